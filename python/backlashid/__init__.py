@@ -1,0 +1,53 @@
+"""backlashid: identification of systems with general backlash.
+
+Models of Vörös, "Modeling and identification of nonlinear cascade and sandwich systems with
+general backlash": :class:`GeneralBacklash` (eq 1-15), :class:`LinearBlock` (eq 16 / 29),
+:class:`CascadeModel` (Fig. 2) and :class:`SandwichModel` (Fig. 3), simulated in Rust.
+"""
+
+from __future__ import annotations
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("backlashid")
+except PackageNotFoundError:  # running from a source tree
+    __version__ = "0.0.0"
+
+from .backlash import BranchCheck, GeneralBacklash, SwitchingSignals
+from .errors import BacklashIdError, DataError, ModelError
+from .examples import ExampleData, example1, example2, example_data
+from .linear import LinearBlock
+from .models import (
+    CascadeModel,
+    CascadeSimulation,
+    CascadeState,
+    SandwichModel,
+    SandwichSimulation,
+    SandwichState,
+    model_from_dict,
+    model_from_json,
+)
+
+__all__ = [
+    "BacklashIdError",
+    "BranchCheck",
+    "CascadeModel",
+    "CascadeSimulation",
+    "CascadeState",
+    "DataError",
+    "ExampleData",
+    "GeneralBacklash",
+    "LinearBlock",
+    "ModelError",
+    "SandwichModel",
+    "SandwichSimulation",
+    "SandwichState",
+    "SwitchingSignals",
+    "__version__",
+    "example1",
+    "example2",
+    "example_data",
+    "model_from_dict",
+    "model_from_json",
+]

@@ -1,0 +1,63 @@
+"""Conversion of user inputs (array-likes, coefficient lists) to what the Rust core takes.
+
+The caller's objects are never modified: the core only reads, and results are new arrays.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import DataError, ModelError
+
+
+def as_signal(values: Any, name: str) -> NDArray[np.float64]:
+    """A float64 numpy array of a real-valued array-like (dimensions are checked by the core)."""
+    try:
+        arr = np.asarray(values)
+    except (TypeError, ValueError) as exc:  # ragged lists and the like
+        raise DataError(f"{name} is not an array of numbers ({exc}): pass a 1-D array of reals") from None
+    if arr.dtype.kind == "c":
+        raise DataError(f"{name} is complex: pass the real-valued signal (e.g. {name}.real)")
+    if arr.dtype.kind not in "biuf":
+        try:
+            arr = arr.astype(np.float64)
+        except (TypeError, ValueError):
+            raise DataError(
+                f"{name} has dtype {arr.dtype}, not numbers: convert it to a float array first"
+            ) from None
+    return np.asarray(arr, dtype=np.float64)
+
+
+def as_coefficients(values: Any, name: str, *, allow_empty: bool = False) -> list[float]:
+    """A list of floats from a scalar or 1-D sequence of model coefficients."""
+    try:
+        arr = np.atleast_1d(np.asarray(values, dtype=np.float64))
+    except (TypeError, ValueError):
+        raise ModelError(f"{name} must be a list of real numbers, got {values!r}") from None
+    if arr.ndim != 1:
+        raise ModelError(f"{name} must be a flat list of coefficients, got shape {arr.shape}")
+    if arr.size == 0 and not allow_empty:
+        raise ModelError(f"{name} is empty: give at least one coefficient")
+    return [float(v) for v in arr]
+
+
+def as_scalar(value: Any, name: str, error: type[Exception] = ModelError) -> float:
+    """A real scalar parameter."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise error(f"{name} must be a real number, got {value!r}") from None
+
+
+def frozen(values: list[float]) -> NDArray[np.float64]:
+    """A read-only float64 array, so a model's parameters cannot be changed behind its back."""
+    arr = np.array(values, dtype=np.float64)
+    arr.setflags(write=False)
+    return arr
+
+
+def format_list(values: NDArray[np.float64]) -> str:
+    return "[" + ", ".join(f"{v:.6g}" for v in values) + "]"

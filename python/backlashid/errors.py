@@ -1,0 +1,25 @@
+"""The exceptions of backlashid. The Rust core's one error enum maps onto these classes.
+
+- ``BacklashIdError``: the base of everything backlashid raises on purpose.
+- ``DataError``: bad data (NaN or inf, wrong dimensionality, empty or too short, wrong dtype).
+- ``ModelError``: invalid model parameters (negative widths, non-increasing branches, empty
+  coefficient lists) or a model that diverges in simulation.
+
+``DataError`` and ``ModelError`` are also ``ValueError``, so generic handlers keep working.
+"""
+
+from __future__ import annotations
+
+__all__ = ["BacklashIdError", "DataError", "ModelError"]
+
+
+class BacklashIdError(Exception):
+    """Base class of the errors raised by backlashid."""
+
+
+class DataError(BacklashIdError, ValueError):
+    """The data cannot be used as given; the message says how to fix it."""
+
+
+class ModelError(BacklashIdError, ValueError):
+    """The model parameters are invalid, or the model diverged; the message says why."""

@@ -1,0 +1,63 @@
+"""Figures (matplotlib is an optional extra: ``pip install backlashid[plot]``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._convert import as_signal
+from .backlash import GeneralBacklash
+from .errors import BacklashIdError
+
+__all__ = ["plot_characteristic"]
+
+
+def _pyplot() -> Any:
+    try:
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise BacklashIdError(
+            "plotting needs matplotlib: pip install 'backlashid[plot]'"
+        ) from None
+    return plt
+
+
+def plot_characteristic(
+    backlash: GeneralBacklash,
+    x: ArrayLike | None = None,
+    y: ArrayLike | None = None,
+    *,
+    x_range: tuple[float, float] | None = None,
+    ax: Any = None,
+    title: str | None = None,
+) -> Any:
+    """Draw the branches L(x), R(x) of a general backlash (as in the paper's Figs 1, 4, 7),
+    over the path (x(t), y(t)) of a simulation when x and y are given. Returns the axes."""
+    plt = _pyplot()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 5))
+    if x is not None and y is not None:
+        xs, ys = as_signal(x, "x"), as_signal(y, "y")
+        ax.plot(xs, ys, color="0.7", lw=0.6, label="simulated path (x(t), y(t))", zorder=1)
+        lo, hi = float(xs.min()), float(xs.max())
+        y_lo, y_hi = float(ys.min()), float(ys.max())
+    else:
+        lo, hi = -2.0 * (backlash.c_left + 1.0), 2.0 * (backlash.c_right + 1.0)
+        y_lo, y_hi = -np.inf, np.inf
+    if x_range is not None:
+        lo, hi = x_range
+    grid, left, right = backlash.characteristic(lo, hi, 600)
+    pad = 0.05 * (y_hi - y_lo) if np.isfinite(y_hi - y_lo) else 0.0
+    for values, name, style in ((left, "L(x)", "C0"), (right, "R(x)", "C3")):
+        shown = np.where((values >= y_lo - pad) & (values <= y_hi + pad), values, np.nan)
+        ax.plot(grid, shown, color=style, lw=2, label=name, zorder=2)
+    ax.axhline(0.0, color="k", lw=0.5)
+    ax.axvline(0.0, color="k", lw=0.5)
+    ax.set_xlabel("x (input of the backlash)")
+    ax.set_ylabel("y (output of the backlash)")
+    ax.set_title(title or f"General backlash, c_L = {backlash.c_left:.3g}, c_R = {backlash.c_right:.3g}")
+    ax.legend(loc="upper left")
+    ax.grid(alpha=0.3)
+    return ax

@@ -1,0 +1,357 @@
+//! The general backlash of eq (1)-(8): branches
+//!     L(x) = sum_{i=1}^n m_Li (x + c_L)^i   (eq 4),   R(x) = sum_{i=1}^n m_Ri (x - c_R)^i   (eq 5),
+//! and the output moves along L or R, or holds y(t-1) inside the dead band (eq 1).
+
+use crate::error::{Error, Result};
+use crate::signal::{check_coefficients, check_signal};
+
+/// One branch: value(x) = sum_{i>=1} m_i (x + shift)^i, so shift = c_L for L and -c_R for R.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Branch {
+    shift: f64,
+    m: Vec<f64>,
+}
+
+impl Branch {
+    pub fn coefficients(&self) -> &[f64] {
+        &self.m
+    }
+
+    /// The branch at x, by Horner's rule in xi = x + shift (eq 4-5, or eq 9-10 for xi).
+    #[inline(always)]
+    pub fn value(&self, x: f64) -> f64 {
+        let xi = x + self.shift;
+        let mut acc = 0.0;
+        for m in self.m.iter().rev() {
+            acc = acc * xi + m;
+        }
+        acc * xi
+    }
+
+    /// d value / dx.
+    pub fn slope(&self, x: f64) -> f64 {
+        let xi = x + self.shift;
+        let mut acc = 0.0;
+        for (k, m) in self.m.iter().enumerate().rev() {
+            acc = acc * xi + (k + 1) as f64 * m;
+        }
+        acc
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeneralBacklash {
+    c_left: f64,
+    c_right: f64,
+    left: Branch,
+    right: Branch,
+}
+
+/// What `GeneralBacklash::check_branches` found on an x-range: the paper assumes both branches
+/// increase and do not cross "in the region of practical interest" (Section 2).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BranchCheck {
+    pub x_min: f64,
+    pub x_max: f64,
+    /// Intervals where dL/dx <= 0.
+    pub left_not_increasing: Vec<(f64, f64)>,
+    /// Intervals where dR/dx <= 0.
+    pub right_not_increasing: Vec<(f64, f64)>,
+    /// Intervals where L(x) <= R(x): the branches cross at their ends.
+    pub crossed: Vec<(f64, f64)>,
+}
+
+impl BranchCheck {
+    pub fn is_valid(&self) -> bool {
+        self.left_not_increasing.is_empty()
+            && self.right_not_increasing.is_empty()
+            && self.crossed.is_empty()
+    }
+}
+
+impl GeneralBacklash {
+    /// Widths c_L, c_R >= 0 and branch coefficients m_L = [m_L1..m_Ln], m_R = [m_R1..m_Rn].
+    /// Both branches must increase from their x-axis crossings across the dead band [-c_L, c_R].
+    pub fn new(c_left: f64, c_right: f64, m_left: Vec<f64>, m_right: Vec<f64>) -> Result<Self> {
+        for (name, c) in [("c_L", c_left), ("c_R", c_right)] {
+            if !(c.is_finite() && c >= 0.0) {
+                return Err(Error::Model(format!(
+                    "{name} = {c}: dead-band widths must be finite and >= 0 \
+                     (the branches cross the x-axis at -c_L and +c_R)"
+                )));
+            }
+        }
+        check_coefficients("m_L", &m_left, false)?;
+        check_coefficients("m_R", &m_right, false)?;
+        let bl = GeneralBacklash {
+            c_left,
+            c_right,
+            left: Branch {
+                shift: c_left,
+                m: m_left,
+            },
+            right: Branch {
+                shift: -c_right,
+                m: m_right,
+            },
+        };
+        let check = bl.check_branches(-c_left, c_right);
+        for (name, branch, bad) in [
+            ("L", &bl.left, &check.left_not_increasing),
+            ("R", &bl.right, &check.right_not_increasing),
+        ] {
+            if branch.m[0] <= 0.0 || !bad.is_empty() {
+                return Err(Error::Model(format!(
+                    "branch {name} does not increase across the dead band [-c_L, c_R] = \
+                     [{:.6}, {:.6}] (m_{name}1 = {}): a backlash needs increasing branches; \
+                     make m_{name}1 > 0 and check the higher coefficients",
+                    -c_left, c_right, branch.m[0]
+                )));
+            }
+        }
+        Ok(bl)
+    }
+
+    pub fn c_left(&self) -> f64 {
+        self.c_left
+    }
+
+    pub fn c_right(&self) -> f64 {
+        self.c_right
+    }
+
+    pub fn left(&self) -> &Branch {
+        &self.left
+    }
+
+    pub fn right(&self) -> &Branch {
+        &self.right
+    }
+
+    /// One step of eq (1) with its case order (L first, then R, else hold). For increasing
+    /// branches x <= z_L is L(x) <= y(t-1) by eq (2), and x >= z_R is R(x) >= y(t-1) by eq (3).
+    #[inline(always)]
+    pub fn step(&self, x: f64, y_prev: f64) -> f64 {
+        let l = self.left.value(x);
+        let r = self.right.value(x);
+        let not_left = if r >= y_prev { r } else { y_prev };
+        if l <= y_prev {
+            l
+        } else {
+            not_left
+        }
+    }
+
+    /// The backlash output for the internal signal `x`, from memory y(0) = `y0`.
+    pub fn simulate(&self, x: &[f64], y0: f64) -> Result<Vec<f64>> {
+        check_signal("x", x)?;
+        check_memory(y0)?;
+        let mut y = Vec::with_capacity(x.len());
+        let mut y_prev = y0;
+        for &xt in x {
+            y_prev = self.step(xt, y_prev);
+            y.push(y_prev);
+        }
+        Ok(y)
+    }
+
+    /// z_L, z_R of eq (2)-(3): where L and R reach `y_prev`, searched on [x_lo, x_hi], where
+    /// the branches are taken to increase. Outside the range: -inf / +inf as appropriate.
+    pub fn breakpoints(&self, y_prev: f64, x_lo: f64, x_hi: f64) -> (f64, f64) {
+        (
+            inverse_on(&self.left, y_prev, x_lo, x_hi),
+            inverse_on(&self.right, y_prev, x_lo, x_hi),
+        )
+    }
+
+    /// Eq (1) read literally, through the breakpoints of eq (2)-(3). A reference form (slow:
+    /// a root search per sample) to check `simulate` and the switching form against.
+    pub fn simulate_by_breakpoints(&self, x: &[f64], y0: f64) -> Result<Vec<f64>> {
+        check_signal("x", x)?;
+        check_memory(y0)?;
+        let x_lo = x.iter().cloned().fold(f64::INFINITY, f64::min);
+        let x_hi = x.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        let mut y = Vec::with_capacity(x.len());
+        let mut y_prev = y0;
+        for &xt in x {
+            let (z_l, z_r) = self.breakpoints(y_prev, x_lo, x_hi);
+            y_prev = if xt <= z_l {
+                self.left.value(xt)
+            } else if xt >= z_r {
+                self.right.value(xt)
+            } else {
+                y_prev
+            };
+            y.push(y_prev);
+        }
+        Ok(y)
+    }
+
+    /// Where, on [x_min, x_max], a branch fails to increase or L falls to or below R.
+    /// Sampled on a fine grid (4096 cells) with interval ends refined by bisection.
+    pub fn check_branches(&self, x_min: f64, x_max: f64) -> BranchCheck {
+        let (lo, hi) = (x_min.min(x_max), x_min.max(x_max));
+        BranchCheck {
+            x_min: lo,
+            x_max: hi,
+            left_not_increasing: intervals_where_nonpositive(|x| self.left.slope(x), lo, hi),
+            right_not_increasing: intervals_where_nonpositive(|x| self.right.slope(x), lo, hi),
+            crossed: intervals_where_nonpositive(
+                |x| self.left.value(x) - self.right.value(x),
+                lo,
+                hi,
+            ),
+        }
+    }
+}
+
+pub(crate) fn check_memory(y0: f64) -> Result<()> {
+    if !y0.is_finite() {
+        return Err(Error::Data(format!(
+            "initial backlash memory y0 = {y0}: give a finite value (0 starts inside the dead band)"
+        )));
+    }
+    Ok(())
+}
+
+/// The x in [lo, hi] where an increasing `branch` equals `level` (bisection to adjacent
+/// floats); -inf if the branch is above `level` on all of it, +inf if below.
+fn inverse_on(branch: &Branch, level: f64, lo: f64, hi: f64) -> f64 {
+    if branch.value(lo) > level {
+        return f64::NEG_INFINITY;
+    }
+    if branch.value(hi) < level {
+        return f64::INFINITY;
+    }
+    let (mut a, mut b) = (lo, hi);
+    for _ in 0..2100 {
+        let mid = 0.5 * (a + b);
+        if mid <= a || mid >= b {
+            break;
+        }
+        if branch.value(mid) <= level {
+            a = mid;
+        } else {
+            b = mid;
+        }
+    }
+    // The largest x with value <= level: x <= z_L then holds exactly when L(x) <= level.
+    a
+}
+
+/// Intervals of [lo, hi] where f <= 0, found on a grid and refined by bisection.
+fn intervals_where_nonpositive(f: impl Fn(f64) -> f64, lo: f64, hi: f64) -> Vec<(f64, f64)> {
+    const CELLS: usize = 4096;
+    if !(lo.is_finite() && hi.is_finite()) {
+        return Vec::new();
+    }
+    let at = |k: usize| lo + (hi - lo) * (k as f64) / (CELLS as f64);
+    let refine = |mut good: f64, mut bad: f64| {
+        // f(good) > 0 >= f(bad): move both towards the sign change.
+        for _ in 0..200 {
+            let mid = 0.5 * (good + bad);
+            if mid == good || mid == bad {
+                break;
+            }
+            if f(mid) > 0.0 {
+                good = mid;
+            } else {
+                bad = mid;
+            }
+        }
+        bad
+    };
+    let mut out = Vec::new();
+    let mut start: Option<f64> = None;
+    let mut prev_x = lo;
+    for k in 0..=CELLS {
+        let x = at(k);
+        let bad = !(f(x) > 0.0);
+        match (start, bad) {
+            (None, true) => start = Some(if k == 0 { x } else { refine(prev_x, x) }),
+            (Some(s), false) => {
+                out.push((s, refine(x, prev_x)));
+                start = None;
+            }
+            _ => {}
+        }
+        prev_x = x;
+    }
+    if let Some(s) = start {
+        out.push((s, hi));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn example1() -> GeneralBacklash {
+        GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap()
+    }
+
+    #[test]
+    fn branches_cross_the_axis_at_minus_c_left_and_c_right() {
+        let bl = example1();
+        assert_eq!(bl.left().value(-0.6), 0.0);
+        assert_eq!(bl.right().value(0.5), 0.0);
+        // L(0) = 0.6 - 0.3*0.36 + 0.3*0.216
+        assert!((bl.left().value(0.0) - (0.6 - 0.108 + 0.0648)).abs() < 1e-15);
+    }
+
+    #[test]
+    fn holds_in_the_dead_band_and_follows_the_branches_outside() {
+        let bl = example1();
+        let y = bl.simulate(&[0.0, 0.3, -0.3, 2.0, 1.9, -2.0], 0.0).unwrap();
+        assert_eq!(&y[..3], &[0.0, 0.0, 0.0]);
+        assert_eq!(y[3], bl.right().value(2.0));
+        assert_eq!(y[4], y[3]); // a small reversal stays in the dead band
+        assert_eq!(y[5], bl.left().value(-2.0));
+    }
+
+    #[test]
+    fn breakpoint_form_equals_value_form() {
+        let bl = example1();
+        let x: Vec<f64> = (0..2000)
+            .map(|k| 1.5 * ((k as f64) * 0.37).sin() + 0.3 * ((k as f64) * 1.3).cos())
+            .collect();
+        let a = bl.simulate(&x, 0.0).unwrap();
+        let b = bl.simulate_by_breakpoints(&x, 0.0).unwrap();
+        for (p, q) in a.iter().zip(&b) {
+            assert!((p - q).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn invalid_parameters_are_refused() {
+        let bad = [
+            GeneralBacklash::new(-0.1, 0.5, vec![1.0], vec![1.0]),
+            GeneralBacklash::new(0.1, f64::NAN, vec![1.0], vec![1.0]),
+            GeneralBacklash::new(0.1, 0.5, vec![], vec![1.0]),
+            GeneralBacklash::new(0.1, 0.5, vec![-1.0], vec![1.0]),
+            // R'(x) = 1 + 6 (x - 0.5) < 0 for x < 1/3: R falls across the dead band
+            GeneralBacklash::new(0.5, 0.5, vec![1.0], vec![1.0, 3.0]),
+        ];
+        for b in bad {
+            assert!(matches!(b, Err(Error::Model(_))), "{b:?}");
+        }
+    }
+
+    #[test]
+    fn check_reports_where_branches_cross_and_turn() {
+        // L(x) = (x+0.1) - (x+0.1)^2 turns at x = 0.4; R(x) = 2(x-0.1) overtakes L at x = 0.3
+        let bl = GeneralBacklash::new(0.1, 0.1, vec![1.0, -1.0], vec![2.0]).unwrap();
+        let c = bl.check_branches(-1.0, 1.0);
+        assert!(!c.is_valid());
+        assert_eq!(c.left_not_increasing.len(), 1);
+        assert!((c.left_not_increasing[0].0 - 0.4).abs() < 1e-9);
+        assert!(c.right_not_increasing.is_empty());
+        // L - R = -x^2 - 1.2x + 0.29 <= 0 for x >= (-1.2 + sqrt(2.6)) / 2 on [-1, 1]
+        let root = (-1.2 + 2.6f64.sqrt()) / 2.0;
+        assert_eq!(c.crossed.len(), 1);
+        assert!((c.crossed[0].0 - root).abs() < 1e-9, "{:?}", c.crossed);
+        assert_eq!(c.crossed[0].1, 1.0);
+        assert!(example1().check_branches(-3.0, 3.0).is_valid());
+    }
+}

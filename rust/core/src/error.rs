@@ -1,0 +1,25 @@
+//! The one error type of the core. The Python binding maps each variant to a class of
+//! `backlashid.errors`; every message says what the caller should do.
+
+use std::fmt;
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Error {
+    /// Bad data: NaN or inf, wrong dimensionality, empty or too short. (`DataError`)
+    Data(String),
+    /// Invalid model parameters: negative widths, non-increasing branches, empty coefficient
+    /// lists, an unstable block that diverged in simulation. (`ModelError`)
+    Model(String),
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::Data(msg) | Error::Model(msg) => f.write_str(msg),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+pub type Result<T> = std::result::Result<T, Error>;

@@ -1,0 +1,21 @@
+//! backlashid-core: the numerics of backlashid, without Python.
+//!
+//! Models of Vörös, "Modeling and identification of nonlinear cascade and sandwich systems
+//! with general backlash": the general backlash (eq 1-15), the cascade linear block ->
+//! backlash (eq 16-17) and the sandwich linear -> backlash -> linear (eq 29).
+
+pub mod backlash;
+pub mod cascade;
+pub mod error;
+pub mod linear;
+pub mod polynomial;
+pub mod sandwich;
+pub mod signal;
+pub mod switching;
+
+pub use backlash::{Branch, BranchCheck, GeneralBacklash};
+pub use cascade::{CascadeModel, CascadeSimulation, CascadeState};
+pub use error::{Error, Result};
+pub use linear::{LinearBlock, LinearState};
+pub use sandwich::{SandwichModel, SandwichSimulation, SandwichState};
+pub use switching::{switching, switching_form, SwitchingSignals};

@@ -1,0 +1,375 @@
+//! Thin pyo3 binding of backlashid-core: converts arrays, releases the GIL around the loops,
+//! and maps `backlashid_core::Error` onto `backlashid.errors`. No numerics live here.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use backlashid_core as core;
+use std::borrow::Cow;
+
+use numpy::{IntoPyArray, PyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Raise the `backlashid.errors` class that matches a core error.
+fn to_py_err(py: Python<'_>, err: core::Error) -> PyErr {
+    let (class, msg) = match err {
+        core::Error::Data(m) => ("DataError", m),
+        core::Error::Model(m) => ("ModelError", m),
+    };
+    raise(py, class, msg)
+}
+
+fn raise(py: Python<'_>, class: &str, msg: String) -> PyErr {
+    let made = py
+        .import("backlashid.errors")
+        .and_then(|m| m.getattr(class))
+        .and_then(|c| c.call1((msg,)));
+    match made {
+        Ok(instance) => PyErr::from_value(instance),
+        Err(e) => e,
+    }
+}
+
+/// Run core work without the GIL; a panic becomes `BacklashIdError` (a bug to report).
+fn run<T: Send>(py: Python<'_>, work: impl FnOnce() -> core::Result<T> + Send) -> PyResult<T> {
+    match py.detach(|| catch_unwind(AssertUnwindSafe(work))) {
+        Ok(Ok(v)) => Ok(v),
+        Ok(Err(e)) => Err(to_py_err(py, e)),
+        Err(_) => Err(raise(
+            py,
+            "BacklashIdError",
+            "internal error in the Rust core (a bug): please report it with the input that \
+             caused it"
+                .into(),
+        )),
+    }
+}
+
+/// A 1-D float64 signal, borrowed when contiguous (the Python layer converted the dtype).
+fn signal<'a>(
+    py: Python<'_>,
+    name: &str,
+    arr: &'a PyReadonlyArrayDyn<'_, f64>,
+) -> PyResult<Cow<'a, [f64]>> {
+    if arr.ndim() != 1 {
+        return Err(to_py_err(
+            py,
+            core::Error::Data(format!(
+                "{name} has {} dimensions, expected a 1-D signal: pass one channel, e.g. \
+                 {name}.ravel() for a column",
+                arr.ndim()
+            )),
+        ));
+    }
+    Ok(match arr.as_slice() {
+        Ok(s) => Cow::Borrowed(s),
+        Err(_) => Cow::Owned(arr.as_array().iter().copied().collect()),
+    })
+}
+
+fn vec_f64<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
+    v.into_pyarray(py)
+}
+
+fn vec_bool<'py>(py: Python<'py>, v: Vec<bool>) -> Bound<'py, PyArray1<bool>> {
+    v.into_pyarray(py)
+}
+
+#[pyclass(frozen, module = "backlashid._core", name = "LinearBlock")]
+struct PyLinearBlock(core::LinearBlock);
+
+#[pymethods]
+impl PyLinearBlock {
+    #[new]
+    fn new(py: Python<'_>, a: Vec<f64>, b: Vec<f64>) -> PyResult<Self> {
+        core::LinearBlock::new(a, b)
+            .map(Self)
+            .map_err(|e| to_py_err(py, e))
+    }
+
+    /// Poles as (re, im) pairs.
+    fn poles(&self) -> Vec<(f64, f64)> {
+        self.0.poles()
+    }
+
+    fn simulate<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        u_past: Vec<f64>,
+        x_past: Vec<f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let u = signal(py, "u", &u)?;
+        let state = core::LinearState { u_past, x_past };
+        let x = run(py, || self.0.simulate(&u, &state))?;
+        Ok(vec_f64(py, x))
+    }
+}
+
+#[pyclass(frozen, module = "backlashid._core", name = "GeneralBacklash")]
+struct PyGeneralBacklash(core::GeneralBacklash);
+
+#[pymethods]
+impl PyGeneralBacklash {
+    #[new]
+    fn new(
+        py: Python<'_>,
+        c_left: f64,
+        c_right: f64,
+        m_left: Vec<f64>,
+        m_right: Vec<f64>,
+    ) -> PyResult<Self> {
+        core::GeneralBacklash::new(c_left, c_right, m_left, m_right)
+            .map(Self)
+            .map_err(|e| to_py_err(py, e))
+    }
+
+    fn left<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArrayDyn<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let x = signal(py, "x", &x)?;
+        Ok(vec_f64(
+            py,
+            x.iter().map(|&v| self.0.left().value(v)).collect(),
+        ))
+    }
+
+    fn right<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArrayDyn<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let x = signal(py, "x", &x)?;
+        Ok(vec_f64(
+            py,
+            x.iter().map(|&v| self.0.right().value(v)).collect(),
+        ))
+    }
+
+    /// form: "eq1" (value comparisons, fast) or "breakpoints" (eq 1 through z_L, z_R of eq 2-3).
+    fn simulate<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArrayDyn<'py, f64>,
+        y0: f64,
+        form: &str,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let x = signal(py, "x", &x)?;
+        let y = match form {
+            "eq1" => run(py, || self.0.simulate(&x, y0))?,
+            "breakpoints" => run(py, || self.0.simulate_by_breakpoints(&x, y0))?,
+            other => {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "unknown form {other:?}: use 'eq1' or 'breakpoints'"
+                )))
+            }
+        };
+        Ok(vec_f64(py, y))
+    }
+
+    /// Eq (9)-(15): (xi1, xi2, f1, f2, y).
+    #[allow(clippy::type_complexity)]
+    fn switching<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArrayDyn<'py, f64>,
+        y0: f64,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyArray1<f64>>,
+    )> {
+        let x = signal(py, "x", &x)?;
+        let s = run(py, || core::switching_form(&self.0, &x, y0))?;
+        Ok((
+            vec_f64(py, s.xi1),
+            vec_f64(py, s.xi2),
+            vec_bool(py, s.f1),
+            vec_bool(py, s.f2),
+            vec_f64(py, s.y),
+        ))
+    }
+
+    fn breakpoints(&self, y_prev: f64, x_lo: f64, x_hi: f64) -> (f64, f64) {
+        self.0.breakpoints(y_prev, x_lo, x_hi)
+    }
+
+    fn check_branches<'py>(
+        &self,
+        py: Python<'py>,
+        x_min: f64,
+        x_max: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let c = py.detach(|| self.0.check_branches(x_min, x_max));
+        let d = PyDict::new(py);
+        d.set_item("x_min", c.x_min)?;
+        d.set_item("x_max", c.x_max)?;
+        d.set_item("left_not_increasing", c.left_not_increasing)?;
+        d.set_item("right_not_increasing", c.right_not_increasing)?;
+        d.set_item("crossed", c.crossed)?;
+        Ok(d)
+    }
+}
+
+type SignalOut<'py> = Bound<'py, PyArray1<f64>>;
+type FlagOut<'py> = Bound<'py, PyArray1<bool>>;
+
+#[pyclass(frozen, module = "backlashid._core", name = "CascadeModel")]
+struct PyCascadeModel(core::CascadeModel);
+
+#[pymethods]
+impl PyCascadeModel {
+    #[new]
+    fn new(linear: &PyLinearBlock, backlash: &PyGeneralBacklash) -> Self {
+        Self(core::CascadeModel::new(
+            linear.0.clone(),
+            backlash.0.clone(),
+        ))
+    }
+
+    fn simulate<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        u_past: Vec<f64>,
+        x_past: Vec<f64>,
+        y_prev: f64,
+    ) -> PyResult<SignalOut<'py>> {
+        let u = signal(py, "u", &u)?;
+        let state = core::CascadeState {
+            linear: core::LinearState { u_past, x_past },
+            y_prev,
+        };
+        Ok(vec_f64(py, run(py, || self.0.simulate(&u, &state))?))
+    }
+
+    /// (x, y, f1, f2, (u_past, x_past, y_prev)) of the record.
+    #[allow(clippy::type_complexity)]
+    fn simulate_internals<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        u_past: Vec<f64>,
+        x_past: Vec<f64>,
+        y_prev: f64,
+    ) -> PyResult<(
+        SignalOut<'py>,
+        SignalOut<'py>,
+        FlagOut<'py>,
+        FlagOut<'py>,
+        (Vec<f64>, Vec<f64>, f64),
+    )> {
+        let u = signal(py, "u", &u)?;
+        let state = core::CascadeState {
+            linear: core::LinearState { u_past, x_past },
+            y_prev,
+        };
+        let s = run(py, || self.0.simulate_internals(&u, &state))?;
+        let fs = s.final_state;
+        Ok((
+            vec_f64(py, s.x),
+            vec_f64(py, s.y),
+            vec_bool(py, s.f1),
+            vec_bool(py, s.f2),
+            (fs.linear.u_past, fs.linear.x_past, fs.y_prev),
+        ))
+    }
+}
+
+#[pyclass(frozen, module = "backlashid._core", name = "SandwichModel")]
+struct PySandwichModel(core::SandwichModel);
+
+#[pymethods]
+impl PySandwichModel {
+    #[new]
+    fn new(
+        input_linear: &PyLinearBlock,
+        backlash: &PyGeneralBacklash,
+        output_linear: &PyLinearBlock,
+    ) -> Self {
+        Self(core::SandwichModel::new(
+            input_linear.0.clone(),
+            backlash.0.clone(),
+            output_linear.0.clone(),
+        ))
+    }
+
+    fn simulate<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        u_past: Vec<f64>,
+        x_past: Vec<f64>,
+        y_past: Vec<f64>,
+        w_past: Vec<f64>,
+    ) -> PyResult<SignalOut<'py>> {
+        let u = signal(py, "u", &u)?;
+        let state = sandwich_state(u_past, x_past, y_past, w_past);
+        Ok(vec_f64(py, run(py, || self.0.simulate(&u, &state))?))
+    }
+
+    /// (x, y, w, f1, f2, (u_past, x_past, y_past, w_past)) of the record.
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
+    fn simulate_internals<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        u_past: Vec<f64>,
+        x_past: Vec<f64>,
+        y_past: Vec<f64>,
+        w_past: Vec<f64>,
+    ) -> PyResult<(
+        SignalOut<'py>,
+        SignalOut<'py>,
+        SignalOut<'py>,
+        FlagOut<'py>,
+        FlagOut<'py>,
+        (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>),
+    )> {
+        let u = signal(py, "u", &u)?;
+        let state = sandwich_state(u_past, x_past, y_past, w_past);
+        let s = run(py, || self.0.simulate_internals(&u, &state))?;
+        let fs = s.final_state;
+        Ok((
+            vec_f64(py, s.x),
+            vec_f64(py, s.y),
+            vec_f64(py, s.w),
+            vec_bool(py, s.f1),
+            vec_bool(py, s.f2),
+            (
+                fs.input.u_past,
+                fs.input.x_past,
+                fs.output.u_past,
+                fs.output.x_past,
+            ),
+        ))
+    }
+}
+
+fn sandwich_state(
+    u_past: Vec<f64>,
+    x_past: Vec<f64>,
+    y_past: Vec<f64>,
+    w_past: Vec<f64>,
+) -> core::SandwichState {
+    core::SandwichState {
+        input: core::LinearState { u_past, x_past },
+        output: core::LinearState {
+            u_past: y_past,
+            x_past: w_past,
+        },
+    }
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyLinearBlock>()?;
+    m.add_class::<PyGeneralBacklash>()?;
+    m.add_class::<PyCascadeModel>()?;
+    m.add_class::<PySandwichModel>()?;
+    Ok(())
+}
