@@ -40,7 +40,7 @@ def plot_characteristic(
         _, ax = plt.subplots(figsize=(6, 5))
     if x is not None and y is not None:
         xs, ys = as_signal(x, "x"), as_signal(y, "y")
-        ax.plot(xs, ys, color="0.7", lw=0.6, label="simulated path (x(t), y(t))", zorder=1)
+        ax.scatter(xs, ys, s=4, color="0.55", alpha=0.6, lw=0, label="simulated (x(t), y(t))", zorder=1)
         lo, hi = float(xs.min()), float(xs.max())
         y_lo, y_hi = float(ys.min()), float(ys.max())
     else:

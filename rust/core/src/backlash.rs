@@ -112,6 +112,24 @@ impl GeneralBacklash {
         Ok(bl)
     }
 
+    /// An estimate during identification: finite numbers only, no shape checks (the
+    /// iterations may pass through branches that turn or cross; eq 1's case order copes).
+    pub fn from_estimate(c_left: f64, c_right: f64, m_left: Vec<f64>, m_right: Vec<f64>) -> Result<Self> {
+        for (name, c) in [("c_L", c_left), ("c_R", c_right)] {
+            if !c.is_finite() {
+                return Err(Error::Model(format!("{name} = {c}: the estimate diverged")));
+            }
+        }
+        check_coefficients("m_L", &m_left, false)?;
+        check_coefficients("m_R", &m_right, false)?;
+        Ok(GeneralBacklash {
+            c_left,
+            c_right,
+            left: Branch { shift: c_left, m: m_left },
+            right: Branch { shift: -c_right, m: m_right },
+        })
+    }
+
     pub fn c_left(&self) -> f64 {
         self.c_left
     }

@@ -10,12 +10,16 @@ pub enum Error {
     /// Invalid model parameters: negative widths, non-increasing branches, empty coefficient
     /// lists, an unstable block that diverged in simulation. (`ModelError`)
     Model(String),
+    /// The data do not determine the parameters: too few samples off the dead band, a
+    /// regressor column that is never excited, a rank-deficient regressor.
+    /// (`NotIdentifiableError`)
+    NotIdentifiable(String),
 }
 
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Error::Data(msg) | Error::Model(msg) => f.write_str(msg),
+            Error::Data(msg) | Error::Model(msg) | Error::NotIdentifiable(msg) => f.write_str(msg),
         }
     }
 }

@@ -8,8 +8,11 @@ pub mod backlash;
 pub mod cascade;
 pub mod error;
 pub mod linear;
+pub mod lstsq;
 pub mod polynomial;
+pub mod regressor;
 pub mod sandwich;
+pub mod sensitivity;
 pub mod signal;
 pub mod switching;
 
