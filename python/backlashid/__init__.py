@@ -15,8 +15,9 @@ except PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
 
 from .backlash import BranchCheck, GeneralBacklash, SwitchingSignals
-from .errors import BacklashIdError, DataError, ModelError
+from .errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from .examples import ExampleData, example1, example2, example_data
+from .identification import FitResult, fit_cascade, fit_sandwich
 from .linear import LinearBlock
 from .models import (
     CascadeModel,
@@ -37,9 +38,12 @@ __all__ = [
     "CascadeState",
     "DataError",
     "ExampleData",
+    "FitResult",
     "GeneralBacklash",
     "LinearBlock",
     "ModelError",
+    "NotConvergedError",
+    "NotIdentifiableError",
     "SandwichModel",
     "SandwichSimulation",
     "SandwichState",
@@ -48,6 +52,8 @@ __all__ = [
     "example1",
     "example2",
     "example_data",
+    "fit_cascade",
+    "fit_sandwich",
     "model_from_dict",
     "model_from_json",
 ]

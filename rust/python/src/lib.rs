@@ -6,7 +6,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use backlashid_core as core;
 use std::borrow::Cow;
 
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -15,6 +15,7 @@ fn to_py_err(py: Python<'_>, err: core::Error) -> PyErr {
     let (class, msg) = match err {
         core::Error::Data(m) => ("DataError", m),
         core::Error::Model(m) => ("ModelError", m),
+        core::Error::NotIdentifiable(m) => ("NotIdentifiableError", m),
     };
     raise(py, class, msg)
 }
@@ -365,11 +366,225 @@ fn sandwich_state(
     }
 }
 
+// ---- identification: one call per iteration; Python drives the iterations ----------------
+
+/// An estimate during the iterations: finite numbers, no shape checks.
+fn estimate(
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c_left: f64,
+    c_right: f64,
+    m_left: Vec<f64>,
+    m_right: Vec<f64>,
+) -> core::Result<(core::LinearBlock, core::GeneralBacklash)> {
+    Ok((
+        core::LinearBlock::new(a, b)?,
+        core::GeneralBacklash::from_estimate(c_left, c_right, m_left, m_right)?,
+    ))
+}
+
+type LsOut<'py> = (SignalOut<'py>, f64, Bound<'py, PyArray2<f64>>, f64);
+
+fn ls_out<'py>(py: Python<'py>, ls: core::lstsq::LeastSquares) -> PyResult<LsOut<'py>> {
+    let p = ls.theta.len();
+    let cov = ls.unscaled_covariance.into_pyarray(py).reshape([p, p])?;
+    Ok((vec_f64(py, ls.theta), ls.rss, cov, ls.rcond))
+}
+
+/// min ||A theta - b|| by faer QR: (theta, rss, (A^T A)^-1, rcond).
+#[pyfunction]
+fn lstsq<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArrayDyn<'py, f64>,
+    b: PyReadonlyArrayDyn<'py, f64>,
+    names: Vec<String>,
+) -> PyResult<LsOut<'py>> {
+    let shape = a.shape().to_vec();
+    if shape.len() != 2 {
+        return Err(to_py_err(py, core::Error::Data("A must be a 2-D matrix".into())));
+    }
+    let a_vec: Vec<f64> = a.as_array().iter().copied().collect(); // row-major (logical order)
+    let b = signal(py, "b", &b)?;
+    let ls = run(py, || core::lstsq::solve(&a_vec, shape[0], shape[1], &b, &names))?;
+    ls_out(py, ls)
+}
+
+/// One iteration of the cascade algorithm (eq 18-28): internal variables at the current
+/// estimate, regressor, QR solve. Returns (theta, rss, cov, rcond, x, f1, f2, rows).
+#[pyfunction]
+#[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, u, y, y_switch, skip, names))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn cascade_iteration<'py>(
+    py: Python<'py>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c_left: f64,
+    c_right: f64,
+    m_left: Vec<f64>,
+    m_right: Vec<f64>,
+    u: PyReadonlyArrayDyn<'py, f64>,
+    y: PyReadonlyArrayDyn<'py, f64>,
+    y_switch: PyReadonlyArrayDyn<'py, f64>,
+    skip: usize,
+    names: Vec<String>,
+) -> PyResult<(LsOut<'py>, SignalOut<'py>, FlagOut<'py>, FlagOut<'py>)> {
+    let (u, y, ys) = (signal(py, "u", &u)?, signal(py, "y", &y)?, signal(py, "y_switch", &y_switch)?);
+    let (ls, reg) = run(py, || {
+        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
+        let reg = core::regressor::cascade_regression(&lin, &bl, &u, &y, &ys, skip)?;
+        let ls = core::lstsq::solve(&reg.phi, reg.rows, reg.cols, &reg.target, &names)?;
+        Ok((ls, reg))
+    })?;
+    Ok((ls_out(py, ls)?, vec_f64(py, reg.x), vec_bool(py, reg.f1), vec_bool(py, reg.f2)))
+}
+
+/// One iteration of the sandwich algorithm (eq 33-36). Returns (theta, rss, cov, rcond),
+/// x, f1, f2.
+#[pyfunction]
+#[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, r, s, u, w, skip, names))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn sandwich_iteration<'py>(
+    py: Python<'py>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c_left: f64,
+    c_right: f64,
+    m_left: Vec<f64>,
+    m_right: Vec<f64>,
+    r: Vec<f64>,
+    s: Vec<f64>,
+    u: PyReadonlyArrayDyn<'py, f64>,
+    w: PyReadonlyArrayDyn<'py, f64>,
+    skip: usize,
+    names: Vec<String>,
+) -> PyResult<(LsOut<'py>, SignalOut<'py>, FlagOut<'py>, FlagOut<'py>)> {
+    let (u, w) = (signal(py, "u", &u)?, signal(py, "w", &w)?);
+    let (ls, reg) = run(py, || {
+        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
+        let out = core::LinearBlock::new(r, s)?;
+        let reg = core::regressor::sandwich_regression(&lin, &bl, &out, &u, &w, skip)?;
+        let ls = core::lstsq::solve(&reg.phi, reg.rows, reg.cols, &reg.target, &names)?;
+        Ok((ls, reg))
+    })?;
+    Ok((ls_out(py, ls)?, vec_f64(py, reg.x), vec_bool(py, reg.f1), vec_bool(py, reg.f2)))
+}
+
+/// ARX least squares y(t) = sum a_i u(t-i) - sum b_j y(t-j): (theta, rss, cov, rcond).
+#[pyfunction]
+fn arx<'py>(
+    py: Python<'py>,
+    u: PyReadonlyArrayDyn<'py, f64>,
+    y: PyReadonlyArrayDyn<'py, f64>,
+    na: usize,
+    nb: usize,
+    skip: usize,
+) -> PyResult<LsOut<'py>> {
+    let (u, y) = (signal(py, "u", &u)?, signal(py, "y", &y)?);
+    let names: Vec<String> =
+        (1..=na).map(|i| format!("a{i}")).chain((1..=nb).map(|j| format!("b{j}"))).collect();
+    let ls = run(py, || {
+        let (phi, target) = core::regressor::arx_regression(&u, &y, na, nb, skip)?;
+        core::lstsq::solve(&phi, target.len(), na + nb, &target, &names)
+    })?;
+    ls_out(py, ls)
+}
+
+fn sensitivity_out<'py>(
+    py: Python<'py>,
+    sens: core::sensitivity::Sensitivity,
+) -> PyResult<(SignalOut<'py>, Bound<'py, PyArray2<f64>>)> {
+    let rows = sens.output.len();
+    let jac = sens.jacobian.into_pyarray(py).reshape([rows, sens.cols])?;
+    Ok((vec_f64(py, sens.output), jac))
+}
+
+/// Cascade output y and its Jacobian (samples x parameters) for the output-error fit.
+#[pyfunction]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn cascade_sensitivity<'py>(
+    py: Python<'py>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c_left: f64,
+    c_right: f64,
+    m_left: Vec<f64>,
+    m_right: Vec<f64>,
+    u: PyReadonlyArrayDyn<'py, f64>,
+) -> PyResult<(SignalOut<'py>, Bound<'py, PyArray2<f64>>)> {
+    let u = signal(py, "u", &u)?;
+    let sens = run(py, || {
+        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
+        core::sensitivity::cascade_sensitivity(&lin, &bl, &u)
+    })?;
+    sensitivity_out(py, sens)
+}
+
+/// Sandwich output w and its Jacobian (samples x parameters) for the output-error fit.
+#[pyfunction]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn sandwich_sensitivity<'py>(
+    py: Python<'py>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c_left: f64,
+    c_right: f64,
+    m_left: Vec<f64>,
+    m_right: Vec<f64>,
+    r: Vec<f64>,
+    s: Vec<f64>,
+    u: PyReadonlyArrayDyn<'py, f64>,
+) -> PyResult<(SignalOut<'py>, Bound<'py, PyArray2<f64>>)> {
+    let u = signal(py, "u", &u)?;
+    let sens = run(py, || {
+        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
+        let out = core::LinearBlock::new(r, s)?;
+        core::sensitivity::sandwich_sensitivity(&lin, &bl, &out, &u)
+    })?;
+    sensitivity_out(py, sens)
+}
+
+/// Free-run output of an estimate (cascade when r is empty, else sandwich), from rest.
+#[pyfunction]
+#[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, r, s, u))]
+#[allow(clippy::too_many_arguments)]
+fn simulate_estimate<'py>(
+    py: Python<'py>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c_left: f64,
+    c_right: f64,
+    m_left: Vec<f64>,
+    m_right: Vec<f64>,
+    r: Vec<f64>,
+    s: Vec<f64>,
+    u: PyReadonlyArrayDyn<'py, f64>,
+) -> PyResult<SignalOut<'py>> {
+    let u = signal(py, "u", &u)?;
+    let out = run(py, || {
+        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
+        if r.is_empty() {
+            let m = core::CascadeModel::new(lin, bl);
+            m.simulate(&u, &m.rest_state())
+        } else {
+            let m = core::SandwichModel::new(lin, bl, core::LinearBlock::new(r, s)?);
+            m.simulate(&u, &m.rest_state())
+        }
+    })?;
+    Ok(vec_f64(py, out))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyLinearBlock>()?;
     m.add_class::<PyGeneralBacklash>()?;
     m.add_class::<PyCascadeModel>()?;
     m.add_class::<PySandwichModel>()?;
+    m.add_function(wrap_pyfunction!(lstsq, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate_estimate, m)?)?;
+    m.add_function(wrap_pyfunction!(arx, m)?)?;
+    m.add_function(wrap_pyfunction!(cascade_iteration, m)?)?;
+    m.add_function(wrap_pyfunction!(sandwich_iteration, m)?)?;
+    m.add_function(wrap_pyfunction!(cascade_sensitivity, m)?)?;
+    m.add_function(wrap_pyfunction!(sandwich_sensitivity, m)?)?;
     Ok(())
 }

@@ -1,0 +1,150 @@
+"""Model structure of an identification: orders, degree, and the parameter vector under the
+paper's names (eq 19 for the cascade, eq 31 for the sandwich; m_L1 = 1 and r_1 = 1 fixed).
+
+Physical order: a_1..a_na, b_1..b_nb, c_L, m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn, r_2..r_nr,
+s_1..s_ns. The least-squares vector of eq (19)/(31) has c_1 = c_L and c_2 = m_R1 c_R at the
+positions of c_L and c_R (eq 20, 32).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Union
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .backlash import GeneralBacklash
+from .errors import DataError
+from .linear import LinearBlock
+from .models import CascadeModel, SandwichModel
+
+Model = Union[CascadeModel, SandwichModel]
+
+
+@dataclass(frozen=True)
+class Structure:
+    """na, nb of the (input) linear block, branch degree n, and nr, ns of the sandwich's
+    output block (nr = 0 for a cascade)."""
+
+    na: int
+    nb: int
+    degree: int
+    nr: int = 0
+    ns: int = 0
+
+    def __post_init__(self) -> None:
+        for name, value, least in (("na", self.na, 1), ("nb", self.nb, 0), ("degree", self.degree, 1)):
+            if not isinstance(value, (int, np.integer)) or value < least:
+                raise DataError(f"{name} = {value!r}: give a whole number >= {least}")
+        if self.is_sandwich and (self.nr < 1 or self.ns < 0):
+            raise DataError(f"nr = {self.nr}, ns = {self.ns}: the output block needs nr >= 1, ns >= 0")
+
+    @property
+    def is_sandwich(self) -> bool:
+        return self.nr > 0
+
+    @property
+    def names(self) -> list[str]:
+        n = self.degree
+        names = [f"a{i}" for i in range(1, self.na + 1)] + [f"b{j}" for j in range(1, self.nb + 1)]
+        names += ["c_L"] + [f"m_L{i}" for i in range(2, n + 1)]
+        names += ["m_R1", "c_R"] + [f"m_R{i}" for i in range(2, n + 1)]
+        if self.is_sandwich:
+            names += [f"r{i}" for i in range(2, self.nr + 1)] + [f"s{j}" for j in range(1, self.ns + 1)]
+        return names
+
+    @property
+    def ls_names(self) -> list[str]:
+        """Names of the least-squares vector of eq (19)/(31)."""
+        return [{"c_L": "c_1", "c_R": "c_2"}.get(k, k) for k in self.names]
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    def _slices(self) -> dict[str, slice | int]:
+        na, nb, n = self.na, self.nb, self.degree
+        k = na + nb
+        out: dict[str, slice | int] = {"a": slice(0, na), "b": slice(na, k), "c_L": k}
+        out["m_L"] = slice(k + 1, k + n)  # m_L2..m_Ln
+        out["m_R1"] = k + n
+        out["c_R"] = k + n + 1
+        out["m_R"] = slice(k + n + 2, k + 2 * n + 1)  # m_R2..m_Rn
+        j = k + 2 * n + 1
+        out["r"] = slice(j, j + self.nr - 1 if self.is_sandwich else j)
+        out["s"] = slice(out["r"].stop, out["r"].stop + self.ns)  # type: ignore[union-attr]
+        return out
+
+    def unpack(self, theta: NDArray[np.float64]) -> dict[str, object]:
+        """Keyword arguments of the core's estimate functions from a physical vector."""
+        sl = self._slices()
+        t = np.asarray(theta, dtype=np.float64)
+        out: dict[str, object] = {
+            "a": t[sl["a"]].tolist(),
+            "b": t[sl["b"]].tolist(),
+            "c_left": float(t[sl["c_L"]]),
+            "c_right": float(t[sl["c_R"]]),
+            "m_left": [1.0] + t[sl["m_L"]].tolist(),
+            "m_right": [float(t[sl["m_R1"]])] + t[sl["m_R"]].tolist(),
+        }
+        if self.is_sandwich:
+            out["r"] = [1.0] + t[sl["r"]].tolist()
+            out["s"] = t[sl["s"]].tolist()
+        return out
+
+    def pack(self, model: Model) -> NDArray[np.float64]:
+        """Physical vector of a model (normalised so that m_L1 = 1 and r_1 = 1)."""
+        model = normalise(model)
+        lin = model.input_linear if isinstance(model, SandwichModel) else model.linear
+        bl = model.backlash
+        if (lin.na, lin.nb, bl.degree) != (self.na, self.nb, self.degree):
+            raise DataError(f"the model has orders ({lin.na}, {lin.nb}) and degree {bl.degree}, not {self}")
+        n = self.degree
+        m_l = np.zeros(n)
+        m_r = np.zeros(n)
+        m_l[: len(bl.m_left)] = bl.m_left
+        m_r[: len(bl.m_right)] = bl.m_right
+        parts = [lin.a, lin.b, [bl.c_left], m_l[1:], [m_r[0], bl.c_right], m_r[1:]]
+        if isinstance(model, SandwichModel):
+            parts += [model.r[1:], model.s]
+        return np.concatenate([np.asarray(p, dtype=np.float64) for p in parts])
+
+    def physical_from_ls(self, theta_ls: NDArray[np.float64]) -> NDArray[np.float64]:
+        """c_L = c_1, c_R = c_2 / m_R1 (eq 20, 32)."""
+        sl = self._slices()
+        t = np.array(theta_ls, dtype=np.float64)
+        t[sl["c_R"]] = t[sl["c_R"]] / t[sl["m_R1"]]
+        return t
+
+    def model(self, theta: NDArray[np.float64]) -> Model:
+        """The validated model of a physical vector (raises ModelError if it is not a valid
+        backlash, e.g. branches that fall across the dead band)."""
+        p = self.unpack(theta)
+        lin = LinearBlock(p["a"], p["b"])
+        bl = GeneralBacklash(p["c_left"], p["c_right"], p["m_left"], p["m_right"])
+        if self.is_sandwich:
+            return SandwichModel(lin, bl, LinearBlock(p["r"], p["s"]))
+        return CascadeModel(lin, bl)
+
+    def __str__(self) -> str:
+        text = f"na={self.na}, nb={self.nb}, degree={self.degree}"
+        return text + (f", nr={self.nr}, ns={self.ns}" if self.is_sandwich else "")
+
+
+def normalise(model: Model) -> Model:
+    """The same input/output behaviour with m_L1 = 1 (and r_1 = 1 for the sandwich).
+
+    Scaling y by g (m -> g m, r -> r / g) leaves w unchanged; then scaling x by k
+    (a -> k a, c -> k c, m_i -> m_i / k^i) leaves y unchanged."""
+    lin = model.input_linear if isinstance(model, SandwichModel) else model.linear
+    bl = model.backlash
+    g = float(model.r[0]) if isinstance(model, SandwichModel) else 1.0
+    m_left, m_right = np.asarray(bl.m_left) * g, np.asarray(bl.m_right) * g
+    k = float(m_left[0])  # x' = k x makes m'_L1 = 1
+    powers = lambda m: m / k ** np.arange(1, len(m) + 1)  # noqa: E731
+    new_lin = LinearBlock(lin.a * k, lin.b)
+    new_bl = GeneralBacklash(bl.c_left * k, bl.c_right * k, powers(m_left), powers(m_right))
+    if isinstance(model, SandwichModel):
+        return SandwichModel(new_lin, new_bl, LinearBlock(model.r / g, model.s))
+    return CascadeModel(new_lin, new_bl)
