@@ -61,3 +61,61 @@ def plot_characteristic(
     ax.legend(loc="upper left")
     ax.grid(alpha=0.3)
     return ax
+
+
+def plot_branches_comparison(
+    true_backlash: GeneralBacklash,
+    estimated: GeneralBacklash,
+    x_range: tuple[float, float],
+    *,
+    ax: Any = None,
+    title: str | None = None,
+) -> Any:
+    """True and estimated branches on one plot (the paper's Figs 4 and 7)."""
+    plt = _pyplot()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 5))
+    for bl, style, label in ((true_backlash, "-", "true"), (estimated, "--", "estimated")):
+        grid, left, right = bl.characteristic(*x_range, 600)
+        ax.plot(grid, left, style, color="C0", lw=2, label=f"L(x) {label}")
+        ax.plot(grid, right, style, color="C3", lw=2, label=f"R(x) {label}")
+    ax.axhline(0.0, color="k", lw=0.5)
+    ax.axvline(0.0, color="k", lw=0.5)
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.set_title(title or "General backlash: true and estimated")
+    ax.legend(loc="upper left")
+    ax.grid(alpha=0.3)
+    return ax
+
+
+def plot_trajectories(
+    history: ArrayLike,
+    names: list[str],
+    shown: list[str],
+    *,
+    truth: dict[str, float] | None = None,
+    ax: Any = None,
+    title: str | None = None,
+) -> Any:
+    """Parameter estimates over the iterations (the paper's Figs 5, 6, 8-10); dotted lines
+    mark the true values when given."""
+    plt = _pyplot()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 4))
+    h = np.asarray(history, dtype=np.float64)
+    its = np.arange(1, len(h) + 1)
+    for k, name in enumerate(shown):
+        color = f"C{k % 10}"
+        ax.plot(its, h[:, names.index(name)], "-o", ms=3, color=color, label=name)
+        if truth is not None:
+            ax.axhline(truth[name], color=color, ls=":", lw=1)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("estimate")
+    ax.set_title(title or "Parameter estimates")
+    ax.legend(loc="best", fontsize="small", ncol=2)
+    ax.grid(alpha=0.3)
+    return ax
