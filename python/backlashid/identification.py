@@ -152,11 +152,15 @@ def _reflect(den: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.real(np.poly(roots))[1:]
 
 
-def _initial_theta(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], start: Start, warmup: int) -> NDArray[np.float64]:
+def _initial_theta(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], start: Start, warmup: int, literal: bool) -> NDArray[np.float64]:
     """Iteration 1 (the paper: "only the parameters of the linear system are estimated"): an
-    ARX fit with the measured output standing in for x, and the initial m_R1, c_L, c_R."""
+    ARX fit with the measured output standing in for x, and the initial m_R1, c_L, c_R. For the
+    sandwich the ARX input lags start at 2, the delay of its two blocks together, so that the
+    first x is not close to zero (``literal`` keeps lag 1, the plain reading, whose mis-scaled
+    gain makes the paper's sandwich iterations diverge; NOTES.md item 5)."""
     s = structure
-    lin = _core.arx(u, y, s.na, s.nb, warmup)[0]
+    delay = 2 if s.is_sandwich and not literal else 1
+    lin = _core.arx(u, y, s.na, s.nb, delay, warmup)[0]
     m_r1, c_l, c_r = start
     n = s.degree
     theta = np.concatenate([lin, [c_l], np.zeros(n - 1), [m_r1, c_r], np.zeros(n - 1)])
@@ -186,9 +190,10 @@ def _relative_change(new: NDArray[np.float64], old: NDArray[np.float64]) -> floa
 
 def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], start: Start, *, max_iter: int, tol: float, switching: Switching, step: float, reflect: bool, warmup: int) -> _Run:
     s = structure
-    theta = _initial_theta(s, u, y, start, warmup)
+    theta = _initial_theta(s, u, y, start, warmup, literal=not reflect)
     run = _Run(history=[theta], rmse=[_rmse(s, theta, u, y, warmup)], reason="iteration limit", last_ls=None, moving=0.0)
     rows = len(u) - max(warmup, 1 if s.is_sandwich else 0)
+    was_cycling = False
     for _ in range(2, max_iter + 1):
         try:
             (theta_ls, rss, cov, _rcond), moving = _iteration(s, theta, u, y, switching, warmup)
@@ -220,9 +225,14 @@ def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], s
         if change < tol:
             run.reason = "tolerance"
             break
-        if len(run.history) >= 3 and _relative_change(theta, run.history[-3]) < tol:
+        # A 2-cycle jumps back (almost) exactly to the iterate before last, twice in a row; a
+        # spiral that still converges returns only part of the way and is left to converge.
+        back = _relative_change(theta, run.history[-3]) if len(run.history) >= 3 else np.inf
+        cycling = back < tol and back < 0.2 * change
+        if cycling and was_cycling:
             run.reason = "2-cycle"
             break
+        was_cycling = cycling
     return run
 
 
@@ -260,6 +270,11 @@ def _check_data(u: ArrayLike, y: ArrayLike, structure: Structure, warmup: int, y
         )
     if np.ptp(u_arr) == 0.0:
         raise NotIdentifiableError("the input u is constant: the system is not excited; use a varying input")
+    if np.ptp(y_arr[warmup:]) == 0.0:
+        raise NotIdentifiableError(
+            f"{y_name} never changes: 0 % of samples move the output off the backlash dead band; "
+            "excite the system with a larger input amplitude"
+        )
     return u_arr, y_arr
 
 
@@ -316,9 +331,7 @@ def _fit(
         run = min(usable, key=lambda r: r.rmse[r.best()])
         k = run.best()
     theta_iter = run.history[k]
-    theta, steps = theta_iter, 0
-    covariance = _ls_covariance(structure, run.last_ls)  # type: ignore[arg-type]
-    noise_var = run.last_ls[1] / max(run.last_ls[3] - structure.size, 1)  # type: ignore[index]
+    theta, steps, refined = theta_iter, 0, None
     if refine:
         candidates = []
         for r in usable:
@@ -328,23 +341,19 @@ def _fit(
                 except BacklashIdError:
                     continue
         if candidates:
-            best = min(candidates, key=lambda c: c.cost)
+            refined = min(candidates, key=lambda c: c.cost)
             # The simulation error is piecewise smooth: LM can stop at a kink or in a shallow
             # local minimum. Restarts from seeded perturbations keep a result only if cheaper.
             rng = np.random.default_rng(seed)
             for _ in range(restarts):
-                start = best.theta + perturbation * rng.standard_normal(structure.size)
+                start = refined.theta + perturbation * rng.standard_normal(structure.size)
                 try:
                     trial = refine_output_error(structure, u_arr, y_arr, start, warmup=warmup)
                 except BacklashIdError:
                     continue
-                if trial.cost < best.cost:
-                    best = trial
-            theta, steps = best.theta, best.iterations
-            dof = max(len(best.residual) - structure.size, 1)
-            noise_var = best.cost / dof
-            unscaled = _core.lstsq(best.jacobian, best.residual, structure.names)[2]
-            covariance = noise_var * unscaled
+                if trial.cost < refined.cost:
+                    refined = trial
+            theta, steps = refined.theta, refined.iterations
     rmse = _rmse(structure, theta, u_arr, y_arr, warmup)
     best_info = {
         "parameters": dict(zip(structure.names, map(float, theta))),
@@ -358,9 +367,10 @@ def _fit(
         model = structure.model(theta)
     except ModelError as exc:
         raise NotConvergedError(f"the final estimate is not a valid model ({exc})", best_info) from None
-    for block, name in ((model.input_linear if isinstance(model, SandwichModel) else model.linear, "input"),) + (
-        ((model.output_linear, "output"),) if isinstance(model, SandwichModel) else ()
-    ):
+    blocks = [(model.input_linear if isinstance(model, SandwichModel) else model.linear, "input")]
+    if isinstance(model, SandwichModel):
+        blocks.append((model.output_linear, "output"))
+    for block, name in blocks:
         if not block.is_stable():
             raise NotConvergedError(
                 f"the estimated {name} linear block is unstable (spectral radius {block.spectral_radius:.3f}); "
@@ -374,6 +384,13 @@ def _fit(
             f"only {100 * moving:.1f} % of samples move the backlash output off its dead band "
             f"(need {100 * min_moving:.0f} %): excite the system with a larger input amplitude"
         )
+    if refined is not None:
+        noise_var = refined.cost / max(len(refined.residual) - structure.size, 1)
+        covariance = noise_var * _core.lstsq(refined.jacobian, refined.residual, structure.names)[2]
+    else:
+        _theta_ls, rss, _cov, rows = run.last_ls  # type: ignore[misc]
+        noise_var = rss / max(rows - structure.size, 1)
+        covariance = _ls_covariance(structure, run.last_ls)  # type: ignore[arg-type]
     return FitResult(
         model=model,
         structure=structure,

@@ -9,6 +9,7 @@
 use crate::backlash::GeneralBacklash;
 use crate::error::{Error, Result};
 use crate::linear::LinearBlock;
+use crate::lstsq::{solve, LeastSquares};
 use crate::signal::check_signal;
 use crate::switching::switching;
 
@@ -24,6 +25,31 @@ pub struct Regression {
     /// Switching functions eq (25)-(26) (case order of eq 1) for every sample.
     pub f1: Vec<bool>,
     pub f2: Vec<bool>,
+}
+
+impl Regression {
+    /// Fraction of samples from `skip` on where the estimate's backlash moves (f1 or f2).
+    pub fn moving_fraction(&self, skip: usize) -> f64 {
+        let n = self.f1.len().saturating_sub(skip);
+        if n == 0 {
+            return 0.0;
+        }
+        let moving = self.f1[skip..].iter().zip(&self.f2[skip..]).filter(|(a, b)| **a || **b).count();
+        moving as f64 / n as f64
+    }
+
+    /// The least-squares solution; when the data do not determine it, the error also says on
+    /// how many samples the current estimate moves the backlash.
+    pub fn solve(&self, names: &[String], skip: usize) -> Result<LeastSquares> {
+        solve(&self.phi, self.rows, self.cols, &self.target, names).map_err(|e| match e {
+            Error::NotIdentifiable(msg) => Error::NotIdentifiable(format!(
+                "{msg}; at the current estimate only {:.1} % of samples move the backlash \
+                 output (f1 or f2)",
+                100.0 * self.moving_fraction(skip)
+            )),
+            other => other,
+        })
+    }
 }
 
 fn check_same_length(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
@@ -150,9 +176,17 @@ pub fn sandwich_regression(
     Ok(Regression { rows: target.len(), cols, phi, target, x, f1: f1s, f2: f2s })
 }
 
-/// ARX regression y(t) = sum a_i u(t-i) - sum b_j y(t-j): rows [u(t-1..t-na), -y(t-1..t-nb)]
-/// for t >= skip, zero before the record. Columns a_1..a_na, b_1..b_nb.
-pub fn arx_regression(u: &[f64], y: &[f64], na: usize, nb: usize, skip: usize) -> Result<(Vec<f64>, Vec<f64>)> {
+/// ARX regression y(t) = sum a_i u(t-delay+1-i) - sum b_j y(t-j): rows
+/// [u(t-delay)..u(t-delay-na+1), -y(t-1..t-nb)] for t >= skip, zero before the record.
+/// Columns a_1..a_na, b_1..b_nb. The cascade has delay 1; the sandwich's two blocks delay 2.
+pub fn arx_regression(
+    u: &[f64],
+    y: &[f64],
+    na: usize,
+    nb: usize,
+    delay: usize,
+    skip: usize,
+) -> Result<(Vec<f64>, Vec<f64>)> {
     check_signal("u", u)?;
     check_signal("y", y)?;
     check_same_length(u, y, "y")?;
@@ -160,7 +194,7 @@ pub fn arx_regression(u: &[f64], y: &[f64], na: usize, nb: usize, skip: usize) -
     let mut phi = Vec::with_capacity(u.len() * (na + nb));
     let mut target = Vec::with_capacity(u.len());
     for t in skip..u.len() {
-        phi.extend((1..=na).map(|i| lag(u, t, i)));
+        phi.extend((1..=na).map(|i| lag(u, t, delay + i - 1)));
         phi.extend((1..=nb).map(|j| -lag(y, t, j)));
         target.push(y[t]);
     }
@@ -170,7 +204,6 @@ pub fn arx_regression(u: &[f64], y: &[f64], na: usize, nb: usize, skip: usize) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lstsq::solve;
 
     fn names(p: usize) -> Vec<String> {
         (0..p).map(|j| format!("p{j}")).collect()
@@ -226,7 +259,7 @@ mod tests {
         let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
         let u = input(300);
         let x = lin.simulate(&u, &lin.rest_state()).unwrap();
-        let (phi, target) = arx_regression(&u, &x, 2, 2, 0).unwrap();
+        let (phi, target) = arx_regression(&u, &x, 2, 2, 1, 0).unwrap();
         let ls = solve(&phi, target.len(), 4, &target, &names(4)).unwrap();
         for (g, w) in ls.theta.iter().zip([0.7, 0.5, -0.2, 0.35]) {
             assert!((g - w).abs() < 1e-12);

@@ -432,7 +432,7 @@ fn cascade_iteration<'py>(
     let (ls, reg) = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
         let reg = core::regressor::cascade_regression(&lin, &bl, &u, &y, &ys, skip)?;
-        let ls = core::lstsq::solve(&reg.phi, reg.rows, reg.cols, &reg.target, &names)?;
+        let ls = reg.solve(&names, skip)?;
         Ok((ls, reg))
     })?;
     Ok((ls_out(py, ls)?, vec_f64(py, reg.x), vec_bool(py, reg.f1), vec_bool(py, reg.f2)))
@@ -463,13 +463,13 @@ fn sandwich_iteration<'py>(
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
         let out = core::LinearBlock::new(r, s)?;
         let reg = core::regressor::sandwich_regression(&lin, &bl, &out, &u, &w, skip)?;
-        let ls = core::lstsq::solve(&reg.phi, reg.rows, reg.cols, &reg.target, &names)?;
+        let ls = reg.solve(&names, skip)?;
         Ok((ls, reg))
     })?;
     Ok((ls_out(py, ls)?, vec_f64(py, reg.x), vec_bool(py, reg.f1), vec_bool(py, reg.f2)))
 }
 
-/// ARX least squares y(t) = sum a_i u(t-i) - sum b_j y(t-j): (theta, rss, cov, rcond).
+/// ARX least squares y(t) = sum a_i u(t-delay+1-i) - sum b_j y(t-j): (theta, rss, cov, rcond).
 #[pyfunction]
 fn arx<'py>(
     py: Python<'py>,
@@ -477,13 +477,14 @@ fn arx<'py>(
     y: PyReadonlyArrayDyn<'py, f64>,
     na: usize,
     nb: usize,
+    delay: usize,
     skip: usize,
 ) -> PyResult<LsOut<'py>> {
     let (u, y) = (signal(py, "u", &u)?, signal(py, "y", &y)?);
     let names: Vec<String> =
         (1..=na).map(|i| format!("a{i}")).chain((1..=nb).map(|j| format!("b{j}"))).collect();
     let ls = run(py, || {
-        let (phi, target) = core::regressor::arx_regression(&u, &y, na, nb, skip)?;
+        let (phi, target) = core::regressor::arx_regression(&u, &y, na, nb, delay, skip)?;
         core::lstsq::solve(&phi, target.len(), na + nb, &target, &names)
     })?;
     ls_out(py, ls)
