@@ -35,3 +35,28 @@ class SandwichModel:
     def simulate_internals(
         self, u: _F, u_past: list[float], x_past: list[float], y_past: list[float], w_past: list[float]
     ) -> tuple[_F, _F, _F, _B, _B, tuple[list[float], list[float], list[float], list[float]]]: ...
+
+# -- identification (one call per iteration; Python drives the iterations) -------------------
+_LS = tuple[_F, float, NDArray[np.float64], float]  # theta, rss, (A^T A)^-1, rcond
+
+def lstsq(a: NDArray[np.float64], b: _F, names: list[str]) -> _LS: ...
+def arx(u: _F, y: _F, na: int, nb: int, delay: int, skip: int) -> _LS: ...
+def simulate_estimate(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
+    r: list[float], s: list[float], u: _F,
+) -> _F: ...
+def cascade_iteration(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
+    u: _F, y: _F, y_switch: _F, skip: int, names: list[str],
+) -> tuple[_LS, _F, _B, _B]: ...
+def sandwich_iteration(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
+    r: list[float], s: list[float], u: _F, w: _F, skip: int, names: list[str],
+) -> tuple[_LS, _F, _B, _B]: ...
+def cascade_sensitivity(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float], u: _F,
+) -> tuple[_F, NDArray[np.float64]]: ...
+def sandwich_sensitivity(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
+    r: list[float], s: list[float], u: _F,
+) -> tuple[_F, NDArray[np.float64]]: ...

@@ -141,7 +141,7 @@ class GeneralBacklash:
 
     def check_branches(self, x_min: float, x_max: float) -> BranchCheck:
         """Check on [x_min, x_max] that both branches increase and do not cross."""
-        d = self._native.check_branches(as_scalar(x_min, "x_min"), as_scalar(x_max, "x_max"))
+        d: Any = self._native.check_branches(as_scalar(x_min, "x_min"), as_scalar(x_max, "x_max"))
         return BranchCheck(**d)
 
     def characteristic(self, x_min: float, x_max: float, num: int = 400) -> tuple[NDArray[np.float64], ...]:

@@ -173,14 +173,10 @@ def _iteration(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.f
     p = structure.unpack(theta)
     names = structure.ls_names
     if structure.is_sandwich:
-        ls, _x, f1, f2 = _core.sandwich_iteration(
-            p["a"], p["b"], p["c_left"], p["c_right"], p["m_left"], p["m_right"], p["r"], p["s"], u, y, warmup, names
-        )
+        ls, _x, f1, f2 = _core.sandwich_iteration(*p.chain(), p.r, p.s, u, y, warmup, names)
     else:
         y_switch = y if switching == "measured" else simulate(structure, theta, u)
-        ls, _x, f1, f2 = _core.cascade_iteration(
-            p["a"], p["b"], p["c_left"], p["c_right"], p["m_left"], p["m_right"], u, y, y_switch, warmup, names
-        )
+        ls, _x, f1, f2 = _core.cascade_iteration(*p.chain(), u, y, y_switch, warmup, names)
     return ls, f1 | f2
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, Union
+from typing import Any, Literal, Union, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -146,6 +146,16 @@ class CascadeModel(_ModelIO):
         """The paper's start: every past signal zero, y(0) = 0."""
         return CascadeState((0.0,) * self.linear.na, (0.0,) * self.linear.nb, 0.0)
 
+    @overload
+    def simulate(
+        self, u: ArrayLike, *, initial_state: CascadeState | None = ..., internals: Literal[False] = ...
+    ) -> NDArray[np.float64]: ...
+
+    @overload
+    def simulate(
+        self, u: ArrayLike, *, initial_state: CascadeState | None = ..., internals: Literal[True]
+    ) -> CascadeSimulation: ...
+
     def simulate(
         self, u: ArrayLike, *, initial_state: CascadeState | None = None, internals: bool = False
     ) -> NDArray[np.float64] | CascadeSimulation:
@@ -213,6 +223,16 @@ class SandwichModel(_ModelIO):
             (0.0,) * self.output_linear.na,
             (0.0,) * self.output_linear.nb,
         )
+
+    @overload
+    def simulate(
+        self, u: ArrayLike, *, initial_state: SandwichState | None = ..., internals: Literal[False] = ...
+    ) -> NDArray[np.float64]: ...
+
+    @overload
+    def simulate(
+        self, u: ArrayLike, *, initial_state: SandwichState | None = ..., internals: Literal[True]
+    ) -> SandwichSimulation: ...
 
     def simulate(
         self, u: ArrayLike, *, initial_state: SandwichState | None = None, internals: bool = False

@@ -32,16 +32,14 @@ def spectral_radius(den: NDArray[np.float64]) -> float:
 
 def is_stable(structure: Structure, theta: NDArray[np.float64]) -> bool:
     p = structure.unpack(theta)
-    dens = [np.asarray(p["b"])] + ([np.asarray(p["s"])] if structure.is_sandwich else [])
+    dens = [np.asarray(p.b), np.asarray(p.s)]
     return all(spectral_radius(d) < 1.0 for d in dens)
 
 
 def simulate(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
     """Free-run output of an estimate from rest (no shape checks on the branches)."""
     p = structure.unpack(theta)
-    return _core.simulate_estimate(
-        p["a"], p["b"], p["c_left"], p["c_right"], p["m_left"], p["m_right"], p.get("r", []), p.get("s", []), u
-    )
+    return _core.simulate_estimate(*p.chain(), p.r, p.s, u)
 
 
 def sensitivity(
@@ -49,10 +47,8 @@ def sensitivity(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     p = structure.unpack(theta)
     if structure.is_sandwich:
-        return _core.sandwich_sensitivity(
-            p["a"], p["b"], p["c_left"], p["c_right"], p["m_left"], p["m_right"], p["r"], p["s"], u
-        )
-    return _core.cascade_sensitivity(p["a"], p["b"], p["c_left"], p["c_right"], p["m_left"], p["m_right"], u)
+        return _core.sandwich_sensitivity(*p.chain(), p.r, p.s, u)
+    return _core.cascade_sensitivity(*p.chain(), u)
 
 
 def refine_output_error(

@@ -9,7 +9,7 @@ positions of c_L and c_R (eq 20, 32).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Union
+from typing import Any, Union
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,6 +20,25 @@ from .linear import LinearBlock
 from .models import CascadeModel, SandwichModel
 
 Model = Union[CascadeModel, SandwichModel]
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A parameter vector unpacked into the arguments of the core's estimate functions
+    (r and s are empty for a cascade)."""
+
+    a: list[float]
+    b: list[float]
+    c_left: float
+    c_right: float
+    m_left: list[float]
+    m_right: list[float]
+    r: list[float]
+    s: list[float]
+
+    def chain(self) -> tuple[list[float], list[float], float, float, list[float], list[float]]:
+        """(a, b, c_L, c_R, m_L, m_R): the input block and the backlash."""
+        return self.a, self.b, self.c_left, self.c_right, self.m_left, self.m_right
 
 
 @dataclass(frozen=True)
@@ -63,35 +82,33 @@ class Structure:
     def size(self) -> int:
         return len(self.names)
 
-    def _slices(self) -> dict[str, slice | int]:
+    def _slices(self) -> dict[str, Any]:
         na, nb, n = self.na, self.nb, self.degree
         k = na + nb
-        out: dict[str, slice | int] = {"a": slice(0, na), "b": slice(na, k), "c_L": k}
+        out: dict[str, Any] = {"a": slice(0, na), "b": slice(na, k), "c_L": k}
         out["m_L"] = slice(k + 1, k + n)  # m_L2..m_Ln
         out["m_R1"] = k + n
         out["c_R"] = k + n + 1
         out["m_R"] = slice(k + n + 2, k + 2 * n + 1)  # m_R2..m_Rn
         j = k + 2 * n + 1
         out["r"] = slice(j, j + self.nr - 1 if self.is_sandwich else j)
-        out["s"] = slice(out["r"].stop, out["r"].stop + self.ns)  # type: ignore[union-attr]
+        out["s"] = slice(out["r"].stop, out["r"].stop + self.ns)
         return out
 
-    def unpack(self, theta: NDArray[np.float64]) -> dict[str, object]:
-        """Keyword arguments of the core's estimate functions from a physical vector."""
+    def unpack(self, theta: NDArray[np.float64]) -> Estimate:
+        """The estimate of a physical vector, with m_L1 = 1 and r_1 = 1 put back."""
         sl = self._slices()
         t = np.asarray(theta, dtype=np.float64)
-        out: dict[str, object] = {
-            "a": t[sl["a"]].tolist(),
-            "b": t[sl["b"]].tolist(),
-            "c_left": float(t[sl["c_L"]]),
-            "c_right": float(t[sl["c_R"]]),
-            "m_left": [1.0] + t[sl["m_L"]].tolist(),
-            "m_right": [float(t[sl["m_R1"]])] + t[sl["m_R"]].tolist(),
-        }
-        if self.is_sandwich:
-            out["r"] = [1.0] + t[sl["r"]].tolist()
-            out["s"] = t[sl["s"]].tolist()
-        return out
+        return Estimate(
+            a=t[sl["a"]].tolist(),
+            b=t[sl["b"]].tolist(),
+            c_left=float(t[sl["c_L"]]),
+            c_right=float(t[sl["c_R"]]),
+            m_left=[1.0] + t[sl["m_L"]].tolist(),
+            m_right=[float(t[sl["m_R1"]])] + t[sl["m_R"]].tolist(),
+            r=[1.0] + t[sl["r"]].tolist() if self.is_sandwich else [],
+            s=t[sl["s"]].tolist() if self.is_sandwich else [],
+        )
 
     def pack(self, model: Model) -> NDArray[np.float64]:
         """Physical vector of a model (normalised so that m_L1 = 1 and r_1 = 1)."""
@@ -121,10 +138,10 @@ class Structure:
         """The validated model of a physical vector (raises ModelError if it is not a valid
         backlash, e.g. branches that fall across the dead band)."""
         p = self.unpack(theta)
-        lin = LinearBlock(p["a"], p["b"])
-        bl = GeneralBacklash(p["c_left"], p["c_right"], p["m_left"], p["m_right"])
+        lin = LinearBlock(p.a, p.b)
+        bl = GeneralBacklash(p.c_left, p.c_right, p.m_left, p.m_right)
         if self.is_sandwich:
-            return SandwichModel(lin, bl, LinearBlock(p["r"], p["s"]))
+            return SandwichModel(lin, bl, LinearBlock(p.r, p.s))
         return CascadeModel(lin, bl)
 
     def __str__(self) -> str:
