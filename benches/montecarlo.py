@@ -4,7 +4,7 @@ Prints, per example, noise level and algorithm: how many seeds end with max |err
 ("in basin") and < 0.02, the median and worst max |error|, failures, and per-parameter mean,
 std and max |error|. Errors are estimate minus truth over all free parameters (m_L1 = r_1 = 1).
 
-    python benches/montecarlo.py --seeds 100
+    python benches/montecarlo.py --seeds 100 --per-parameter
 """
 
 from __future__ import annotations
@@ -66,12 +66,33 @@ def _orders(model: bid.CascadeModel | bid.SandwichModel) -> tuple[int, ...]:
     return model.linear.na, model.linear.nb, model.backlash.degree
 
 
+def standard_error_check(seeds: int, n: int = 100_000, snr: float = 5.0) -> None:
+    """Example 1 at large N and low SNR: is every error within 3 reported standard errors?"""
+    model = bid.example1()
+    print(f"\nExample 1, N = {n}, SNR {snr:g}: error / standard error per parameter (|z| <= 3 wanted)")
+    for seed in range(seeds):
+        data = bid.example_data(model, n, snr=snr, seed=seed)
+        t0 = time.perf_counter()
+        default = bid.fit_cascade(data.u, data.noisy)
+        seconds = time.perf_counter() - t0
+        z = {k: e / default.standard_errors[k] for k, e in default.errors(model).items()}
+        plain = bid.fit_cascade(data.u, data.noisy, paper=True)
+        zp = {k: e / default.standard_errors[k] for k, e in plain.errors(model).items()}
+        worst = max(z, key=lambda k: abs(z[k]))
+        worst_p = max(zp, key=lambda k: abs(zp[k]))
+        print(
+            f"  seed {seed}: default max |z| = {abs(z[worst]):.2f} ({worst}), {seconds:.1f} s; "
+            f"paper's algorithm max |z| = {abs(zp[worst_p]):.1f} ({worst_p})"
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=100)
     ap.add_argument("--n", type=int, default=1500)
     ap.add_argument("--examples", nargs="+", default=["ex1", "ex2"])
     ap.add_argument("--per-parameter", action="store_true", help="print per-parameter statistics")
+    ap.add_argument("--large-seeds", type=int, default=3, help="seeds of the N = 1e5, SNR 5 check (0 skips it)")
     args = ap.parse_args()
     print(f"Monte Carlo: N = {args.n}, {args.seeds} seeds, |u| < 1; error = max over parameters of |estimate - true|")
     print(f"{'case':<26}{'algorithm':<10}{'<0.1':>6}{'<0.02':>7}{'median':>10}{'worst':>10}{'failed':>8}{'s/fit':>8}")
@@ -89,6 +110,8 @@ def main() -> None:
                     e = r["errors"]
                     for k, name in enumerate(r["names"]):
                         print(f"    {name:<6} mean {e[:, k].mean():+.2e}  std {e[:, k].std():.2e}  max {np.abs(e[:, k]).max():.2e}")
+    if args.large_seeds:
+        standard_error_check(args.large_seeds)
 
 
 if __name__ == "__main__":
