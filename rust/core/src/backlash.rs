@@ -114,7 +114,12 @@ impl GeneralBacklash {
 
     /// An estimate during identification: finite numbers only, no shape checks (the
     /// iterations may pass through branches that turn or cross; eq 1's case order copes).
-    pub fn from_estimate(c_left: f64, c_right: f64, m_left: Vec<f64>, m_right: Vec<f64>) -> Result<Self> {
+    pub fn from_estimate(
+        c_left: f64,
+        c_right: f64,
+        m_left: Vec<f64>,
+        m_right: Vec<f64>,
+    ) -> Result<Self> {
         for (name, c) in [("c_L", c_left), ("c_R", c_right)] {
             if !c.is_finite() {
                 return Err(Error::Model(format!("{name} = {c}: the estimate diverged")));
@@ -125,8 +130,14 @@ impl GeneralBacklash {
         Ok(GeneralBacklash {
             c_left,
             c_right,
-            left: Branch { shift: c_left, m: m_left },
-            right: Branch { shift: -c_right, m: m_right },
+            left: Branch {
+                shift: c_left,
+                m: m_left,
+            },
+            right: Branch {
+                shift: -c_right,
+                m: m_right,
+            },
         })
     }
 
@@ -150,14 +161,16 @@ impl GeneralBacklash {
     /// branches x <= z_L is L(x) <= y(t-1) by eq (2), and x >= z_R is R(x) >= y(t-1) by eq (3).
     #[inline(always)]
     pub fn step(&self, x: f64, y_prev: f64) -> f64 {
-        let l = self.left.value(x);
-        let r = self.right.value(x);
-        let not_left = if r >= y_prev { r } else { y_prev };
-        if l <= y_prev {
-            l
-        } else {
-            not_left
-        }
+        select(self.left.value(x), self.right.value(x), y_prev)
+    }
+
+    /// The step with both branches copied into fixed-size arrays, for the hot loops; None
+    /// for a branch of degree above `PADDED`.
+    pub(crate) fn padded_step(&self) -> Option<PaddedStep> {
+        Some(PaddedStep {
+            left: PaddedBranch::new(&self.left)?,
+            right: PaddedBranch::new(&self.right)?,
+        })
     }
 
     /// The backlash output for the internal signal `x`, from memory y(0) = `y0`.
@@ -170,6 +183,7 @@ impl GeneralBacklash {
             y_prev = self.step(xt, y_prev);
             y.push(y_prev);
         }
+        check_output_overflow(x, &y)?;
         Ok(y)
     }
 
@@ -221,6 +235,86 @@ impl GeneralBacklash {
             ),
         }
     }
+}
+
+/// Eq (1)'s case order given L(x) and R(x), written as two selects (no branch to mispredict).
+#[inline(always)]
+fn select(l: f64, r: f64, y_prev: f64) -> f64 {
+    let not_left = if r >= y_prev { r } else { y_prev };
+    if l <= y_prev {
+        l
+    } else {
+        not_left
+    }
+}
+
+/// One step of eq (1) in a hot loop: the model itself, or its `PaddedStep`.
+pub(crate) trait Step: Copy {
+    fn step(&self, x: f64, y_prev: f64) -> f64;
+}
+
+impl Step for &GeneralBacklash {
+    #[inline(always)]
+    fn step(&self, x: f64, y_prev: f64) -> f64 {
+        GeneralBacklash::step(self, x, y_prev)
+    }
+}
+
+/// Branch degree up to which `GeneralBacklash::padded_step` applies.
+const PADDED: usize = 3;
+
+/// A branch as [m_n, .., m_1] behind leading zeros, so that Horner's rule runs a fixed
+/// number of steps. The zeros change nothing: `Branch::value` starts from acc = 0 anyway,
+/// 0 * xi + 0 = +0 for every finite xi, and a non-finite xi gives NaN either way.
+#[derive(Debug, Clone, Copy)]
+struct PaddedBranch {
+    shift: f64,
+    m: [f64; PADDED],
+}
+
+impl PaddedBranch {
+    fn new(branch: &Branch) -> Option<Self> {
+        let mut m = [0.0; PADDED];
+        let tail = PADDED.checked_sub(branch.m.len())?;
+        for (slot, mi) in m[tail..].iter_mut().zip(branch.m.iter().rev()) {
+            *slot = *mi;
+        }
+        Some(PaddedBranch {
+            shift: branch.shift,
+            m,
+        })
+    }
+
+    #[inline(always)]
+    fn value(&self, x: f64) -> f64 {
+        let xi = x + self.shift;
+        self.m.iter().fold(0.0, |acc, m| acc * xi + m) * xi
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PaddedStep {
+    left: PaddedBranch,
+    right: PaddedBranch,
+}
+
+impl Step for PaddedStep {
+    #[inline(always)]
+    fn step(&self, x: f64, y_prev: f64) -> f64 {
+        select(self.left.value(x), self.right.value(x), y_prev)
+    }
+}
+
+/// Branches of degree n grow like |x|^n: a large but finite x can overflow y.
+pub(crate) fn check_output_overflow(x: &[f64], y: &[f64]) -> Result<()> {
+    if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+        return Err(Error::Model(format!(
+            "simulation diverged: the backlash output y[{i}] overflowed at x[{i}] = {:e}, \
+             where the branch polynomials exceed the float range; scale the signals down",
+            x[i]
+        )));
+    }
+    Ok(())
 }
 
 pub(crate) fn check_memory(y0: f64) -> Result<()> {
@@ -284,7 +378,8 @@ fn intervals_where_nonpositive(f: impl Fn(f64) -> f64, lo: f64, hi: f64) -> Vec<
     let mut prev_x = lo;
     for k in 0..=CELLS {
         let x = at(k);
-        let bad = !(f(x) > 0.0);
+        // not f > 0, a NaN included
+        let bad = f(x).partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater);
         match (start, bad) {
             (None, true) => start = Some(if k == 0 { x } else { refine(prev_x, x) }),
             (Some(s), false) => {

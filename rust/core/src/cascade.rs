@@ -1,8 +1,8 @@
 //! The cascade of Section 3 (Fig. 2): the linear block (16) followed by a general backlash (1).
 
-use crate::backlash::{check_memory, GeneralBacklash};
-use crate::error::Result;
-use crate::linear::{check_no_overflow, LinearBlock, LinearState};
+use crate::backlash::{check_memory, GeneralBacklash, Step};
+use crate::error::{Error, Result};
+use crate::linear::{blame_feeding_block, LinearBlock, LinearState, Recursion, RecursionUser};
 use crate::signal::check_signal;
 use crate::switching::switching;
 
@@ -42,33 +42,48 @@ impl CascadeModel {
         }
     }
 
-    /// x (eq 16) and y (eq 1), sample by sample in one pass.
-    fn run(&self, u: &[f64], state: &CascadeState) -> Result<(Vec<f64>, Vec<f64>)> {
-        check_signal("u", u)?;
-        self.linear.check_state(&state.linear, "state.linear")?;
-        check_memory(state.y_prev)?;
-        let n = u.len();
-        let mut x = vec![0.0; n];
-        let mut y = vec![0.0; n];
-        let mut y_prev = state.y_prev;
-        for t in 0..n {
-            let xt = self.linear.output_at(u, &x, t, &state.linear);
-            x[t] = xt;
-            y_prev = self.backlash.step(xt, y_prev);
-            y[t] = y_prev;
-        }
-        check_no_overflow(&self.linear, &x, "x")?;
-        Ok((x, y))
-    }
-
-    /// The cascade output y for the input u.
+    /// y (eq 1) of x (eq 16) in one pass, x not kept.
+    ///
+    /// The checks of u and x ride along in the loop instead of taking passes of their own:
+    /// a_1 u(t-1) is a term of x(t), so a non-finite u[i] makes x[i+1] non-finite; finite
+    /// x all through and a finite last u thus mean a finite u. On any failure the linear
+    /// block is rerun alone, which names the first culprit exactly as separate checks would.
     pub fn simulate(&self, u: &[f64], state: &CascadeState) -> Result<Vec<f64>> {
-        Ok(self.run(u, state)?.1)
+        let ready = self
+            .linear
+            .check_state(&state.linear, "state.linear")
+            .and_then(|()| check_memory(state.y_prev));
+        if u.is_empty() || ready.is_err() {
+            check_signal("u", u)?;
+            ready?;
+        }
+        let run = CascadeRun {
+            backlash: &self.backlash,
+            u,
+            y0: state.y_prev,
+        };
+        match self.linear.with_recursion(&state.linear, run) {
+            (y, true) if u.last().is_some_and(|v| v.is_finite()) => Ok(y),
+            _ => {
+                let x = self.linear.simulate(u, &state.linear)?;
+                self.backlash
+                    .simulate(&x, state.y_prev)
+                    .map_err(|e| blame_feeding_block(e, &self.linear, "input"))?;
+                unreachable_error()
+            }
+        }
     }
 
     /// The output with x, f1, f2 and the state to continue from.
     pub fn simulate_internals(&self, u: &[f64], state: &CascadeState) -> Result<CascadeSimulation> {
-        let (x, y) = self.run(u, state)?;
+        check_signal("u", u)?;
+        self.linear.check_state(&state.linear, "state.linear")?;
+        check_memory(state.y_prev)?;
+        let x = self.linear.simulate(u, &state.linear)?;
+        let y = self
+            .backlash
+            .simulate(&x, state.y_prev)
+            .map_err(|e| blame_feeding_block(e, &self.linear, "input"))?;
         let (f1, f2) = switching_flags(&self.backlash, &x, &y, state.y_prev);
         let final_state = CascadeState {
             linear: self.linear.state_after(&state.linear, u, &x),
@@ -82,6 +97,53 @@ impl CascadeModel {
             final_state,
         })
     }
+}
+
+/// The loop of `CascadeModel::simulate`: y, and whether every x and y was finite.
+struct CascadeRun<'a> {
+    backlash: &'a GeneralBacklash,
+    u: &'a [f64],
+    y0: f64,
+}
+
+impl RecursionUser for CascadeRun<'_> {
+    type Output = (Vec<f64>, bool);
+
+    fn run<R: Recursion>(self, linear: R) -> Self::Output {
+        match self.backlash.padded_step() {
+            Some(step) => self.run_with(linear, step),
+            None => self.run_with(linear, self.backlash),
+        }
+    }
+}
+
+impl CascadeRun<'_> {
+    /// `collect` on a slice's `map` writes into one exact allocation without capacity checks
+    /// (`push` has them, and its rarely taken call makes the compiler spill the recursion's
+    /// registers). So no early exit: a non-finite x only clears the `finite` flag.
+    fn run_with<R: Recursion, S: Step>(&self, mut linear: R, backlash: S) -> (Vec<f64>, bool) {
+        let mut finite = true;
+        let mut y_prev = self.y0;
+        let y = self
+            .u
+            .iter()
+            .map(|&ut| {
+                let xt = linear.next(ut);
+                y_prev = backlash.step(xt, y_prev);
+                finite &= xt.is_finite() & y_prev.is_finite();
+                y_prev
+            })
+            .collect();
+        (y, finite)
+    }
+}
+
+/// For a failure that a rerun of the linear block alone did not reproduce: cannot happen
+/// (the rerun computes the same x), but an error beats a panic.
+pub(crate) fn unreachable_error<T>() -> Result<T> {
+    Err(Error::Model(
+        "internal error: the simulation failed but its rerun did not; please report".into(),
+    ))
 }
 
 /// f1(t), f2(t) of eq (12)-(13) (case order of eq 1) along a simulated record.

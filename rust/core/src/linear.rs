@@ -125,12 +125,25 @@ impl LinearBlock {
     pub fn simulate(&self, u: &[f64], state: &LinearState) -> Result<Vec<f64>> {
         crate::signal::check_signal("u", u)?;
         self.check_state(state, "state")?;
-        let mut x = vec![0.0; u.len()];
-        for t in 0..u.len() {
-            x[t] = self.output_at(u, &x, t, state);
-        }
+        let x = self.with_recursion(state, Outputs(u));
         check_no_overflow(self, &x, "x")?;
         Ok(x)
+    }
+
+    /// Run `f` on this block's recursion started from `state`. The usual low orders get a
+    /// recursion with its orders fixed at compile time, so that its past lives in registers;
+    /// every order gives the same numbers (the same sums in the same order).
+    #[inline]
+    pub(crate) fn with_recursion<F: RecursionUser>(&self, state: &LinearState, f: F) -> F::Output {
+        macro_rules! try_fixed {
+            ($(($na:literal, $nb:literal)),*) => {$(
+                if let Some(rec) = Fixed::<$na, $nb>::new(self, state) {
+                    return f.run(rec);
+                }
+            )*};
+        }
+        try_fixed!((1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2));
+        f.run(Dynamic::new(self, state))
     }
 
     /// The state after the record `u` -> `x` that started from `before`.
@@ -139,6 +152,140 @@ impl LinearBlock {
             u_past: shift_in(&before.u_past, u),
             x_past: shift_in(&before.x_past, x),
         }
+    }
+}
+
+/// Eq (16) run forward sample by sample, the past held by the recursion itself.
+pub(crate) trait Recursion: 'static {
+    /// x(t) from the past inputs and outputs; then `u_now` = u(t) and x(t) join the past.
+    fn next(&mut self, u_now: f64) -> f64;
+}
+
+/// Something to do with a recursion of any order: `LinearBlock::with_recursion` calls it.
+pub(crate) trait RecursionUser {
+    type Output;
+    fn run<R: Recursion>(self, rec: R) -> Self::Output;
+}
+
+/// A recursion behind `dyn`, run a block of samples per (virtual) call.
+pub(crate) trait BlockRecursion {
+    /// x for the inputs `u`, into `x` (as many as both have).
+    fn run_block(&mut self, u: &[f64], x: &mut [f64]);
+}
+
+impl<R: Recursion> BlockRecursion for R {
+    fn run_block(&mut self, u: &[f64], x: &mut [f64]) {
+        for (xt, &ut) in x.iter_mut().zip(u) {
+            *xt = self.next(ut);
+        }
+    }
+}
+
+/// The recursion, boxed: `LinearBlock::with_recursion(state, Boxed)`.
+pub(crate) struct Boxed;
+
+impl RecursionUser for Boxed {
+    type Output = Box<dyn BlockRecursion>;
+    fn run<R: Recursion>(self, rec: R) -> Self::Output {
+        Box::new(rec)
+    }
+}
+
+/// x for the input `u`, sample by sample.
+pub(crate) struct Outputs<'a>(pub(crate) &'a [f64]);
+
+impl RecursionUser for Outputs<'_> {
+    type Output = Vec<f64>;
+    fn run<R: Recursion>(self, mut rec: R) -> Vec<f64> {
+        self.0.iter().map(|&ut| rec.next(ut)).collect()
+    }
+}
+
+/// Orders fixed at compile time: the loops unroll and the past stays in registers.
+struct Fixed<const NA: usize, const NB: usize> {
+    a: [f64; NA],
+    b: [f64; NB],
+    /// [u(t-1), u(t-2), ..] and [x(t-1), x(t-2), ..]
+    u_past: [f64; NA],
+    x_past: [f64; NB],
+}
+
+impl<const NA: usize, const NB: usize> Fixed<NA, NB> {
+    /// None unless the block has exactly these orders (and the state fits them).
+    fn new(block: &LinearBlock, state: &LinearState) -> Option<Self> {
+        Some(Fixed {
+            a: block.a.as_slice().try_into().ok()?,
+            b: block.b.as_slice().try_into().ok()?,
+            u_past: state.u_past.as_slice().try_into().ok()?,
+            x_past: state.x_past.as_slice().try_into().ok()?,
+        })
+    }
+}
+
+/// Newest value first: [v, past[0], past[1], ..] without the oldest.
+#[inline(always)]
+fn push_front<const N: usize>(past: &mut [f64; N], v: f64) {
+    if N > 0 {
+        past.copy_within(0..N - 1, 1);
+        past[0] = v;
+    }
+}
+
+impl<const NA: usize, const NB: usize> Recursion for Fixed<NA, NB> {
+    #[inline(always)]
+    fn next(&mut self, u_now: f64) -> f64 {
+        let mut acc = 0.0;
+        for i in 0..NA {
+            acc += self.a[i] * self.u_past[i];
+        }
+        for j in 0..NB {
+            acc -= self.b[j] * self.x_past[j];
+        }
+        push_front(&mut self.u_past, u_now);
+        push_front(&mut self.x_past, acc);
+        acc
+    }
+}
+
+/// Any orders: the same sums over the coefficient vectors.
+struct Dynamic {
+    a: Vec<f64>,
+    b: Vec<f64>,
+    u_past: Vec<f64>,
+    x_past: Vec<f64>,
+}
+
+impl Dynamic {
+    fn new(block: &LinearBlock, state: &LinearState) -> Self {
+        Dynamic {
+            a: block.a.clone(),
+            b: block.b.clone(),
+            u_past: state.u_past.clone(),
+            x_past: state.x_past.clone(),
+        }
+    }
+}
+
+/// Newest value first, as `push_front`; a no-op on an empty past.
+fn push_front_slice(past: &mut [f64], v: f64) {
+    if let Some(last) = past.len().checked_sub(1) {
+        past.copy_within(0..last, 1);
+        past[0] = v;
+    }
+}
+
+impl Recursion for Dynamic {
+    fn next(&mut self, u_now: f64) -> f64 {
+        let mut acc = 0.0;
+        for (ai, ui) in self.a.iter().zip(&self.u_past) {
+            acc += ai * ui;
+        }
+        for (bj, xj) in self.b.iter().zip(&self.x_past) {
+            acc -= bj * xj;
+        }
+        push_front_slice(&mut self.u_past, u_now);
+        push_front_slice(&mut self.x_past, acc);
+        acc
     }
 }
 
@@ -153,6 +300,18 @@ fn shift_in(past: &[f64], signal: &[f64]) -> Vec<f64> {
             }
         })
         .collect()
+}
+
+/// A backlash overflow error, with the stability of the block that fed it: an unstable block
+/// makes x grow until the branch polynomials overflow.
+pub(crate) fn blame_feeding_block(err: Error, block: &LinearBlock, name: &str) -> Error {
+    match err {
+        Error::Model(msg) => Error::Model(format!(
+            "{msg}; the {name} linear block has spectral radius {:.4} (stable needs < 1)",
+            block.spectral_radius()
+        )),
+        other => other,
+    }
 }
 
 /// An unstable block drives its output to inf/NaN: say so instead of returning garbage.

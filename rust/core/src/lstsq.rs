@@ -25,7 +25,13 @@ pub const RANK_TOLERANCE: f64 = 1e-10;
 
 /// Solve min ||A theta - b||, A given row-major as `rows` x `cols`. `names` label the columns
 /// in the error raised when a column carries no information (e.g. no sample on a branch).
-pub fn solve(a: &[f64], rows: usize, cols: usize, b: &[f64], names: &[String]) -> Result<LeastSquares> {
+pub fn solve(
+    a: &[f64],
+    rows: usize,
+    cols: usize,
+    b: &[f64],
+    names: &[String],
+) -> Result<LeastSquares> {
     if a.len() != rows * cols || b.len() != rows {
         return Err(Error::Data(format!(
             "least squares: A has {} values for {rows} x {cols} and b has {} (internal shape mismatch)",
@@ -38,7 +44,12 @@ pub fn solve(a: &[f64], rows: usize, cols: usize, b: &[f64], names: &[String]) -
             "only {rows} usable samples for {cols} parameters: give a longer record"
         )));
     }
-    let label = |j: usize| names.get(j).cloned().unwrap_or_else(|| format!("column {j}"));
+    let label = |j: usize| {
+        names
+            .get(j)
+            .cloned()
+            .unwrap_or_else(|| format!("column {j}"))
+    };
     let mut scale = vec![0.0; cols];
     for r in 0..rows {
         for (j, s) in scale.iter_mut().enumerate() {
@@ -78,7 +89,12 @@ pub fn solve(a: &[f64], rows: usize, cols: usize, b: &[f64], names: &[String]) -
         rss += (b[r] - fit).powi(2);
     }
     let unscaled_covariance = inverse_gram(r_factor, &scale);
-    Ok(LeastSquares { theta, rss, unscaled_covariance, rcond: min_diag / max_diag })
+    Ok(LeastSquares {
+        theta,
+        rss,
+        unscaled_covariance,
+        rcond: min_diag / max_diag,
+    })
 }
 
 /// (A^T A)^{-1} = D^{-1} R^{-1} R^{-T} D^{-1} from the R factor of A D^{-1}.
@@ -98,7 +114,9 @@ fn inverse_gram(r: MatRef<'_, f64>, scale: &[f64]) -> Vec<f64> {
     let mut out = vec![0.0; p * p];
     for i in 0..p {
         for j in 0..p {
-            let s: f64 = (i.max(j)..p).map(|k| rinv[i * p + k] * rinv[j * p + k]).sum();
+            let s: f64 = (i.max(j)..p)
+                .map(|k| rinv[i * p + k] * rinv[j * p + k])
+                .sum();
             out[i * p + j] = s / (scale[i] * scale[j]);
         }
     }
@@ -123,7 +141,9 @@ mod tests {
                 [1.0, t, t * t]
             })
             .collect();
-        let b: Vec<f64> = (0..rows).map(|t| 1.0 - 2.0 * t as f64 + 0.5 * (t * t) as f64).collect();
+        let b: Vec<f64> = (0..rows)
+            .map(|t| 1.0 - 2.0 * t as f64 + 0.5 * (t * t) as f64)
+            .collect();
         let ls = solve(&a, rows, 3, &b, &names(3)).unwrap();
         for (got, want) in ls.theta.iter().zip([1.0, -2.0, 0.5]) {
             assert!((got - want).abs() < 1e-10);
@@ -138,7 +158,10 @@ mod tests {
                         ata * ls.unscaled_covariance[k * 3 + j]
                     })
                     .sum();
-                assert!((g - if i == j { 1.0 } else { 0.0 }).abs() < 1e-9, "{i} {j} {g}");
+                assert!(
+                    (g - if i == j { 1.0 } else { 0.0 }).abs() < 1e-9,
+                    "{i} {j} {g}"
+                );
             }
         }
     }
@@ -151,7 +174,13 @@ mod tests {
             other => panic!("{other:?}"),
         }
         let a = vec![1.0, 2.0, 2.0, 4.0, 3.0, 6.0];
-        assert!(matches!(solve(&a, 3, 2, &[1.0, 2.0, 3.0], &names(2)), Err(Error::NotIdentifiable(_))));
-        assert!(matches!(solve(&a, 1, 2, &[1.0], &names(2)), Err(Error::Data(_))));
+        assert!(matches!(
+            solve(&a, 3, 2, &[1.0, 2.0, 3.0], &names(2)),
+            Err(Error::NotIdentifiable(_))
+        ));
+        assert!(matches!(
+            solve(&a, 1, 2, &[1.0], &names(2)),
+            Err(Error::Data(_))
+        ));
     }
 }

@@ -34,7 +34,11 @@ impl Regression {
         if n == 0 {
             return 0.0;
         }
-        let moving = self.f1[skip..].iter().zip(&self.f2[skip..]).filter(|(a, b)| **a || **b).count();
+        let moving = self.f1[skip..]
+            .iter()
+            .zip(&self.f2[skip..])
+            .filter(|(a, b)| **a || **b)
+            .count();
         moving as f64 / n as f64
     }
 
@@ -65,7 +69,10 @@ fn check_same_length(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
 
 /// Degree n of an estimate (both branches have n coefficients in the regressions).
 fn degree(backlash: &GeneralBacklash) -> Result<usize> {
-    let (nl, nr) = (backlash.left().coefficients().len(), backlash.right().coefficients().len());
+    let (nl, nr) = (
+        backlash.left().coefficients().len(),
+        backlash.right().coefficients().len(),
+    );
     if nl != nr {
         return Err(Error::Model(format!(
             "the estimate's branches have degrees {nl} and {nr}: identification uses one degree n"
@@ -126,7 +133,11 @@ pub fn cascade_regression(
     let mut phi = Vec::with_capacity(u.len().saturating_sub(skip) * cols);
     let mut target = Vec::with_capacity(u.len().saturating_sub(skip));
     for t in 0..u.len() {
-        let (ys_prev, y_prev) = if t > 0 { (y_switch[t - 1], y[t - 1]) } else { (0.0, 0.0) };
+        let (ys_prev, y_prev) = if t > 0 {
+            (y_switch[t - 1], y[t - 1])
+        } else {
+            (0.0, 0.0)
+        };
         let (f1, f2) = switching(backlash, x[t], ys_prev); // eq (25)-(26)
         f1s.push(f1);
         f2s.push(f2);
@@ -137,7 +148,15 @@ pub fn cascade_regression(
         let hold = if f1 || f2 { 0.0 } else { y_prev };
         target.push(y[t] - hold); // eq (21)
     }
-    Ok(Regression { rows: target.len(), cols, phi, target, x, f1: f1s, f2: f2s })
+    Ok(Regression {
+        rows: target.len(),
+        cols,
+        phi,
+        target,
+        x,
+        f1: f1s,
+        f2: f2s,
+    })
 }
 
 /// Eq (33)-(34) at the current estimate: x by eq (22), the backlash output y by eq (35)
@@ -167,13 +186,27 @@ pub fn sandwich_regression(
     let mut target = Vec::with_capacity(u.len());
     for t in skip.max(1)..u.len() {
         let tau = t - 1;
-        push_backlash_part(&mut phi, na, nb, n, backlash, u, &x, tau, f1s[tau], f2s[tau]);
+        push_backlash_part(
+            &mut phi, na, nb, n, backlash, u, &x, tau, f1s[tau], f2s[tau],
+        );
         phi.extend((2..=nr).map(|i| lag(&y, t, i)));
         phi.extend((1..=ns).map(|j| -lag(w, t, j)));
-        let hold = if f1s[tau] || f2s[tau] { 0.0 } else { lag(&y, t, 2) };
+        let hold = if f1s[tau] || f2s[tau] {
+            0.0
+        } else {
+            lag(&y, t, 2)
+        };
         target.push(w[t] - hold); // eq (34)
     }
-    Ok(Regression { rows: target.len(), cols, phi, target, x, f1: f1s, f2: f2s })
+    Ok(Regression {
+        rows: target.len(),
+        cols,
+        phi,
+        target,
+        x,
+        f1: f1s,
+        f2: f2s,
+    })
 }
 
 /// ARX regression y(t) = sum a_i u(t-delay+1-i) - sum b_j y(t-j): rows
@@ -214,7 +247,9 @@ mod tests {
         let mut s = 12345u64;
         (0..n)
             .map(|_| {
-                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
             })
             .collect()
@@ -248,7 +283,9 @@ mod tests {
         let reg = sandwich_regression(&lin, &bl, &out, &u, &w, 0).unwrap();
         let ls = solve(&reg.phi, reg.rows, reg.cols, &reg.target, &names(reg.cols)).unwrap();
         // a1 a2 b1 b2 c1 mL2 mL3 mR1 c2 mR2 mR3 r2 s1 s2
-        let want = [0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.375, 0.2, 0.6, 0.15, -0.2, 0.35];
+        let want = [
+            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.375, 0.2, 0.6, 0.15, -0.2, 0.35,
+        ];
         for (g, w) in ls.theta.iter().zip(want) {
             assert!((g - w).abs() < 1e-9, "{:?}", ls.theta);
         }

@@ -1,10 +1,13 @@
 //! The sandwich of Section 4 (Fig. 3): the input block (16), a general backlash (1) and the
 //! output block (29): w(t) = sum_{i=1}^{nr} r_i y(t-i) - sum_{j=1}^{ns} s_j w(t-j).
 
-use crate::backlash::GeneralBacklash;
-use crate::cascade::switching_flags;
+use crate::backlash::{GeneralBacklash, Step};
+use crate::cascade::{switching_flags, unreachable_error};
 use crate::error::{Error, Result};
-use crate::linear::{check_no_overflow, LinearBlock, LinearState};
+use crate::linear::{
+    blame_feeding_block, check_no_overflow, Boxed, LinearBlock, LinearState, Outputs, Recursion,
+    RecursionUser,
+};
 use crate::signal::check_signal;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -65,29 +68,62 @@ impl SandwichModel {
         Ok(())
     }
 
-    /// x (eq 16), y (eq 1) and w (eq 29), sample by sample in one pass.
+    /// x (eq 16), y (eq 1) and w (eq 29), one block after the other.
     fn run(&self, u: &[f64], state: &SandwichState) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
         check_signal("u", u)?;
         self.check_state(state)?;
-        let n = u.len();
-        let (mut x, mut y, mut w) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        let mut y_prev = state.output.u_past[0];
-        for t in 0..n {
-            // w(t) needs y up to t-1 only
-            w[t] = self.output_linear.output_at(&y, &w, t, &state.output);
-            let xt = self.input_linear.output_at(u, &x, t, &state.input);
-            x[t] = xt;
-            y_prev = self.backlash.step(xt, y_prev);
-            y[t] = y_prev;
-        }
-        check_no_overflow(&self.input_linear, &x, "x")?;
+        let x = self.input_linear.simulate(u, &state.input)?;
+        let y = self
+            .backlash
+            .simulate(&x, state.output.u_past[0])
+            .map_err(|e| blame_feeding_block(e, &self.input_linear, "input"))?;
+        let w = self
+            .output_linear
+            .with_recursion(&state.output, Outputs(&y));
         check_no_overflow(&self.output_linear, &w, "w")?;
         Ok((x, y, w))
     }
 
-    /// The sandwich output w for the input u.
+    /// The sandwich output w for the input u, block by block: x and y, then w, for `BLOCK`
+    /// samples at a time, only w kept. (One loop for all three would let the compiler pack
+    /// x(t) and w(t) into one vector, which chains x(t) behind y(t-1): slower. Boxing the
+    /// two stages also spares compiling one loop per pair of block orders.) The checks of
+    /// u, x and w ride along as in `CascadeModel::simulate`; on a failure `run` names it.
     pub fn simulate(&self, u: &[f64], state: &SandwichState) -> Result<Vec<f64>> {
-        Ok(self.run(u, state)?.2)
+        const BLOCK: usize = 256;
+        let ready = self.check_state(state);
+        if u.is_empty() || ready.is_err() {
+            check_signal("u", u)?;
+            ready?;
+        }
+        let first_two = XyBlocks {
+            backlash: &self.backlash,
+            y0: state.output.u_past[0],
+        };
+        let mut x_then_y = self.input_linear.with_recursion(&state.input, first_two);
+        let mut output = self.output_linear.with_recursion(&state.output, Boxed);
+        let mut w = Vec::with_capacity(u.len());
+        let (mut x_block, mut y_block, mut w_block) = ([0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK]);
+        let mut finite = true;
+        for u_block in u.chunks(BLOCK) {
+            let x_block = &mut x_block[..u_block.len()];
+            let y_block = &mut y_block[..u_block.len()];
+            let w_block = &mut w_block[..u_block.len()];
+            x_then_y.run_block(u_block, x_block, y_block);
+            output.run_block(y_block, w_block);
+            finite &= x_block
+                .iter()
+                .chain(&*y_block)
+                .chain(&*w_block)
+                .all(|v| v.is_finite());
+            w.extend_from_slice(w_block);
+        }
+        if finite && u.last().is_some_and(|v| v.is_finite()) {
+            Ok(w)
+        } else {
+            self.run(u, state)?;
+            unreachable_error()
+        }
     }
 
     /// The output with x, y, f1, f2 and the state to continue from.
@@ -110,6 +146,54 @@ impl SandwichModel {
             f2,
             final_state,
         })
+    }
+}
+
+/// The input block and the backlash of a sandwich, run a block of samples per call.
+trait XyBlock {
+    /// x and y for the inputs `u`, into `x` and `y` (as many as all three have).
+    fn run_block(&mut self, u: &[f64], x: &mut [f64], y: &mut [f64]);
+}
+
+struct Xy<R, S> {
+    input: R,
+    backlash: S,
+    y_prev: f64,
+}
+
+impl<R: Recursion, S: Step> XyBlock for Xy<R, S> {
+    fn run_block(&mut self, u: &[f64], x: &mut [f64], y: &mut [f64]) {
+        for ((xt, yt), &ut) in x.iter_mut().zip(y.iter_mut()).zip(u) {
+            *xt = self.input.next(ut);
+            self.y_prev = self.backlash.step(*xt, self.y_prev);
+            *yt = self.y_prev;
+        }
+    }
+}
+
+/// Boxes the input block's recursion with the backlash, from memory y(0) = `y0`.
+struct XyBlocks<'a> {
+    backlash: &'a GeneralBacklash,
+    y0: f64,
+}
+
+impl<'a> RecursionUser for XyBlocks<'a> {
+    type Output = Box<dyn XyBlock + 'a>;
+
+    fn run<R: Recursion>(self, input: R) -> Self::Output {
+        let y_prev = self.y0;
+        match self.backlash.padded_step() {
+            Some(backlash) => Box::new(Xy {
+                input,
+                backlash,
+                y_prev,
+            }),
+            None => Box::new(Xy {
+                input,
+                backlash: self.backlash,
+                y_prev,
+            }),
+        }
     }
 }
 

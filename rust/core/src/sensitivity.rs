@@ -64,7 +64,11 @@ fn backlash_chain(
     if backlash.right().coefficients().len() != n {
         return Err(Error::Model("both branches need the same degree n".into()));
     }
-    let lay = Layout { na: linear.na(), nb: linear.nb(), n };
+    let lay = Layout {
+        na: linear.na(),
+        nb: linear.nb(),
+        n,
+    };
     let b = linear.b();
     let nl = lay.linear();
     let len = u.len();
@@ -78,10 +82,18 @@ fn backlash_chain(
         for k in 0..nl {
             let mut acc = if k < lay.na {
                 let i = k + 1;
-                if i <= t { u[t - i] } else { 0.0 }
+                if i <= t {
+                    u[t - i]
+                } else {
+                    0.0
+                }
             } else {
                 let j = k - lay.na + 1;
-                if j <= t { -x[t - j] } else { 0.0 }
+                if j <= t {
+                    -x[t - j]
+                } else {
+                    0.0
+                }
             };
             for (jj, bj) in b.iter().enumerate() {
                 let lagj = jj + 1;
@@ -130,12 +142,20 @@ fn backlash_chain(
 }
 
 /// The cascade output y and d y / d theta.
-pub fn cascade_sensitivity(linear: &LinearBlock, backlash: &GeneralBacklash, u: &[f64]) -> Result<Sensitivity> {
+pub fn cascade_sensitivity(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+) -> Result<Sensitivity> {
     check_signal("u", u)?;
     let cols = linear.na() + linear.nb() + 2 * backlash.left().coefficients().len() + 1;
     let (_, y, dy, lay) = backlash_chain(linear, backlash, u, cols)?;
     debug_assert_eq!(lay.cols(), cols);
-    Ok(Sensitivity { output: y, jacobian: dy, cols })
+    Ok(Sensitivity {
+        output: y,
+        jacobian: dy,
+        cols,
+    })
 }
 
 /// The sandwich output w and d w / d theta.
@@ -148,7 +168,8 @@ pub fn sandwich_sensitivity(
     check_signal("u", u)?;
     let (r, s) = (output_linear.a(), output_linear.b());
     let (nr, ns) = (r.len(), s.len());
-    let inner = input_linear.na() + input_linear.nb() + 2 * backlash.left().coefficients().len() + 1;
+    let inner =
+        input_linear.na() + input_linear.nb() + 2 * backlash.left().coefficients().len() + 1;
     let cols = inner + (nr - 1) + ns;
     let (_, y, dy, _) = backlash_chain(input_linear, backlash, u, cols)?;
     let len = u.len();
@@ -182,7 +203,11 @@ pub fn sandwich_sensitivity(
         w[t] = wt;
     }
     crate::linear::check_no_overflow(output_linear, &w, "w")?;
-    Ok(Sensitivity { output: w, jacobian: dw, cols })
+    Ok(Sensitivity {
+        output: w,
+        jacobian: dw,
+        cols,
+    })
 }
 
 #[cfg(test)]
@@ -190,7 +215,9 @@ mod tests {
     use super::*;
 
     fn input(n: usize) -> Vec<f64> {
-        (0..n).map(|k| ((k as f64) * 0.61).sin() * 0.9 + ((k as f64) * 0.17).cos() * 0.3).collect()
+        (0..n)
+            .map(|k| ((k as f64) * 0.61).sin() * 0.9 + ((k as f64) * 0.17).cos() * 0.3)
+            .collect()
     }
 
     /// Parameter vector in the column order, and a model from it.
@@ -210,7 +237,9 @@ mod tests {
     #[test]
     fn sandwich_jacobian_matches_central_differences() {
         // Example 2's parameters: a1 a2 b1 b2 cL mL2 mL3 mR1 cR mR2 mR3 r2 s1 s2
-        let theta = [0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.5, 0.2, 0.6, 0.15, -0.2, 0.35];
+        let theta = [
+            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.5, 0.2, 0.6, 0.15, -0.2, 0.35,
+        ];
         let u = input(400);
         let (lin, bl, out) = sandwich_from(&theta);
         let sens = sandwich_sensitivity(&lin, &bl, &out, &u).unwrap();
@@ -232,7 +261,11 @@ mod tests {
                     close += 1;
                 }
             }
-            assert!(close >= u.len() * 97 / 100, "parameter {k}: {close} of {}", u.len());
+            assert!(
+                close >= u.len() * 97 / 100,
+                "parameter {k}: {close} of {}",
+                u.len()
+            );
         }
     }
 

@@ -6,7 +6,9 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use backlashid_core as core;
 use std::borrow::Cow;
 
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -401,11 +403,16 @@ fn lstsq<'py>(
 ) -> PyResult<LsOut<'py>> {
     let shape = a.shape().to_vec();
     if shape.len() != 2 {
-        return Err(to_py_err(py, core::Error::Data("A must be a 2-D matrix".into())));
+        return Err(to_py_err(
+            py,
+            core::Error::Data("A must be a 2-D matrix".into()),
+        ));
     }
     let a_vec: Vec<f64> = a.as_array().iter().copied().collect(); // row-major (logical order)
     let b = signal(py, "b", &b)?;
-    let ls = run(py, || core::lstsq::solve(&a_vec, shape[0], shape[1], &b, &names))?;
+    let ls = run(py, || {
+        core::lstsq::solve(&a_vec, shape[0], shape[1], &b, &names)
+    })?;
     ls_out(py, ls)
 }
 
@@ -428,14 +435,23 @@ fn cascade_iteration<'py>(
     skip: usize,
     names: Vec<String>,
 ) -> PyResult<(LsOut<'py>, SignalOut<'py>, FlagOut<'py>, FlagOut<'py>)> {
-    let (u, y, ys) = (signal(py, "u", &u)?, signal(py, "y", &y)?, signal(py, "y_switch", &y_switch)?);
+    let (u, y, ys) = (
+        signal(py, "u", &u)?,
+        signal(py, "y", &y)?,
+        signal(py, "y_switch", &y_switch)?,
+    );
     let (ls, reg) = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
         let reg = core::regressor::cascade_regression(&lin, &bl, &u, &y, &ys, skip)?;
         let ls = reg.solve(&names, skip)?;
         Ok((ls, reg))
     })?;
-    Ok((ls_out(py, ls)?, vec_f64(py, reg.x), vec_bool(py, reg.f1), vec_bool(py, reg.f2)))
+    Ok((
+        ls_out(py, ls)?,
+        vec_f64(py, reg.x),
+        vec_bool(py, reg.f1),
+        vec_bool(py, reg.f2),
+    ))
 }
 
 /// One iteration of the sandwich algorithm (eq 33-36). Returns (theta, rss, cov, rcond),
@@ -466,7 +482,12 @@ fn sandwich_iteration<'py>(
         let ls = reg.solve(&names, skip)?;
         Ok((ls, reg))
     })?;
-    Ok((ls_out(py, ls)?, vec_f64(py, reg.x), vec_bool(py, reg.f1), vec_bool(py, reg.f2)))
+    Ok((
+        ls_out(py, ls)?,
+        vec_f64(py, reg.x),
+        vec_bool(py, reg.f1),
+        vec_bool(py, reg.f2),
+    ))
 }
 
 /// ARX least squares y(t) = sum a_i u(t-delay+1-i) - sum b_j y(t-j): (theta, rss, cov, rcond).
@@ -481,8 +502,10 @@ fn arx<'py>(
     skip: usize,
 ) -> PyResult<LsOut<'py>> {
     let (u, y) = (signal(py, "u", &u)?, signal(py, "y", &y)?);
-    let names: Vec<String> =
-        (1..=na).map(|i| format!("a{i}")).chain((1..=nb).map(|j| format!("b{j}"))).collect();
+    let names: Vec<String> = (1..=na)
+        .map(|i| format!("a{i}"))
+        .chain((1..=nb).map(|j| format!("b{j}")))
+        .collect();
     let ls = run(py, || {
         let (phi, target) = core::regressor::arx_regression(&u, &y, na, nb, delay, skip)?;
         core::lstsq::solve(&phi, target.len(), na + nb, &target, &names)
