@@ -21,13 +21,13 @@ def as_signal(values: Any, name: str) -> NDArray[np.float64]:
         raise DataError(f"{name} is not an array of numbers ({exc}): pass a 1-D array of reals") from None
     if arr.dtype.kind == "c":
         raise DataError(f"{name} is complex: pass the real-valued signal (e.g. {name}.real)")
-    if arr.dtype.kind not in "biuf":
+    if arr.dtype.kind == "O":  # e.g. a list mixing numbers and None, or Decimals
         try:
             arr = arr.astype(np.float64)
         except (TypeError, ValueError):
-            raise DataError(
-                f"{name} has dtype {arr.dtype}, not numbers: convert it to a float array first"
-            ) from None
+            raise DataError(f"{name} holds values that are not numbers: convert it to a float array first") from None
+    elif arr.dtype.kind not in "biuf":  # text, dates, durations, records
+        raise DataError(f"{name} has dtype {arr.dtype}, not numbers: convert it to a float array first")
     return np.asarray(arr, dtype=np.float64)
 
 

@@ -10,8 +10,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import _core
 from ._convert import as_coefficients, as_scalar, as_signal, format_list, frozen
+from .errors import DataError
 
 __all__ = ["GeneralBacklash", "BranchCheck", "SwitchingSignals"]
+
+
+def _finite_range(lo: Any, hi: Any) -> tuple[float, float]:
+    a, b = as_scalar(lo, "x_min", DataError), as_scalar(hi, "x_max", DataError)
+    if not (np.isfinite(a) and np.isfinite(b)):
+        raise DataError(f"the x-range [{a}, {b}] must be finite: give the range the data cover")
+    return a, b
 
 
 @dataclass(frozen=True)
@@ -126,22 +134,27 @@ class GeneralBacklash:
         ``form="eq1"`` compares branch values with y(t-1) (fast); ``"breakpoints"`` follows
         eq (1) literally through z_L and z_R of eq (2)-(3) (a root search per sample).
         """
-        return self._native.simulate(as_signal(x, "x"), as_scalar(y0, "y0"), form)
+        if form not in ("eq1", "breakpoints"):
+            raise DataError(f"form = {form!r}: use 'eq1' or 'breakpoints'")
+        return self._native.simulate(as_signal(x, "x"), as_scalar(y0, "y0", DataError), form)
 
     def switching(self, x: ArrayLike, *, y0: float = 0.0) -> SwitchingSignals:
         """The switching-function form, eq (9)-(15), with the case order of eq (1)."""
-        xi1, xi2, f1, f2, y = self._native.switching(as_signal(x, "x"), as_scalar(y0, "y0"))
+        xi1, xi2, f1, f2, y = self._native.switching(as_signal(x, "x"), as_scalar(y0, "y0", DataError))
         return SwitchingSignals(xi1=xi1, xi2=xi2, f1=f1, f2=f2, y=y)
 
     def breakpoints(self, y_prev: float, x_range: tuple[float, float]) -> tuple[float, float]:
         """z_L, z_R of eq (2)-(3): where L and R reach y_prev, searched on ``x_range``
         (-inf or +inf when the branch does not reach y_prev there)."""
-        lo, hi = (as_scalar(v, "x_range") for v in x_range)
-        return self._native.breakpoints(as_scalar(y_prev, "y_prev"), lo, hi)
+        lo, hi = _finite_range(x_range[0], x_range[1])
+        y = as_scalar(y_prev, "y_prev", DataError)
+        if not np.isfinite(y):
+            raise DataError(f"y_prev = {y}: give a finite value")
+        return self._native.breakpoints(y, lo, hi)
 
     def check_branches(self, x_min: float, x_max: float) -> BranchCheck:
         """Check on [x_min, x_max] that both branches increase and do not cross."""
-        d: Any = self._native.check_branches(as_scalar(x_min, "x_min"), as_scalar(x_max, "x_max"))
+        d: Any = self._native.check_branches(*_finite_range(x_min, x_max))
         return BranchCheck(**d)
 
     def characteristic(self, x_min: float, x_max: float, num: int = 400) -> tuple[NDArray[np.float64], ...]:

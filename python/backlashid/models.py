@@ -298,6 +298,8 @@ def model_from_dict(data: dict[str, Any]) -> Model:
 
 
 def _parse_json(text: str) -> dict[str, Any]:
+    if not isinstance(text, (str, bytes, bytearray)):
+        raise ModelError(f"expected JSON text, got {type(text).__name__}: pass the string from to_json()")
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
