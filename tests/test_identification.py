@@ -216,3 +216,33 @@ def test_divergence_of_the_papers_sandwich_algorithm_carries_the_best_iterate():
     assert best["history"].shape[1] == 14
     # the default algorithm gets the same record right
     assert max_error(fit_sandwich(d.u, d.noisy), truth) < 1e-8
+
+
+def test_an_unstable_final_estimate_is_reported_with_its_spectral_radius():
+    # a slow pole (0.98) and heavy noise: the paper's plain iterations end unstable
+    truth = CascadeModel(LinearBlock([0.1], [-0.98]), bid.example1().backlash)
+    d = bid.example_data(truth, 1500, snr=5, seed=0)
+    with pytest.raises(NotConvergedError, match="unstable.*spectral radius"):
+        fit_cascade(d.u, d.noisy, na=1, nb=1, paper=True)
+
+
+def test_a_rank_deficient_regressor_is_not_identifiable():
+    # a pure sinusoid satisfies a 2nd-order recurrence: u(t-1), u(t-2), u(t-3) are dependent
+    u = 0.9 * np.sin(0.3 * np.arange(1500))
+    y = bid.example1().simulate(u)
+    with pytest.raises(NotIdentifiableError, match="rank deficient.*a3"):
+        fit_cascade(u, y, na=3, nb=2)
+
+
+def test_paper_command_reproduces_example1_and_writes_its_figures(tmp_path):
+    from click.testing import CliRunner
+
+    from backlashid.cli import main
+
+    out = CliRunner().invoke(main, ["paper", "--example", "1", "--out", str(tmp_path)])
+    assert out.exit_code == 0, out.output
+    for token in ("it 1", "it 20", "final", "c_L", "m_R3", "max |error|"):
+        assert token in out.output
+    names = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert names == ["example1_fig4_characteristic.png", "example1_fig5_linear.png", "example1_fig6_backlash.png"]
+    assert all(p.stat().st_size > 10_000 for p in tmp_path.glob("*.png"))

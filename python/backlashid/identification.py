@@ -312,12 +312,7 @@ def _fit(
     ]
     usable = [r for r in runs if r.last_ls is not None]
     if not usable:
-        err = runs[0].error
-        raise NotIdentifiableError(
-            f"no iteration could be computed ({err}); the data move the backlash too little or the "
-            "initial values (m_R1, c_L, c_R) leave no samples on a branch: raise the input amplitude "
-            "or give smaller initial widths"
-        ) from None
+        raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
     if paper:
         run = usable[0]
         k = len(run.history) - 1
@@ -357,22 +352,21 @@ def _fit(
         "history": np.array(run.history),
         "reason": run.reason,
     }
+    est = structure.unpack(theta)
+    for den, name in ((est.b, "input"), (est.s, "output")):
+        radius = spectral_radius(np.asarray(den))
+        if not radius < 1.0:
+            raise NotConvergedError(
+                f"the estimated {name} linear block is unstable (spectral radius {radius:.3f}); "
+                "use the default algorithm (it reflects unstable poles) or other initial values",
+                best_info,
+            )
     if not np.isfinite(rmse):
-        raise NotConvergedError("the identification diverged: no estimate simulates to a finite output", best_info)
+        raise NotConvergedError("the identification diverged: the estimate simulates to no finite output", best_info)
     try:
         model = structure.model(theta)
     except ModelError as exc:
         raise NotConvergedError(f"the final estimate is not a valid model ({exc})", best_info) from None
-    blocks = [(model.input_linear if isinstance(model, SandwichModel) else model.linear, "input")]
-    if isinstance(model, SandwichModel):
-        blocks.append((model.output_linear, "output"))
-    for block, name in blocks:
-        if not block.is_stable():
-            raise NotConvergedError(
-                f"the estimated {name} linear block is unstable (spectral radius {block.spectral_radius:.3f}); "
-                "try the default algorithm (pole reflection) or other initial values",
-                best_info,
-            )
     sim = model.simulate(u_arr, internals=True)
     moving = float(np.mean((sim.f1 | sim.f2)[warmup:]))
     if moving < min_moving:

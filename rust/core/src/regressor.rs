@@ -47,8 +47,8 @@ impl Regression {
     pub fn solve(&self, names: &[String], skip: usize) -> Result<LeastSquares> {
         solve(&self.phi, self.rows, self.cols, &self.target, names).map_err(|e| match e {
             Error::NotIdentifiable(msg) => Error::NotIdentifiable(format!(
-                "{msg}; at the current estimate only {:.1} % of samples move the backlash \
-                 output (f1 or f2)",
+                "{msg} (at the current estimate {:.1} % of samples move the backlash \
+                 output: f1 or f2)",
                 100.0 * self.moving_fraction(skip)
             )),
             other => other,
