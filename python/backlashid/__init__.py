@@ -29,6 +29,7 @@ from .models import (
     model_from_dict,
     model_from_json,
 )
+from .parallel import fit_many
 
 __all__ = [
     "BacklashIdError",
@@ -53,6 +54,7 @@ __all__ = [
     "example2",
     "example_data",
     "fit_cascade",
+    "fit_many",
     "fit_sandwich",
     "model_from_dict",
     "model_from_json",

@@ -1,0 +1,251 @@
+"""Identification of many records on a Dask cluster (a fleet of gearboxes, one record each).
+
+:func:`fit_many` runs :func:`~backlashid.fit_cascade` or :func:`~backlashid.fit_sandwich` on
+every record on Dask distributed: an embedded ``LocalCluster`` (one single-threaded worker
+process per core) unless a scheduler ``address`` or a ``client`` is given. Consecutive records
+are grouped into up to 8 tasks per worker thread (a task costs the scheduler about as much as a
+small fit), and scattered (they go from the client straight to the workers, not through the
+scheduler); results come back in input order. A record the
+identification rejects comes back as the :class:`~backlashid.BacklashIdError` it raised, in
+its slot, so one bad record does not lose the fleet's results. The fits are deterministic, so
+each result equals (bit for bit) the one of a call on that record alone.
+
+Needs the ``dask`` extra: ``pip install 'backlashid[dask]'``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import logging
+import os
+import pickle
+import uuid
+from contextlib import ExitStack
+from dataclasses import fields
+from typing import Any, Callable, Literal, Mapping, Sequence
+
+from .errors import BacklashIdError, DataError
+from .identification import FitResult, fit_cascade, fit_sandwich
+from .models import model_from_dict
+
+__all__ = ["fit_many"]
+
+Kind = Literal["cascade", "sandwich"]
+_FITS: dict[str, Callable[..., FitResult]] = {"cascade": fit_cascade, "sandwich": fit_sandwich}
+_INSTALL = "pip install 'backlashid[dask]'"
+_TASKS_PER_THREAD = 8  # records are grouped into at most this many tasks per worker thread
+
+
+def _distributed() -> Any:
+    try:
+        import distributed
+    except ImportError as exc:
+        raise BacklashIdError(f"fit_many runs on Dask distributed, which is not installed ({exc}): {_INSTALL}") from None
+    return distributed
+
+
+def _check_options(fit: Callable[..., FitResult], options: Mapping[str, Any]) -> None:
+    allowed = [name for name in inspect.signature(fit).parameters if name not in ("u", "y", "w")]
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        raise DataError(f"unknown option(s) {', '.join(unknown)} for {fit.__name__}: use {', '.join(allowed)}")
+
+
+def _record(item: Any, index: int) -> tuple[Any, Any]:
+    """(u, y) of one dataset: a (u, y) pair or a mapping with keys u and y (or w)."""
+    if isinstance(item, Mapping):
+        outputs = [key for key in ("y", "w") if key in item]
+        extra = sorted(map(str, set(item) - {"u", "y", "w"}))
+        if "u" not in item or len(outputs) != 1 or extra:
+            raise DataError(
+                f"datasets[{index}] has keys {sorted(map(str, item))}: give the keys u and y (or w)"
+            )
+        return item["u"], item[outputs[0]]
+    if isinstance(item, (str, bytes)) or not hasattr(item, "__len__") or len(item) != 2:
+        raise DataError(f"datasets[{index}] is a {type(item).__name__}: give a (u, y) pair or a dict with keys u and y")
+    u, y = item
+    return u, y
+
+
+# -- what a task returns: FitResult holds Rust objects, which do not pickle --------------------
+
+
+def _fit_one(record: tuple[Any, Any], kind: str, options: dict[str, Any]) -> tuple[Any, ...]:
+    """The task: one fit on a worker, packed for the trip back to the client."""
+    u, y = record
+    try:
+        result = _FITS[kind](u, y, **options)
+    except BacklashIdError as exc:
+        state = dict(vars(exc))
+        try:
+            pickle.dumps(state)
+        except Exception:  # e.g. a NotConvergedError.best that does not pickle: keep what does
+            state = {k: v for k, v in state.items() if _picklable(v)}
+        return ("error", type(exc), exc.args, state)
+    values = {f.name: getattr(result, f.name) for f in fields(result) if f.name != "model"}
+    return ("ok", values, result.model.to_dict())
+
+
+def _fit_batch(records: list[tuple[Any, Any]], kind: str, options: dict[str, Any]) -> list[tuple[Any, ...]]:
+    """The task: a few records, fitted one after the other (a task costs the scheduler a few
+    milliseconds, as much as a small fit)."""
+    return [_fit_one(record, kind, options) for record in records]
+
+
+def _picklable(value: Any) -> bool:
+    try:
+        pickle.dumps(value)
+    except Exception:
+        return False
+    return True
+
+
+def _unpack(payload: tuple[Any, ...]) -> FitResult | BacklashIdError:
+    if payload[0] == "ok":
+        _, values, model = payload
+        return FitResult(model=model_from_dict(model), **values)
+    _, cls, args, state = payload
+    exc: BacklashIdError = cls.__new__(cls, *args)
+    exc.args = args
+    exc.__dict__.update(state)
+    return exc
+
+
+# -- the client side ---------------------------------------------------------------------------
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # macOS, Windows
+        return os.cpu_count() or 1
+
+
+def fit_many(
+    datasets: Sequence[Any],
+    kind: Kind = "cascade",
+    *,
+    client: Any = None,
+    address: str | None = None,
+    n_workers: int | None = None,
+    progress: bool = True,
+    **fit_options: Any,
+) -> list[FitResult | BacklashIdError]:
+    """Identify every record of ``datasets`` on Dask distributed; results in input order.
+
+    ``datasets``: (u, y) pairs, or dicts with keys ``u`` and ``y`` (or ``w`` for a sandwich).
+    ``kind``: "cascade" (:func:`fit_cascade`) or "sandwich" (:func:`fit_sandwich`);
+    ``fit_options`` (na, nb, degree, restarts, seed, ...) pass through to that function.
+
+    Where it runs: ``client``, a ``distributed.Client`` (used, not closed); else ``address``, a
+    running scheduler ("tcp://host:8786"); else an embedded ``LocalCluster`` of ``n_workers``
+    single-threaded worker processes (default: one per core, at most one per record; no
+    dashboard, quiet logs), closed on return. Worker processes are spawned, so a script that
+    calls this needs the ``if __name__ == "__main__":`` guard. ``progress`` shows a progress
+    bar (tqdm) on stderr.
+
+    A record whose fit raises a :class:`BacklashIdError` (bad data, not identifiable, not
+    converged) gets that exception object in its slot instead of a :class:`FitResult`; other
+    exceptions (bugs) are raised. Unknown ``kind`` or options raise :class:`DataError`, a
+    missing Dask a :class:`BacklashIdError`.
+    """
+    fit = _FITS.get(kind) if isinstance(kind, str) else None
+    if fit is None:
+        raise DataError(f"kind = {kind!r}: use 'cascade' (fit_cascade) or 'sandwich' (fit_sandwich)")
+    _check_options(fit, fit_options)
+    if client is not None and address is not None:
+        raise DataError("give client= or address=, not both")
+    if n_workers is not None:
+        if client is not None or address is not None:
+            raise DataError("n_workers sizes the embedded cluster: leave it out with client= or address=")
+        if not isinstance(n_workers, int) or isinstance(n_workers, bool) or n_workers < 1:
+            raise DataError(f"n_workers = {n_workers!r}: give a whole number >= 1")
+    distributed = _distributed()
+
+    items = list(datasets)
+    results: list[Any] = [None] * len(items)
+    todo: list[tuple[int, tuple[Any, Any]]] = []
+    for i, item in enumerate(items):
+        try:
+            todo.append((i, _record(item, i)))
+        except DataError as exc:
+            results[i] = exc
+    if not todo:
+        return results
+
+    with ExitStack() as stack:
+        if client is None:
+            if address is not None:
+                client = stack.enter_context(distributed.Client(address, set_as_default=False))
+            else:
+                cluster = stack.enter_context(
+                    distributed.LocalCluster(
+                        n_workers=min(n_workers or _cores(), len(todo)),
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=None,
+                        silence_logs=logging.ERROR,
+                    )
+                )
+                client = stack.enter_context(distributed.Client(cluster, set_as_default=False))
+        _run(distributed, client, todo, kind, fit_options, progress, results)
+    return results
+
+
+def _run(
+    distributed: Any,
+    client: Any,
+    todo: list[tuple[int, tuple[Any, Any]]],
+    kind: str,
+    options: dict[str, Any],
+    progress: bool,
+    results: list[Any],
+) -> None:
+    threads = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
+    threads = max(threads, 4)  # a cluster still scaling up reports few workers
+    n_tasks = min(len(todo), _TASKS_PER_THREAD * threads)
+    bounds = [len(todo) * k // n_tasks for k in range(n_tasks + 1)]
+    batches = [todo[lo:hi] for lo, hi in zip(bounds, bounds[1:])]
+    run = uuid.uuid4().hex[:8]
+    # One scatter: the records go from here straight to the workers (spread over them), and
+    # each task runs where its records are.
+    data = client.scatter([[record for _, record in batch] for batch in batches], hash=False)
+    futures = client.map(
+        _fit_batch, data, kind=kind, options=options, pure=False,
+        key=[f"backlashid-fit_{kind}-{batch[0][0]}-{batch[-1][0]}-{run}" for batch in batches],
+    )
+    slots = {future.key: [i for i, _ in batch] for future, batch in zip(futures, batches)}
+    remaining = set(slots)
+    del data  # the tasks hold the records now; each is released when its task is done
+    bar = _progress_bar(distributed, futures, kind, progress, len(todo))
+    try:
+        # Results are fetched in batches of what has finished (one round trip per batch).
+        for done in distributed.as_completed(futures, loop=client.loop).batches():
+            for future in done:
+                if future.status == "error":
+                    exc = future.exception()
+                    if hasattr(exc, "add_note"):
+                        exc.add_note(f"(in fit_many, fitting one of datasets{slots[future.key]})")
+                    raise exc
+            for future, payloads in zip(done, client.gather(done)):
+                for i, payload in zip(slots[future.key], payloads):
+                    results[i] = _unpack(payload)
+                remaining.discard(future.key)
+                if bar is not None:
+                    bar.update(len(payloads))
+    finally:
+        if bar is not None:
+            bar.close()
+        if remaining:  # an error, or an interrupt: stop what is left
+            client.cancel([f for f in futures if f.key in remaining])
+
+
+def _progress_bar(distributed: Any, futures: list[Any], kind: str, progress: bool, total: int) -> Any:
+    if not progress:
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # Dask's own text bar; it returns when everything is done
+        distributed.progress(futures)
+        return None
+    return tqdm(total=total, desc=f"fit_{kind}", unit="fit")
