@@ -196,6 +196,6 @@ def test_errors_cross_the_process_boundary_with_their_attributes(monkeypatch):
 
     monkeypatch.setitem(parallel._FITS, "cascade", diverges)
     payload = pickle.loads(pickle.dumps(parallel._fit_one((np.zeros(3), np.zeros(3)), "cascade", {})))
-    exc = parallel._unpack(payload)
+    exc = payload
     assert type(exc) is NotConvergedError and str(exc) == "the identification diverged"
     assert exc.best["parameters"] == best["parameters"] and np.array_equal(exc.best["history"], best["history"])

@@ -175,6 +175,10 @@ class GeneralBacklash:
     def from_dict(cls, data: dict[str, Any]) -> GeneralBacklash:
         return cls(data["c_left"], data["c_right"], data["m_left"], data["m_right"])
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # rebuilt (and revalidated) from its parameters: the Rust object does not pickle
+        return (GeneralBacklash, (self._c_left, self._c_right, self._m_left.tolist(), self._m_right.tolist()))
+
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, GeneralBacklash):
             return NotImplemented

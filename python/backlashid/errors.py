@@ -39,3 +39,7 @@ class NotConvergedError(BacklashIdError):
     def __init__(self, message: str, best: object = None) -> None:
         super().__init__(message)
         self.best = best
+
+    def __reduce__(self) -> tuple[object, ...]:
+        # exceptions pickle by their args only; keep the best iterate across processes
+        return (type(self), (self.args[0], self.best))

@@ -110,6 +110,10 @@ class LinearBlock:
     def from_dict(cls, data: dict[str, Any]) -> LinearBlock:
         return cls(data["a"], data.get("b", ()))
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # rebuilt from its coefficients: the Rust object behind it does not pickle
+        return (LinearBlock, (self._a.tolist(), self._b.tolist()))
+
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, LinearBlock):
             return NotImplemented

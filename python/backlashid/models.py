@@ -142,6 +142,9 @@ class CascadeModel(_ModelIO):
         _check_type(self.backlash, GeneralBacklash, "backlash")
         object.__setattr__(self, "_native", _core.CascadeModel(self.linear._native, self.backlash._native))
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (CascadeModel, (self.linear, self.backlash))
+
     def rest_state(self) -> CascadeState:
         """The paper's start: every past signal zero, y(0) = 0."""
         return CascadeState((0.0,) * self.linear.na, (0.0,) * self.linear.nb, 0.0)
@@ -207,6 +210,9 @@ class SandwichModel(_ModelIO):
             "_native",
             _core.SandwichModel(self.input_linear._native, self.backlash._native, self.output_linear._native),
         )
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (SandwichModel, (self.input_linear, self.backlash, self.output_linear))
 
     @property
     def r(self) -> NDArray[np.float64]:

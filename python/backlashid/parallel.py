@@ -18,15 +18,12 @@ from __future__ import annotations
 import inspect
 import logging
 import os
-import pickle
 import uuid
 from contextlib import ExitStack
-from dataclasses import fields
 from typing import Any, Callable, Literal, Mapping, Sequence
 
 from .errors import BacklashIdError, DataError
 from .identification import FitResult, fit_cascade, fit_sandwich
-from .models import model_from_dict
 
 __all__ = ["fit_many"]
 
@@ -67,48 +64,23 @@ def _record(item: Any, index: int) -> tuple[Any, Any]:
     return u, y
 
 
-# -- what a task returns: FitResult holds Rust objects, which do not pickle --------------------
+# -- the tasks ------------------------------------------------------------------------------------
 
 
-def _fit_one(record: tuple[Any, Any], kind: str, options: dict[str, Any]) -> tuple[Any, ...]:
-    """The task: one fit on a worker, packed for the trip back to the client."""
+def _fit_one(record: tuple[Any, Any], kind: str, options: dict[str, Any]) -> FitResult | BacklashIdError:
+    """One fit on a worker; an identification error is returned, not raised, so that it
+    reaches the caller in its dataset's slot (results and errors pickle)."""
     u, y = record
     try:
-        result = _FITS[kind](u, y, **options)
+        return _FITS[kind](u, y, **options)
     except BacklashIdError as exc:
-        state = dict(vars(exc))
-        try:
-            pickle.dumps(state)
-        except Exception:  # e.g. a NotConvergedError.best that does not pickle: keep what does
-            state = {k: v for k, v in state.items() if _picklable(v)}
-        return ("error", type(exc), exc.args, state)
-    values = {f.name: getattr(result, f.name) for f in fields(result) if f.name != "model"}
-    return ("ok", values, result.model.to_dict())
+        return exc
 
 
-def _fit_batch(records: list[tuple[Any, Any]], kind: str, options: dict[str, Any]) -> list[tuple[Any, ...]]:
+def _fit_batch(records: list[tuple[Any, Any]], kind: str, options: dict[str, Any]) -> list[FitResult | BacklashIdError]:
     """The task: a few records, fitted one after the other (a task costs the scheduler a few
     milliseconds, as much as a small fit)."""
     return [_fit_one(record, kind, options) for record in records]
-
-
-def _picklable(value: Any) -> bool:
-    try:
-        pickle.dumps(value)
-    except Exception:
-        return False
-    return True
-
-
-def _unpack(payload: tuple[Any, ...]) -> FitResult | BacklashIdError:
-    if payload[0] == "ok":
-        _, values, model = payload
-        return FitResult(model=model_from_dict(model), **values)
-    _, cls, args, state = payload
-    exc: BacklashIdError = cls.__new__(cls, *args)
-    exc.args = args
-    exc.__dict__.update(state)
-    return exc
 
 
 # -- the client side ---------------------------------------------------------------------------
@@ -228,8 +200,8 @@ def _run(
                         exc.add_note(f"(in fit_many, fitting one of datasets{slots[future.key]})")
                     raise exc
             for future, payloads in zip(done, client.gather(done)):
-                for i, payload in zip(slots[future.key], payloads):
-                    results[i] = _unpack(payload)
+                for i, outcome in zip(slots[future.key], payloads):
+                    results[i] = outcome
                 remaining.discard(future.key)
                 if bar is not None:
                     bar.update(len(payloads))
