@@ -169,15 +169,15 @@ def _initial_theta(structure: Structure, u: NDArray[np.float64], y: NDArray[np.f
     return theta
 
 
-def _iteration(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], switching: Switching, warmup: int) -> tuple[Any, NDArray[np.bool_]]:
+def _iteration(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], switching: Switching, warmup: int) -> tuple[Any, float]:
+    """One iteration in the core (streaming QR, no N x p matrix): the least-squares solution
+    and the fraction of samples on which the estimate moves the backlash."""
     p = structure.unpack(theta)
     names = structure.ls_names
     if structure.is_sandwich:
-        ls, _x, f1, f2 = _core.sandwich_iteration(*p.chain(), p.r, p.s, u, y, warmup, names)
-    else:
-        y_switch = y if switching == "measured" else simulate(structure, theta, u)
-        ls, _x, f1, f2 = _core.cascade_iteration(*p.chain(), u, y, y_switch, warmup, names)
-    return ls, f1 | f2
+        return _core.sandwich_iteration(*p.chain(), p.r, p.s, u, y, warmup, names)
+    y_switch = y if switching == "measured" else simulate(structure, theta, u)
+    return _core.cascade_iteration(*p.chain(), u, y, y_switch, warmup, names)
 
 
 def _relative_change(new: NDArray[np.float64], old: NDArray[np.float64]) -> float:
@@ -199,7 +199,7 @@ def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], s
         except ModelError as exc:  # the estimate overflowed in simulation
             run.reason, run.error = "diverged", exc
             break
-        run.moving = float(np.mean(moving[warmup:]))
+        run.moving = moving
         new = s.physical_from_ls(theta_ls)
         if not np.all(np.isfinite(new)):
             run.reason = "diverged"
@@ -375,8 +375,8 @@ def _fit(
             f"(need {100 * min_moving:.0f} %): excite the system with a larger input amplitude"
         )
     if refined is not None:
-        noise_var = refined.cost / max(len(refined.residual) - structure.size, 1)
-        covariance = noise_var * _core.lstsq(refined.jacobian, refined.residual, structure.names)[2]
+        noise_var = refined.cost / max(refined.n_residuals - structure.size, 1)
+        covariance = noise_var * refined.unscaled_covariance(structure.names)
     else:
         _theta_ls, rss, _cov, rows = run.last_ls  # type: ignore[misc]
         noise_var = rss / max(rows - structure.size, 1)

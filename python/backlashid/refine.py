@@ -1,7 +1,9 @@
 """Output-error refinement: Levenberg-Marquardt on the free-run simulation error.
 
-The Jacobian comes from the core's sensitivity recursions (exact derivatives of the simulated
-output); every damped step is a faer QR solve of [J; sqrt(lambda) D] delta = [r; 0].
+Each Jacobian is folded, row block by row block, into the triangular factor R_aug of [J | r]
+by the core (streaming QR, no N x p matrix); a damped step then solves the small problem
+[R; sqrt(lambda) D] delta = [Q^T r; 0] (faer QR), since ||r - J delta||^2 =
+||Q^T r - R delta||^2 + rho^2.
 """
 
 from __future__ import annotations
@@ -20,9 +22,14 @@ from .structure import Structure
 class OutputErrorFit:
     theta: NDArray[np.float64]
     cost: float  # sum of squared simulation errors after the warm-up
-    residual: NDArray[np.float64]
-    jacobian: NDArray[np.float64]
+    r_aug: NDArray[np.float64]  # (p+1) x (p+1) factor of [J | r] at theta
+    n_residuals: int
     iterations: int
+
+    def unscaled_covariance(self, names: list[str]) -> NDArray[np.float64]:
+        """(J^T J)^{-1} = (R^T R)^{-1}."""
+        p = len(names)
+        return _core.lstsq(self.r_aug[:p, :p], self.r_aug[:p, p], names)[2]
 
 
 def spectral_radius(den: NDArray[np.float64]) -> float:
@@ -32,8 +39,7 @@ def spectral_radius(den: NDArray[np.float64]) -> float:
 
 def is_stable(structure: Structure, theta: NDArray[np.float64]) -> bool:
     p = structure.unpack(theta)
-    dens = [np.asarray(p.b), np.asarray(p.s)]
-    return all(spectral_radius(d) < 1.0 for d in dens)
+    return all(spectral_radius(np.asarray(d)) < 1.0 for d in (p.b, p.s))
 
 
 def simulate(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -45,10 +51,21 @@ def simulate(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.flo
 def sensitivity(
     structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Output and dense Jacobian (samples x parameters): for checks and small records."""
     p = structure.unpack(theta)
     if structure.is_sandwich:
         return _core.sandwich_sensitivity(*p.chain(), p.r, p.s, u)
     return _core.cascade_sensitivity(*p.chain(), u)
+
+
+def oe_factor(
+    structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int
+) -> tuple[NDArray[np.float64], float]:
+    """R_aug of [J | y - y_sim] over t >= warmup, and the cost sum (y - y_sim)^2."""
+    p = structure.unpack(theta)
+    if structure.is_sandwich:
+        return _core.sandwich_oe_factor(*p.chain(), p.r, p.s, u, y, warmup)
+    return _core.cascade_oe_factor(*p.chain(), u, y, warmup)
 
 
 def refine_output_error(
@@ -65,46 +82,44 @@ def refine_output_error(
     """Minimise sum_t (y(t) - y_sim(t, theta))^2 over t >= warmup from theta0; steps that make
     a linear block unstable or overflow the simulation are rejected (the damping grows)."""
     names = structure.names
+    n_par = structure.size
 
-    def residual(theta: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    def cost_at(theta: NDArray[np.float64]) -> float:
         if not is_stable(structure, theta):
-            return None
+            return np.inf
         try:
             r = y[warmup:] - simulate(structure, theta, u)[warmup:]
         except BacklashIdError:
-            return None
-        return r if np.all(np.isfinite(r)) else None
-
-    def jacobian(theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        return sensitivity(structure, theta, u)[1][warmup:]
+            return np.inf
+        with np.errstate(over="ignore", invalid="ignore"):
+            c = float(r @ r)
+        return c if np.isfinite(c) else np.inf
 
     theta = np.array(theta0, dtype=np.float64)
-    r0 = residual(theta)
-    if r0 is None:
+    if not np.isfinite(cost_at(theta)):
         raise BacklashIdError("output-error refinement: the start is unstable or diverges")
-    r, jac = r0, jacobian(theta)
-    cost = float(r @ r)
-    scale = np.zeros(len(theta))
+    r_aug, cost = oe_factor(structure, theta, u, y, warmup)
+    scale = np.zeros(n_par)
     lam = 1e-3
     it = 0
     for it in range(1, max_iter + 1):
-        scale = np.maximum(scale, np.sqrt(np.einsum("ij,ij->j", jac, jac)))  # Marquardt's D
+        r_mat, qtr = r_aug[:n_par, :n_par], r_aug[:n_par, n_par]
+        scale = np.maximum(scale, np.linalg.norm(r_mat, axis=0))  # Marquardt's D: column norms of J
         d = np.where(scale > 0, scale, 1.0)
         accepted = False
         while lam < 1e12:
-            a = np.vstack([jac, np.sqrt(lam) * np.diag(d)])
-            delta = _core.lstsq(a, np.concatenate([r, np.zeros(len(d))]), names)[0]
-            r_trial = residual(theta + delta)
-            if r_trial is not None and float(r_trial @ r_trial) < cost:
-                new_cost = float(r_trial @ r_trial)
+            a = np.vstack([r_mat, np.sqrt(lam) * np.diag(d)])
+            delta = _core.lstsq(a, np.concatenate([qtr, np.zeros(n_par)]), names)[0]
+            new_cost = cost_at(theta + delta)
+            if new_cost < cost:
                 small_step = np.linalg.norm(delta) <= xtol * (np.linalg.norm(theta) + xtol)
                 small_gain = cost - new_cost <= ftol * cost
-                theta, r, cost = theta + delta, r_trial, new_cost
-                jac = jacobian(theta)
+                theta = theta + delta
+                r_aug, cost = oe_factor(structure, theta, u, y, warmup)
                 lam = max(lam / 3.0, 1e-12)
                 accepted = True
                 break
             lam *= 4.0
         if not accepted or small_step or small_gain:
             break
-    return OutputErrorFit(theta=theta, cost=cost, residual=r, jacobian=jac, iterations=it)
+    return OutputErrorFit(theta=theta, cost=cost, r_aug=r_aug, n_residuals=len(y) - warmup, iterations=it)

@@ -308,13 +308,17 @@ impl Step for PaddedStep {
 /// Branches of degree n grow like |x|^n: a large but finite x can overflow y.
 pub(crate) fn check_output_overflow(x: &[f64], y: &[f64]) -> Result<()> {
     if let Some(i) = y.iter().position(|v| !v.is_finite()) {
-        return Err(Error::Model(format!(
-            "simulation diverged: the backlash output y[{i}] overflowed at x[{i}] = {:e}, \
-             where the branch polynomials exceed the float range; scale the signals down",
-            x[i]
-        )));
+        return Err(output_overflow(i, x[i]));
     }
     Ok(())
+}
+
+/// The error of `check_output_overflow` for sample `i` with input `x`.
+pub(crate) fn output_overflow(i: usize, x: f64) -> Error {
+    Error::Model(format!(
+        "simulation diverged: the backlash output y[{i}] overflowed at x[{i}] = {x:e}, \
+         where the branch polynomials exceed the float range; scale the signals down"
+    ))
 }
 
 pub(crate) fn check_memory(y0: f64) -> Result<()> {

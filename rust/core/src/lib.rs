@@ -14,6 +14,7 @@ pub mod regressor;
 pub mod sandwich;
 pub mod sensitivity;
 pub mod signal;
+pub mod streaming;
 pub mod switching;
 
 pub use backlash::{Branch, BranchCheck, GeneralBacklash};
@@ -21,4 +22,5 @@ pub use cascade::{CascadeModel, CascadeSimulation, CascadeState};
 pub use error::{Error, Result};
 pub use linear::{LinearBlock, LinearState};
 pub use sandwich::{SandwichModel, SandwichSimulation, SandwichState};
+pub use streaming::{fold_parallel, TriangularFactor};
 pub use switching::{switching, switching_form, SwitchingSignals};

@@ -317,13 +317,18 @@ pub(crate) fn blame_feeding_block(err: Error, block: &LinearBlock, name: &str) -
 /// An unstable block drives its output to inf/NaN: say so instead of returning garbage.
 pub(crate) fn check_no_overflow(block: &LinearBlock, out: &[f64], name: &str) -> Result<()> {
     if let Some(i) = out.iter().position(|v| !v.is_finite()) {
-        return Err(Error::Model(format!(
-            "simulation diverged: {name}[{i}] overflowed; the linear block has spectral \
-             radius {:.4} (stable needs < 1); use a stable block or a shorter record",
-            block.spectral_radius()
-        )));
+        return Err(overflow(block, name, i));
     }
     Ok(())
+}
+
+/// The error of `check_no_overflow` for sample `i` of the output `name`.
+pub(crate) fn overflow(block: &LinearBlock, name: &str, i: usize) -> Error {
+    Error::Model(format!(
+        "simulation diverged: {name}[{i}] overflowed; the linear block has spectral \
+         radius {:.4} (stable needs < 1); use a stable block or a shorter record",
+        block.spectral_radius()
+    ))
 }
 
 #[cfg(test)]

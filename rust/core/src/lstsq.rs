@@ -1,12 +1,12 @@
-//! Linear least squares by Householder QR (faer), with the statistics the fits report.
+//! Linear least squares by Householder QR, with the statistics the fits report. The dense
+//! `solve` folds its rows into a `streaming::TriangularFactor`; both solve through
+//! `solve_triangular`.
 //!
 //! Columns are scaled to unit norm before the factorisation, so the rank test and the
 //! conditioning do not depend on the units of the regressors (powers of xi up to degree 25).
 
-use faer::linalg::solvers::SolveLstsq;
-use faer::{Mat, MatRef};
-
 use crate::error::{Error, Result};
+use crate::streaming::TriangularFactor;
 
 /// The solution of min ||A theta - b|| and what is needed for standard errors.
 #[derive(Debug, Clone, PartialEq)]
@@ -25,6 +25,9 @@ pub const RANK_TOLERANCE: f64 = 1e-10;
 
 /// Solve min ||A theta - b||, A given row-major as `rows` x `cols`. `names` label the columns
 /// in the error raised when a column carries no information (e.g. no sample on a branch).
+///
+/// The rows are folded into a `TriangularFactor` (blocked Householder QR of [A | b]) and
+/// solved from it, so the dense and the streaming paths share every check and statistic.
 pub fn solve(
     a: &[f64],
     rows: usize,
@@ -40,9 +43,38 @@ pub fn solve(
         )));
     }
     if rows < cols {
-        return Err(Error::NotIdentifiable(format!(
-            "only {rows} usable samples for {cols} parameters: give a longer record"
+        return Err(too_few_rows(rows, cols));
+    }
+    let mut factor = TriangularFactor::new(cols);
+    factor.fold(a, b)?;
+    factor.solve(names)
+}
+
+fn too_few_rows(rows: usize, cols: usize) -> Error {
+    Error::NotIdentifiable(format!(
+        "only {rows} usable samples for {cols} parameters: give a longer record"
+    ))
+}
+
+/// The solution from R_aug (row-major `n` x `n`, n = p + 1, upper triangular) of [A | b]
+/// over `rows` rows: the column norms of A are those of R, the rank test and rcond use the
+/// R of the column-scaled A (R D^{-1}), theta by back substitution, rss = R_aug[p][p]^2.
+pub(crate) fn solve_triangular(
+    r: &[f64],
+    n: usize,
+    p: usize,
+    rows: usize,
+    names: &[String],
+) -> Result<LeastSquares> {
+    if n != p + 1 || r.len() != n * n {
+        return Err(Error::Data(format!(
+            "least squares: a triangular factor of {} values for {p} columns (internal shape \
+             mismatch)",
+            r.len()
         )));
+    }
+    if rows < p {
+        return Err(too_few_rows(rows, p));
     }
     let label = |j: usize| {
         names
@@ -50,15 +82,13 @@ pub fn solve(
             .cloned()
             .unwrap_or_else(|| format!("column {j}"))
     };
-    let mut scale = vec![0.0; cols];
-    for r in 0..rows {
-        for (j, s) in scale.iter_mut().enumerate() {
-            *s += a[r * cols + j] * a[r * cols + j];
-        }
-    }
+    let mut scale = vec![0.0; p];
     for (j, s) in scale.iter_mut().enumerate() {
-        *s = s.sqrt();
-        if !(*s > 0.0) || !s.is_finite() {
+        *s = (0..=j)
+            .map(|i| r[i * n + j] * r[i * n + j])
+            .sum::<f64>()
+            .sqrt();
+        if !s.is_finite() || *s <= 0.0 {
             return Err(Error::NotIdentifiable(format!(
                 "the regressor of {} is {} in every sample: the data never excite it \
                  (check the input amplitude and the initial values)",
@@ -67,38 +97,52 @@ pub fn solve(
             )));
         }
     }
-    let scaled = Mat::<f64>::from_fn(rows, cols, |r, j| a[r * cols + j] / scale[j]);
-    let rhs = Mat::<f64>::from_fn(rows, 1, |r, _| b[r]);
-    let qr = scaled.qr();
-    let r_factor = qr.thin_R();
-    let diag: Vec<f64> = (0..cols).map(|j| r_factor[(j, j)].abs()).collect();
+    if !r[n * n - 1].is_finite() {
+        return Err(Error::NotIdentifiable(
+            "the regression target is non-finite: the data or the current estimate \
+             overflowed (scale the signals down)"
+                .into(),
+        ));
+    }
+    // R of the column-scaled A.
+    let scaled: Vec<f64> = (0..p * p)
+        .map(|k| r[(k / p) * n + k % p] / scale[k % p])
+        .collect();
+    let diag: Vec<f64> = (0..p).map(|j| scaled[j * p + j].abs()).collect();
     let max_diag = diag.iter().cloned().fold(0.0, f64::max);
     let min_diag = diag.iter().cloned().fold(f64::INFINITY, f64::min);
-    if let Some(j) = diag.iter().position(|&d| !(d > RANK_TOLERANCE * max_diag)) {
+    if let Some(j) = diag
+        .iter()
+        .position(|&d| d.is_nan() || d <= RANK_TOLERANCE * max_diag)
+    {
         return Err(Error::NotIdentifiable(format!(
             "the regressor is rank deficient: {} is (nearly) a combination of the other \
              columns; lower the branch degree or linear orders, or excite the system more",
             label(j)
         )));
     }
-    let sol = qr.solve_lstsq(rhs.as_ref());
-    let theta: Vec<f64> = (0..cols).map(|j| sol[(j, 0)] / scale[j]).collect();
-    let mut rss = 0.0;
-    for r in 0..rows {
-        let fit: f64 = (0..cols).map(|j| a[r * cols + j] * theta[j]).sum();
-        rss += (b[r] - fit).powi(2);
+    // R_s z = Q^T b, theta = D^{-1} z.
+    let mut z = vec![0.0; p];
+    for i in (0..p).rev() {
+        let mut acc = r[i * n + p];
+        for k in i + 1..p {
+            acc -= scaled[i * p + k] * z[k];
+        }
+        z[i] = acc / scaled[i * p + i];
     }
-    let unscaled_covariance = inverse_gram(r_factor, &scale);
+    let theta: Vec<f64> = z.iter().zip(&scale).map(|(zi, s)| zi / s).collect();
+    let rss = r[n * n - 1] * r[n * n - 1];
+    let unscaled_covariance = inverse_gram(&scaled, &scale);
     Ok(LeastSquares {
         theta,
         rss,
         unscaled_covariance,
-        rcond: min_diag / max_diag,
+        rcond: if p == 0 { 1.0 } else { min_diag / max_diag },
     })
 }
 
-/// (A^T A)^{-1} = D^{-1} R^{-1} R^{-T} D^{-1} from the R factor of A D^{-1}.
-fn inverse_gram(r: MatRef<'_, f64>, scale: &[f64]) -> Vec<f64> {
+/// (A^T A)^{-1} = D^{-1} R^{-1} R^{-T} D^{-1} from the R factor (row-major p x p) of A D^{-1}.
+pub(crate) fn inverse_gram(r: &[f64], scale: &[f64]) -> Vec<f64> {
     let p = scale.len();
     // R^{-1} by back substitution, column by column.
     let mut rinv = vec![0.0; p * p];
@@ -106,9 +150,9 @@ fn inverse_gram(r: MatRef<'_, f64>, scale: &[f64]) -> Vec<f64> {
         for i in (0..=col).rev() {
             let mut acc = if i == col { 1.0 } else { 0.0 };
             for k in i + 1..=col {
-                acc -= r[(i, k)] * rinv[k * p + col];
+                acc -= r[i * p + k] * rinv[k * p + col];
             }
-            rinv[i * p + col] = acc / r[(i, i)];
+            rinv[i * p + col] = acc / r[i * p + i];
         }
     }
     let mut out = vec![0.0; p * p];

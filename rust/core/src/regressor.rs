@@ -11,6 +11,7 @@ use crate::error::{Error, Result};
 use crate::linear::LinearBlock;
 use crate::lstsq::{solve, LeastSquares};
 use crate::signal::check_signal;
+use crate::streaming::{default_threads, fold_parallel, TriangularFactor};
 use crate::switching::switching;
 
 /// Row-major regressor, target, and the internal signals the rows were built from.
@@ -30,30 +31,54 @@ pub struct Regression {
 impl Regression {
     /// Fraction of samples from `skip` on where the estimate's backlash moves (f1 or f2).
     pub fn moving_fraction(&self, skip: usize) -> f64 {
-        let n = self.f1.len().saturating_sub(skip);
-        if n == 0 {
-            return 0.0;
-        }
-        let moving = self.f1[skip..]
-            .iter()
-            .zip(&self.f2[skip..])
-            .filter(|(a, b)| **a || **b)
-            .count();
-        moving as f64 / n as f64
+        moving_fraction(&self.f1, &self.f2, skip)
     }
 
     /// The least-squares solution; when the data do not determine it, the error also says on
     /// how many samples the current estimate moves the backlash.
     pub fn solve(&self, names: &[String], skip: usize) -> Result<LeastSquares> {
-        solve(&self.phi, self.rows, self.cols, &self.target, names).map_err(|e| match e {
-            Error::NotIdentifiable(msg) => Error::NotIdentifiable(format!(
-                "{msg} (at the current estimate {:.1} % of samples move the backlash \
-                 output: f1 or f2)",
-                100.0 * self.moving_fraction(skip)
-            )),
-            other => other,
-        })
+        solve(&self.phi, self.rows, self.cols, &self.target, names)
+            .map_err(|e| with_moving_fraction(e, self.moving_fraction(skip)))
     }
+}
+
+/// Fraction of samples from `skip` on where the backlash moves (f1 or f2); 0 for none.
+pub fn moving_fraction(f1: &[bool], f2: &[bool], skip: usize) -> f64 {
+    let n = f1.len().min(f2.len()).saturating_sub(skip);
+    if n == 0 {
+        return 0.0;
+    }
+    let moving = f1[skip..]
+        .iter()
+        .zip(&f2[skip..])
+        .filter(|(a, b)| **a || **b)
+        .count();
+    moving as f64 / n as f64
+}
+
+/// A `NotIdentifiable` error completed with the share of samples on which the current
+/// estimate moves the backlash (the usual cause: too few samples off the dead band).
+pub fn with_moving_fraction(err: Error, moving_fraction: f64) -> Error {
+    match err {
+        Error::NotIdentifiable(msg) => Error::NotIdentifiable(format!(
+            "{msg} (at the current estimate {:.1} % of samples move the backlash \
+             output: f1 or f2)",
+            100.0 * moving_fraction
+        )),
+        other => other,
+    }
+}
+
+/// `TriangularFactor::solve` with the moving fraction in a `NotIdentifiable` error, as
+/// `Regression::solve` reports it.
+pub fn solve_factor(
+    factor: &TriangularFactor,
+    names: &[String],
+    moving_fraction: f64,
+) -> Result<LeastSquares> {
+    factor
+        .solve(names)
+        .map_err(|e| with_moving_fraction(e, moving_fraction))
 }
 
 fn check_same_length(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
@@ -81,11 +106,12 @@ fn degree(backlash: &GeneralBacklash) -> Result<usize> {
     Ok(nl)
 }
 
-/// The backlash part of eq (18) at sample `tau` (the whole phi(tau) of the cascade), pushed
-/// onto `row`: [u(tau-i) f1, -x(tau-j) f1, f1, xi1^i f1 (i>=2), x f2, -f2, xi2^i f2 (i>=2)].
+/// The backlash part of eq (18) at sample `tau` (the whole phi(tau) of the cascade), written
+/// to the start of `row`: [u(tau-i) f1, -x(tau-j) f1, f1, xi1^i f1 (i>=2), x f2, -f2,
+/// xi2^i f2 (i>=2)]. Returns the number of values written (na + nb + 2n + 1).
 #[allow(clippy::too_many_arguments)]
-fn push_backlash_part(
-    row: &mut Vec<f64>,
+fn backlash_part(
+    row: &mut [f64],
     na: usize,
     nb: usize,
     n: usize,
@@ -95,18 +121,95 @@ fn push_backlash_part(
     tau: usize,
     f1: bool,
     f2: bool,
-) {
+) -> usize {
     let lag = |s: &[f64], k: usize| if k <= tau { s[tau - k] } else { 0.0 };
     let (g1, g2) = (f1 as u8 as f64, f2 as u8 as f64);
     let xi1 = x[tau] + backlash.c_left(); // eq (23)
     let xi2 = x[tau] - backlash.c_right(); // eq (24)
-    row.extend((1..=na).map(|i| lag(u, i) * g1));
-    row.extend((1..=nb).map(|j| -lag(x, j) * g1));
-    row.push(g1);
-    row.extend((2..=n).map(|i| xi1.powi(i as i32) * g1));
-    row.push(x[tau] * g2);
-    row.push(-g2);
-    row.extend((2..=n).map(|i| xi2.powi(i as i32) * g2));
+    let mut k = 0;
+    let mut put = |v: f64| {
+        row[k] = v;
+        k += 1;
+    };
+    (1..=na).for_each(|i| put(lag(u, i) * g1));
+    (1..=nb).for_each(|j| put(-lag(x, j) * g1));
+    put(g1);
+    (2..=n).for_each(|i| put(xi1.powi(i as i32) * g1));
+    put(x[tau] * g2);
+    put(-g2);
+    (2..=n).for_each(|i| put(xi2.powi(i as i32) * g2));
+    k
+}
+
+/// The cascade's regression at an estimate: x by eq (22) and f1, f2 by eq (25)-(26) for
+/// every sample; rows are built from them on demand.
+struct CascadeRows<'a> {
+    backlash: &'a GeneralBacklash,
+    u: &'a [f64],
+    y: &'a [f64],
+    na: usize,
+    nb: usize,
+    n: usize,
+    cols: usize,
+    x: Vec<f64>,
+    f1: Vec<bool>,
+    f2: Vec<bool>,
+}
+
+impl<'a> CascadeRows<'a> {
+    fn new(
+        linear: &LinearBlock,
+        backlash: &'a GeneralBacklash,
+        u: &'a [f64],
+        y: &'a [f64],
+        y_switch: &[f64],
+    ) -> Result<Self> {
+        check_signal("u", u)?;
+        check_signal("y", y)?;
+        check_same_length(u, y, "y")?;
+        check_same_length(u, y_switch, "y_switch")?;
+        let n = degree(backlash)?;
+        let (na, nb) = (linear.na(), linear.nb());
+        let x = linear.simulate(u, &linear.rest_state())?; // eq (22)
+        let (f1, f2) = (0..u.len())
+            .map(|t| {
+                let ys_prev = if t > 0 { y_switch[t - 1] } else { 0.0 };
+                switching(backlash, x[t], ys_prev) // eq (25)-(26)
+            })
+            .unzip();
+        Ok(Self {
+            backlash,
+            u,
+            y,
+            na,
+            nb,
+            n,
+            cols: na + nb + 2 * n + 1,
+            x,
+            f1,
+            f2,
+        })
+    }
+
+    /// phi(t) of eq (18) into `row`; returns the target y(t) - y(t-1)[1 - f1][1 - f2] (21).
+    fn fill(&self, t: usize, row: &mut [f64]) -> f64 {
+        let (f1, f2) = (self.f1[t], self.f2[t]);
+        backlash_part(
+            row,
+            self.na,
+            self.nb,
+            self.n,
+            self.backlash,
+            self.u,
+            &self.x,
+            t,
+            f1,
+            f2,
+        );
+        let y_prev = if t > 0 { self.y[t - 1] } else { 0.0 };
+        let hold = if f1 || f2 { 0.0 } else { y_prev };
+        self.y[t] - hold // eq (21)
+    }
 }
 
 /// Eq (18)-(21) at the current estimate: x by eq (22), f1, f2 by eq (25)-(26) with
@@ -120,43 +223,135 @@ pub fn cascade_regression(
     y_switch: &[f64],
     skip: usize,
 ) -> Result<Regression> {
-    check_signal("u", u)?;
-    check_signal("y", y)?;
-    check_same_length(u, y, "y")?;
-    check_same_length(u, y_switch, "y_switch")?;
-    let n = degree(backlash)?;
-    let (na, nb) = (linear.na(), linear.nb());
-    let cols = na + nb + 2 * n + 1;
-    let x = linear.simulate(u, &linear.rest_state())?; // eq (22)
-    let mut f1s = Vec::with_capacity(u.len());
-    let mut f2s = Vec::with_capacity(u.len());
-    let mut phi = Vec::with_capacity(u.len().saturating_sub(skip) * cols);
-    let mut target = Vec::with_capacity(u.len().saturating_sub(skip));
-    for t in 0..u.len() {
-        let (ys_prev, y_prev) = if t > 0 {
-            (y_switch[t - 1], y[t - 1])
-        } else {
-            (0.0, 0.0)
-        };
-        let (f1, f2) = switching(backlash, x[t], ys_prev); // eq (25)-(26)
-        f1s.push(f1);
-        f2s.push(f2);
-        if t < skip {
-            continue;
-        }
-        push_backlash_part(&mut phi, na, nb, n, backlash, u, &x, t, f1, f2);
-        let hold = if f1 || f2 { 0.0 } else { y_prev };
-        target.push(y[t] - hold); // eq (21)
-    }
+    let rows = CascadeRows::new(linear, backlash, u, y, y_switch)?;
+    let cols = rows.cols;
+    let start = skip.min(u.len());
+    let mut phi = vec![0.0; (u.len() - start) * cols];
+    let target: Vec<f64> = (start..u.len())
+        .map(|t| rows.fill(t, &mut phi[(t - start) * cols..(t - start + 1) * cols]))
+        .collect();
     Ok(Regression {
         rows: target.len(),
         cols,
         phi,
         target,
-        x,
-        f1: f1s,
-        f2: f2s,
+        x: rows.x,
+        f1: rows.f1,
+        f2: rows.f2,
     })
+}
+
+/// The rows of `cascade_regression` folded into a triangular factor on the default number
+/// of threads, without the N x p matrix; with the moving fraction from `skip` on.
+pub fn cascade_factor(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    y_switch: &[f64],
+    skip: usize,
+) -> Result<(TriangularFactor, f64)> {
+    cascade_factor_threads(linear, backlash, u, y, y_switch, skip, default_threads())
+}
+
+/// `cascade_factor` on `threads` threads (the result depends on it only through rounding).
+pub fn cascade_factor_threads(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    y_switch: &[f64],
+    skip: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
+    let rows = CascadeRows::new(linear, backlash, u, y, y_switch)?;
+    let start = skip.min(u.len());
+    let factor = fold_parallel(u.len() - start, rows.cols, threads, |i, row| {
+        rows.fill(start + i, row)
+    });
+    Ok((factor, moving_fraction(&rows.f1, &rows.f2, skip)))
+}
+
+/// The sandwich's regression at an estimate: x by eq (22), the backlash output y by eq (35)
+/// and its f1, f2 for every sample; rows are built from them on demand.
+struct SandwichRows<'a> {
+    backlash: &'a GeneralBacklash,
+    u: &'a [f64],
+    w: &'a [f64],
+    na: usize,
+    nb: usize,
+    n: usize,
+    nr: usize,
+    ns: usize,
+    cols: usize,
+    x: Vec<f64>,
+    y: Vec<f64>,
+    f1: Vec<bool>,
+    f2: Vec<bool>,
+}
+
+impl<'a> SandwichRows<'a> {
+    fn new(
+        input_linear: &LinearBlock,
+        backlash: &'a GeneralBacklash,
+        output_linear: &LinearBlock,
+        u: &'a [f64],
+        w: &'a [f64],
+    ) -> Result<Self> {
+        check_signal("u", u)?;
+        check_signal("w", w)?;
+        check_same_length(u, w, "w")?;
+        let n = degree(backlash)?;
+        let (na, nb) = (input_linear.na(), input_linear.nb());
+        let (nr, ns) = (output_linear.na(), output_linear.nb());
+        let x = input_linear.simulate(u, &input_linear.rest_state())?; // eq (22)
+        let y = backlash.simulate(&x, 0.0)?; // eq (35)
+        let (f1, f2) = crate::cascade::switching_flags(backlash, &x, &y, 0.0);
+        Ok(Self {
+            backlash,
+            u,
+            w,
+            na,
+            nb,
+            n,
+            nr,
+            ns,
+            cols: na + nb + 2 * n + 1 + nr.saturating_sub(1) + ns,
+            x,
+            y,
+            f1,
+            f2,
+        })
+    }
+
+    /// Phi(t) of eq (33) into `row` (t >= 1); returns the target of eq (34).
+    fn fill(&self, t: usize, row: &mut [f64]) -> f64 {
+        let tau = t - 1;
+        let (f1, f2) = (self.f1[tau], self.f2[tau]);
+        let lag = |s: &[f64], k: usize| if k <= t { s[t - k] } else { 0.0 };
+        let mut k = backlash_part(
+            row,
+            self.na,
+            self.nb,
+            self.n,
+            self.backlash,
+            self.u,
+            &self.x,
+            tau,
+            f1,
+            f2,
+        );
+        for i in 2..=self.nr {
+            row[k] = lag(&self.y, i);
+            k += 1;
+        }
+        for j in 1..=self.ns {
+            row[k] = -lag(self.w, j);
+            k += 1;
+        }
+        let hold = if f1 || f2 { 0.0 } else { lag(&self.y, 2) };
+        self.w[t] - hold // eq (34)
+    }
 }
 
 /// Eq (33)-(34) at the current estimate: x by eq (22), the backlash output y by eq (35)
@@ -171,42 +366,61 @@ pub fn sandwich_regression(
     w: &[f64],
     skip: usize,
 ) -> Result<Regression> {
-    check_signal("u", u)?;
-    check_signal("w", w)?;
-    check_same_length(u, w, "w")?;
-    let n = degree(backlash)?;
-    let (na, nb) = (input_linear.na(), input_linear.nb());
-    let (nr, ns) = (output_linear.na(), output_linear.nb());
-    let cols = na + nb + 2 * n + 1 + (nr - 1) + ns;
-    let x = input_linear.simulate(u, &input_linear.rest_state())?; // eq (22)
-    let y = backlash.simulate(&x, 0.0)?; // eq (35)
-    let (f1s, f2s) = crate::cascade::switching_flags(backlash, &x, &y, 0.0);
-    let lag = |s: &[f64], t: usize, k: usize| if k <= t { s[t - k] } else { 0.0 };
-    let mut phi = Vec::with_capacity(u.len() * cols);
-    let mut target = Vec::with_capacity(u.len());
-    for t in skip.max(1)..u.len() {
-        let tau = t - 1;
-        push_backlash_part(
-            &mut phi, na, nb, n, backlash, u, &x, tau, f1s[tau], f2s[tau],
-        );
-        phi.extend((2..=nr).map(|i| lag(&y, t, i)));
-        phi.extend((1..=ns).map(|j| -lag(w, t, j)));
-        let hold = if f1s[tau] || f2s[tau] {
-            0.0
-        } else {
-            lag(&y, t, 2)
-        };
-        target.push(w[t] - hold); // eq (34)
-    }
+    let rows = SandwichRows::new(input_linear, backlash, output_linear, u, w)?;
+    let cols = rows.cols;
+    let start = skip.max(1).min(u.len());
+    let mut phi = vec![0.0; (u.len() - start) * cols];
+    let target: Vec<f64> = (start..u.len())
+        .map(|t| rows.fill(t, &mut phi[(t - start) * cols..(t - start + 1) * cols]))
+        .collect();
     Ok(Regression {
         rows: target.len(),
         cols,
         phi,
         target,
-        x,
-        f1: f1s,
-        f2: f2s,
+        x: rows.x,
+        f1: rows.f1,
+        f2: rows.f2,
     })
+}
+
+/// The rows of `sandwich_regression` folded into a triangular factor on the default number
+/// of threads, without the N x p matrix; with the moving fraction from `skip` on.
+pub fn sandwich_factor(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    skip: usize,
+) -> Result<(TriangularFactor, f64)> {
+    sandwich_factor_threads(
+        input_linear,
+        backlash,
+        output_linear,
+        u,
+        w,
+        skip,
+        default_threads(),
+    )
+}
+
+/// `sandwich_factor` on `threads` threads (the result depends on it only through rounding).
+pub fn sandwich_factor_threads(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    skip: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
+    let rows = SandwichRows::new(input_linear, backlash, output_linear, u, w)?;
+    let start = skip.max(1).min(u.len());
+    let factor = fold_parallel(u.len() - start, rows.cols, threads, |i, row| {
+        rows.fill(start + i, row)
+    });
+    Ok((factor, moving_fraction(&rows.f1, &rows.f2, skip)))
 }
 
 /// ARX regression y(t) = sum a_i u(t-delay+1-i) - sum b_j y(t-j): rows
@@ -301,5 +515,168 @@ mod tests {
         for (g, w) in ls.theta.iter().zip([0.7, 0.5, -0.2, 0.35]) {
             assert!((g - w).abs() < 1e-12);
         }
+    }
+
+    fn noisy(v: &[f64], level: f64) -> Vec<f64> {
+        let e = input(v.len() + 7);
+        v.iter().zip(&e[7..]).map(|(a, b)| a + level * b).collect()
+    }
+
+    fn assert_close(got: &LeastSquares, want: &LeastSquares, tol: f64) {
+        for (g, w) in got.theta.iter().zip(&want.theta) {
+            assert!((g - w).abs() <= tol * w.abs().max(1e-3), "{g} vs {w}");
+        }
+        assert!(
+            (got.rss - want.rss).abs() <= tol * want.rss.max(1e-20),
+            "{} {}",
+            got.rss,
+            want.rss
+        );
+        for (g, w) in got
+            .unscaled_covariance
+            .iter()
+            .zip(&want.unscaled_covariance)
+        {
+            assert!((g - w).abs() <= tol * w.abs().max(1e-6), "{g} vs {w}");
+        }
+    }
+
+    fn example1() -> (LinearBlock, GeneralBacklash) {
+        (
+            LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap(),
+            GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap(),
+        )
+    }
+
+    fn example2() -> (LinearBlock, GeneralBacklash, LinearBlock) {
+        (
+            LinearBlock::new(vec![0.8, 0.2], vec![0.2, -0.2]).unwrap(),
+            GeneralBacklash::new(0.4, 0.5, vec![1.0, 0.1, 0.3], vec![0.75, 0.2, 0.6]).unwrap(),
+            LinearBlock::new(vec![1.0, 0.15], vec![-0.2, 0.35]).unwrap(),
+        )
+    }
+
+    #[test]
+    fn cascade_factor_solves_like_the_dense_regression() {
+        let (lin, bl) = example1();
+        let u = input(5000);
+        let x = lin.simulate(&u, &lin.rest_state()).unwrap();
+        let y = bl.simulate(&x, 0.0).unwrap();
+        let want = [0.7, 0.5, -0.2, 0.35, 0.6, -0.3, 0.3, 1.5, 0.75, 0.4, 0.2];
+        for threads in [1, 2, 3] {
+            let (f, moving) = cascade_factor_threads(&lin, &bl, &u, &y, &y, 0, threads).unwrap();
+            let ls = solve_factor(&f, &names(11), moving).unwrap();
+            for (g, w) in ls.theta.iter().zip(want) {
+                assert!((g - w).abs() < 1e-9, "{:?}", ls.theta);
+            }
+        }
+        // noisy data at a perturbed estimate, with a warm-up: the dense solution to rounding
+        let yn = noisy(&y, 0.05);
+        let est =
+            GeneralBacklash::from_estimate(0.5, 0.4, vec![1.0, -0.2, 0.25], vec![1.4, 0.3, 0.1])
+                .unwrap();
+        let lin2 = LinearBlock::new(vec![0.6, 0.45], vec![-0.1, 0.3]).unwrap();
+        for skip in [0, 13] {
+            let reg = cascade_regression(&lin2, &est, &u, &yn, &yn, skip).unwrap();
+            let dense = reg.solve(&names(11), skip).unwrap();
+            for threads in [1, 2] {
+                let (f, moving) =
+                    cascade_factor_threads(&lin2, &est, &u, &yn, &yn, skip, threads).unwrap();
+                assert_eq!(f.rows(), reg.rows);
+                assert_eq!(moving, reg.moving_fraction(skip));
+                assert_close(
+                    &solve_factor(&f, &names(11), moving).unwrap(),
+                    &dense,
+                    1e-10,
+                );
+            }
+        }
+        let (f, m) = cascade_factor(&lin, &bl, &u, &y, &y, 0).unwrap();
+        assert!(m > 0.0 && m < 1.0);
+        assert_eq!(f.cols(), 11);
+    }
+
+    #[test]
+    fn sandwich_factor_solves_like_the_dense_regression() {
+        let (lin, bl, out) = example2();
+        let u = input(5000);
+        let m = crate::SandwichModel::new(lin.clone(), bl.clone(), out.clone());
+        let w = m.simulate(&u, &m.rest_state()).unwrap();
+        let want = [
+            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.375, 0.2, 0.6, 0.15, -0.2, 0.35,
+        ];
+        for threads in [1, 2] {
+            let (f, moving) = sandwich_factor_threads(&lin, &bl, &out, &u, &w, 0, threads).unwrap();
+            let ls = solve_factor(&f, &names(14), moving).unwrap();
+            for (g, w) in ls.theta.iter().zip(want) {
+                assert!((g - w).abs() < 1e-9, "{:?}", ls.theta);
+            }
+        }
+        let wn = noisy(&w, 0.02);
+        for skip in [0, 1, 50] {
+            let reg = sandwich_regression(&lin, &bl, &out, &u, &wn, skip).unwrap();
+            let dense = reg.solve(&names(14), skip).unwrap();
+            for threads in [1, 2] {
+                let (f, moving) =
+                    sandwich_factor_threads(&lin, &bl, &out, &u, &wn, skip, threads).unwrap();
+                assert_eq!(f.rows(), reg.rows);
+                assert_eq!(moving, reg.moving_fraction(skip));
+                assert_close(
+                    &solve_factor(&f, &names(14), moving).unwrap(),
+                    &dense,
+                    1e-10,
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_backlash_that_never_moves_is_not_identifiable_with_the_moving_share() {
+        let (lin, _) = example1();
+        // a dead band far wider than x: f1 = f2 = 0 everywhere, the backlash columns are zero
+        let wide = GeneralBacklash::new(50.0, 50.0, vec![1.0, 0.0], vec![1.0, 0.0]).unwrap();
+        let u = input(800);
+        let y = input(900)[100..].to_vec();
+        let (f, moving) = cascade_factor(&lin, &wide, &u, &y, &y, 0).unwrap();
+        assert_eq!(moving, 0.0);
+        let dense = cascade_regression(&lin, &wide, &u, &y, &y, 0)
+            .unwrap()
+            .solve(&names(7), 0);
+        for got in [solve_factor(&f, &names(7), moving), dense] {
+            match got {
+                Err(Error::NotIdentifiable(m)) => {
+                    assert!(
+                        m.contains("p0") && m.contains("0.0 % of samples move"),
+                        "{m}"
+                    )
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        // bad inputs are errors, not panics
+        assert!(matches!(
+            cascade_factor(&lin, &wide, &u, &y[..10], &y, 0),
+            Err(Error::Data(_))
+        ));
+        let mut bad = u.clone();
+        bad[3] = f64::NAN;
+        assert!(matches!(
+            cascade_factor(&lin, &wide, &bad, &y, &y, 0),
+            Err(Error::Data(_))
+        ));
+        let (f, _) = cascade_factor(&lin, &wide, &u, &y, &y, 10_000).unwrap();
+        assert_eq!(f.rows(), 0);
+        let (l2, b2, o2) = example2();
+        let (f, m) = sandwich_factor(&l2, &b2, &o2, &u, &y, 10_000).unwrap();
+        assert_eq!((f.rows(), m), (0, 0.0));
+        assert!(matches!(
+            solve_factor(&f, &names(14), m),
+            Err(Error::NotIdentifiable(_))
+        ));
+        let uneven = GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0], vec![1.0, 0.2]).unwrap();
+        assert!(matches!(
+            sandwich_factor(&l2, &uneven, &o2, &u, &y, 0),
+            Err(Error::Model(_))
+        ));
     }
 }

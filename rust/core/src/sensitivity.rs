@@ -12,6 +12,13 @@ use crate::backlash::GeneralBacklash;
 use crate::error::{Error, Result};
 use crate::linear::LinearBlock;
 use crate::signal::check_signal;
+use crate::streaming::{default_threads, fold_stream, TriangularFactor};
+
+/// Threads of the default output-error factors: the recursion, plus one folding thread when
+/// the machine has a second core (the same bits either way).
+fn oe_threads() -> usize {
+    default_threads().min(2)
+}
 
 /// Output and row-major Jacobian (rows = samples, cols = parameters).
 #[derive(Debug, Clone, PartialEq)]
@@ -210,6 +217,292 @@ pub fn sandwich_sensitivity(
     })
 }
 
+// ---- streaming: the output-error factor of [J | r] without the N x p Jacobian ----------------
+
+/// The cascade chain run one sample at a time: x(t), y(t), dx(t) (last nb + 1 rows kept) and
+/// dy(t) (`cols` wide; the columns after the backlash model's stay zero), the same arithmetic
+/// as `backlash_chain`.
+struct ChainStepper<'a> {
+    linear: &'a LinearBlock,
+    backlash: &'a GeneralBacklash,
+    u: &'a [f64],
+    x: Vec<f64>,
+    lay: Layout,
+    /// dx ring: row t at (t % (nb + 1)) * nl.
+    dx: Vec<f64>,
+    /// dy(t) after `step(t)` (dy(t-1) before it).
+    dy: Vec<f64>,
+    y_prev: f64,
+}
+
+impl<'a> ChainStepper<'a> {
+    fn new(
+        linear: &'a LinearBlock,
+        backlash: &'a GeneralBacklash,
+        u: &'a [f64],
+        cols: usize,
+    ) -> Result<Self> {
+        let n = backlash.left().coefficients().len();
+        if backlash.right().coefficients().len() != n {
+            return Err(Error::Model("both branches need the same degree n".into()));
+        }
+        let lay = Layout {
+            na: linear.na(),
+            nb: linear.nb(),
+            n,
+        };
+        let x = linear.simulate(u, &linear.rest_state())?;
+        Ok(Self {
+            linear,
+            backlash,
+            u,
+            x,
+            dx: vec![0.0; (lay.nb + 1) * lay.linear()],
+            dy: vec![0.0; cols],
+            lay,
+            y_prev: 0.0,
+        })
+    }
+
+    /// Advance to sample t (called for t = 0, 1, ... in order): returns y(t), leaves dy(t).
+    fn step(&mut self, t: usize) -> Result<f64> {
+        let lay = &self.lay;
+        let (nl, ring) = (lay.linear(), lay.nb + 1);
+        let (u, x, b) = (self.u, &self.x, self.linear.b());
+        let cur = (t % ring) * nl;
+        for k in 0..nl {
+            let mut acc = if k < lay.na {
+                let i = k + 1;
+                if i <= t {
+                    u[t - i]
+                } else {
+                    0.0
+                }
+            } else {
+                let j = k - lay.na + 1;
+                if j <= t {
+                    -x[t - j]
+                } else {
+                    0.0
+                }
+            };
+            for (jj, bj) in b.iter().enumerate() {
+                let lagj = jj + 1;
+                if lagj <= t {
+                    acc -= bj * self.dx[((t - lagj) % ring) * nl + k];
+                }
+            }
+            self.dx[cur + k] = acc;
+        }
+        let bl = self.backlash;
+        let xt = x[t];
+        let yt = bl.step(xt, self.y_prev);
+        if !yt.is_finite() {
+            return Err(crate::backlash::output_overflow(t, xt));
+        }
+        let dy = &mut self.dy;
+        let dx = &self.dx[cur..cur + nl];
+        if bl.left().value(xt) <= self.y_prev {
+            dy.fill(0.0);
+            let xi1 = xt + bl.c_left();
+            let slope = bl.left().slope(xt);
+            for k in 0..nl {
+                dy[k] = slope * dx[k];
+            }
+            dy[lay.c_l()] = slope;
+            let mut p = xi1;
+            for i in 2..=lay.n {
+                p *= xi1;
+                dy[lay.m_l(i)] = p;
+            }
+        } else if bl.right().value(xt) >= self.y_prev {
+            dy.fill(0.0);
+            let xi2 = xt - bl.c_right();
+            let slope = bl.right().slope(xt);
+            for k in 0..nl {
+                dy[k] = slope * dx[k];
+            }
+            dy[lay.c_r()] = -slope;
+            dy[lay.m_r1()] = xi2;
+            let mut p = xi2;
+            for i in 2..=lay.n {
+                p *= xi2;
+                dy[lay.m_r(i)] = p;
+            }
+        } // else holding: dy(t) = dy(t-1), already in place (zero before the record)
+        self.y_prev = yt;
+        Ok(yt)
+    }
+}
+
+/// The factor and cost of `fold_stream`, refused when the Jacobian or residual overflowed.
+fn finish(folded: Result<(TriangularFactor, f64)>) -> Result<(TriangularFactor, f64)> {
+    let (factor, cost) = folded?;
+    if !cost.is_finite() || factor.r_aug().iter().any(|v| !v.is_finite()) {
+        return Err(Error::Model(
+            "output-error Jacobian overflowed: the sensitivities of the simulated output \
+             are not finite (an unstable or badly scaled estimate); scale the signals down \
+             or start from a stable estimate"
+                .into(),
+        ));
+    }
+    Ok((factor, cost))
+}
+
+fn check_pair(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
+    check_signal("u", u)?;
+    check_signal(y_name, y)?;
+    if u.len() != y.len() {
+        return Err(Error::Data(format!(
+            "u has {} samples but {y_name} has {}: give input and output of the same record",
+            u.len(),
+            y.len()
+        )));
+    }
+    Ok(())
+}
+
+/// The output-error least-squares problem of the cascade in factored form: R_aug of
+/// [J | r] over the samples t >= `warmup`, J = d y_sim / d theta (the columns of
+/// `cascade_sensitivity`), r = y - y_sim, and the cost sum r^2. The sensitivity recursions
+/// run sample by sample keeping only the rows they need; memory does not grow with N x p.
+pub fn cascade_oe_factor(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+) -> Result<(TriangularFactor, f64)> {
+    cascade_oe_factor_threads(linear, backlash, u, y, warmup, oe_threads())
+}
+
+/// `cascade_oe_factor` with the folding on a second thread when `threads` >= 2 (the same
+/// bits either way).
+pub fn cascade_oe_factor_threads(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
+    check_pair(u, y, "y")?;
+    let cols = linear.na() + linear.nb() + 2 * backlash.left().coefficients().len() + 1;
+    let mut chain = ChainStepper::new(linear, backlash, u, cols)?;
+    debug_assert_eq!(chain.lay.cols(), cols);
+    finish(fold_stream(cols, threads, |sink| {
+        for (t, &measured) in y.iter().enumerate() {
+            let yt = chain.step(t)?;
+            if t >= warmup {
+                sink.push(&chain.dy, measured - yt)?;
+            }
+        }
+        Ok(())
+    }))
+}
+
+/// The output-error least-squares problem of the sandwich in factored form: R_aug of
+/// [J | r] over the samples t >= `warmup`, J = d w_sim / d theta (the columns of
+/// `sandwich_sensitivity`), r = w - w_sim, and the cost sum r^2, with O(p (nr + ns)) memory
+/// for the recursions.
+pub fn sandwich_oe_factor(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+) -> Result<(TriangularFactor, f64)> {
+    sandwich_oe_factor_threads(
+        input_linear,
+        backlash,
+        output_linear,
+        u,
+        w,
+        warmup,
+        oe_threads(),
+    )
+}
+
+/// `sandwich_oe_factor` with the folding on a second thread when `threads` >= 2 (the same
+/// bits either way).
+pub fn sandwich_oe_factor_threads(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
+    check_pair(u, w, "w")?;
+    let (r, s) = (output_linear.a(), output_linear.b());
+    let (nr, ns) = (r.len(), s.len());
+    let inner =
+        input_linear.na() + input_linear.nb() + 2 * backlash.left().coefficients().len() + 1;
+    let cols = inner + nr.saturating_sub(1) + ns;
+    let mut chain = ChainStepper::new(input_linear, backlash, u, cols)?;
+    // rings: y(t), dy(t) over nr + 1 samples, w(t), dw(t) over ns + 1
+    let (ry, rw) = (nr + 1, ns + 1);
+    let mut y_ring = vec![0.0; ry];
+    let mut dy_ring = vec![0.0; ry * cols];
+    let mut w_ring = vec![0.0; rw];
+    let mut dw_ring = vec![0.0; rw * cols];
+    finish(fold_stream(cols, threads, |sink| {
+        for (t, &measured) in w.iter().enumerate() {
+            let yt = chain.step(t)?;
+            let cy = t % ry;
+            y_ring[cy] = yt;
+            dy_ring[cy * cols..(cy + 1) * cols].copy_from_slice(&chain.dy);
+            let cw = t % rw;
+            let (before, rest) = dw_ring.split_at_mut(cw * cols);
+            let (dw, after) = rest.split_at_mut(cols);
+            dw.fill(0.0);
+            let mut wt = 0.0;
+            for (ii, ri) in r.iter().enumerate() {
+                let i = ii + 1;
+                if i <= t {
+                    let k = (t - i) % ry;
+                    let y_lag = y_ring[k];
+                    wt += ri * y_lag;
+                    let dy_lag = &dy_ring[k * cols..(k + 1) * cols];
+                    for (d, v) in dw.iter_mut().zip(dy_lag) {
+                        *d += ri * v;
+                    }
+                    if i >= 2 {
+                        dw[inner + i - 2] += y_lag;
+                    }
+                }
+            }
+            for (jj, sj) in s.iter().enumerate() {
+                let j = jj + 1;
+                if j <= t {
+                    let k = (t - j) % rw;
+                    let w_lag = w_ring[k];
+                    wt -= sj * w_lag;
+                    let dw_lag = if k < cw {
+                        &before[k * cols..(k + 1) * cols]
+                    } else {
+                        &after[(k - cw - 1) * cols..(k - cw) * cols]
+                    };
+                    for (d, v) in dw.iter_mut().zip(dw_lag) {
+                        *d -= sj * v;
+                    }
+                    dw[inner + nr - 1 + jj] -= w_lag;
+                }
+            }
+            if !wt.is_finite() {
+                return Err(crate::linear::overflow(output_linear, "w", t));
+            }
+            w_ring[cw] = wt;
+            if t >= warmup {
+                sink.push(dw, measured - wt)?;
+            }
+        }
+        Ok(())
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -278,5 +571,171 @@ mod tests {
         let sens = cascade_sensitivity(&lin, &bl, &u).unwrap();
         assert_eq!(sens.output, m.simulate(&u, &m.rest_state()).unwrap());
         assert_eq!(sens.cols, 11);
+    }
+
+    fn noisy(v: &[f64], seed: u64) -> Vec<f64> {
+        let mut g = seed;
+        v.iter()
+            .map(|a| {
+                g = g
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                a + 0.05 * (((g >> 11) as f64 / (1u64 << 53) as f64) - 0.5)
+            })
+            .collect()
+    }
+
+    /// R_aug^T R_aug against [J r]^T [J r] of the dense sensitivity, and the cost.
+    fn check_factor(
+        f: &TriangularFactor,
+        cost: f64,
+        sens: &Sensitivity,
+        measured: &[f64],
+        warmup: usize,
+    ) {
+        let p = sens.cols;
+        let n = p + 1;
+        let rows = measured.len().saturating_sub(warmup);
+        assert_eq!((f.cols(), f.rows()), (p, rows));
+        let aug = |t: usize, j: usize| {
+            if j < p {
+                sens.jacobian[t * p + j]
+            } else {
+                measured[t] - sens.output[t]
+            }
+        };
+        let r = f.r_aug();
+        for i in 0..n {
+            for j in 0..n {
+                let rtr: f64 = (0..n).map(|k| r[k * n + i] * r[k * n + j]).sum();
+                let gram: f64 = (warmup..measured.len())
+                    .map(|t| aug(t, i) * aug(t, j))
+                    .sum();
+                let size = (0..n)
+                    .map(|k| {
+                        let a: f64 = (warmup..measured.len()).map(|t| aug(t, k).powi(2)).sum();
+                        a
+                    })
+                    .fold(0.0f64, f64::max);
+                assert!(
+                    (rtr - gram).abs() < 1e-11 * size.max(1e-300),
+                    "{i} {j}: {rtr} {gram}"
+                );
+            }
+        }
+        let want: f64 = (warmup..measured.len()).map(|t| aug(t, p).powi(2)).sum();
+        assert!((cost - want).abs() <= 1e-12 * want, "{cost} {want}");
+        // the last column of R_aug carries ||r||^2
+        let last: f64 = (0..n).map(|k| r[k * n + p].powi(2)).sum();
+        assert!((last - cost).abs() <= 1e-11 * cost, "{last} {cost}");
+    }
+
+    #[test]
+    fn cascade_oe_factor_is_the_factor_of_the_dense_jacobian() {
+        let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
+        let bl = GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap();
+        let u = input(3000);
+        let m = crate::CascadeModel::new(lin.clone(), bl.clone());
+        let y = noisy(&m.simulate(&u, &m.rest_state()).unwrap(), 3);
+        let est_lin = LinearBlock::new(vec![0.65, 0.55], vec![-0.15, 0.3]).unwrap();
+        let est = GeneralBacklash::from_estimate(
+            0.55,
+            0.45,
+            vec![1.0, -0.25, 0.28],
+            vec![1.45, 0.35, 0.25],
+        )
+        .unwrap();
+        let sens = cascade_sensitivity(&est_lin, &est, &u).unwrap();
+        for warmup in [0, 1, 600, 2999, 3000, 5000] {
+            let (f, cost) = cascade_oe_factor(&est_lin, &est, &u, &y, warmup).unwrap();
+            for threads in [1, 2] {
+                let other = cascade_oe_factor_threads(&est_lin, &est, &u, &y, warmup, threads);
+                assert_eq!(other.unwrap(), (f.clone(), cost));
+            }
+            if warmup < u.len() {
+                check_factor(&f, cost, &sens, &y, warmup);
+            } else {
+                assert_eq!((f.rows(), cost), (0, 0.0));
+            }
+        }
+    }
+
+    #[test]
+    fn sandwich_oe_factor_is_the_factor_of_the_dense_jacobian() {
+        let theta = [
+            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.5, 0.2, 0.6, 0.15, -0.2, 0.35,
+        ];
+        let u = input(3000);
+        let (lin, bl, out) = sandwich_from(&theta);
+        let w = noisy(
+            &sandwich_sensitivity(&lin, &bl, &out, &u).unwrap().output,
+            5,
+        );
+        let mut est = theta;
+        for (k, v) in est.iter_mut().enumerate() {
+            *v *= 1.0 + 0.03 * ((k % 3) as f64 - 1.0);
+        }
+        let (l2, b2, o2) = sandwich_from(&est);
+        let sens = sandwich_sensitivity(&l2, &b2, &o2, &u).unwrap();
+        for warmup in [0, 2, 700] {
+            let (f, cost) = sandwich_oe_factor(&l2, &b2, &o2, &u, &w, warmup).unwrap();
+            for threads in [1, 2] {
+                let other = sandwich_oe_factor_threads(&l2, &b2, &o2, &u, &w, warmup, threads);
+                assert_eq!(other.unwrap(), (f.clone(), cost));
+            }
+            check_factor(&f, cost, &sens, &w, warmup);
+        }
+        // output orders other than Example 2's: FIR output block, longer denominators
+        for (r, s) in [
+            (vec![1.0], vec![]),
+            (vec![1.0, 0.3, -0.1], vec![0.5, -0.1, 0.05]),
+        ] {
+            let o3 = LinearBlock::new(r, s).unwrap();
+            let sens = sandwich_sensitivity(&l2, &b2, &o3, &u).unwrap();
+            let (f, cost) = sandwich_oe_factor(&l2, &b2, &o3, &u, &w, 10).unwrap();
+            check_factor(&f, cost, &sens, &w, 10);
+        }
+    }
+
+    #[test]
+    fn oe_factors_report_overflow_and_bad_data() {
+        let lin = LinearBlock::new(vec![1.0], vec![]).unwrap();
+        let cubic =
+            GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0, 0.0, 1.0], vec![1.0, 0.0, 1.0])
+                .unwrap();
+        let mut u = input(100);
+        u[50] = 1e150;
+        let y = input(100);
+        match cascade_oe_factor(&lin, &cubic, &u, &y, 0) {
+            Err(Error::Model(m)) => assert!(m.contains("overflowed"), "{m}"),
+            other => panic!("{other:?}"),
+        }
+        let u = input(100);
+        let unstable = LinearBlock::new(vec![1.0], vec![-3.0]).unwrap();
+        let big: Vec<f64> = input(2000).iter().map(|v| v + 1.0).collect();
+        let w = vec![0.0; 2000];
+        match sandwich_oe_factor(&lin, &cubic, &unstable, &big, &w, 0) {
+            Err(Error::Model(m)) => assert!(m.contains("w[") && m.contains("spectral"), "{m}"),
+            other => panic!("{other:?}"),
+        }
+        assert!(matches!(
+            cascade_oe_factor(&lin, &cubic, &u, &y[..99], 0),
+            Err(Error::Data(_))
+        ));
+        assert!(matches!(
+            cascade_oe_factor(&lin, &cubic, &[], &[], 0),
+            Err(Error::Data(_))
+        ));
+        let mut bad = y.clone();
+        bad[7] = f64::INFINITY;
+        assert!(matches!(
+            cascade_oe_factor(&lin, &cubic, &u, &bad, 0),
+            Err(Error::Data(_))
+        ));
+        let uneven = GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0], vec![1.0, 0.2]).unwrap();
+        assert!(matches!(
+            sandwich_oe_factor(&lin, &uneven, &lin, &u, &y, 0),
+            Err(Error::Model(_))
+        ));
     }
 }

@@ -417,7 +417,8 @@ fn lstsq<'py>(
 }
 
 /// One iteration of the cascade algorithm (eq 18-28): internal variables at the current
-/// estimate, regressor, QR solve. Returns (theta, rss, cov, rcond, x, f1, f2, rows).
+/// estimate, the regressor rows folded into a streaming QR factor (no N x p matrix), solve.
+/// Returns ((theta, rss, cov, rcond), moving_fraction).
 #[pyfunction]
 #[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, u, y, y_switch, skip, names))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
@@ -434,28 +435,25 @@ fn cascade_iteration<'py>(
     y_switch: PyReadonlyArrayDyn<'py, f64>,
     skip: usize,
     names: Vec<String>,
-) -> PyResult<(LsOut<'py>, SignalOut<'py>, FlagOut<'py>, FlagOut<'py>)> {
+) -> PyResult<(LsOut<'py>, f64)> {
     let (u, y, ys) = (
         signal(py, "u", &u)?,
         signal(py, "y", &y)?,
         signal(py, "y_switch", &y_switch)?,
     );
-    let (ls, reg) = run(py, || {
+    let (ls, moving) = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
-        let reg = core::regressor::cascade_regression(&lin, &bl, &u, &y, &ys, skip)?;
-        let ls = reg.solve(&names, skip)?;
-        Ok((ls, reg))
+        let (factor, moving) = core::regressor::cascade_factor(&lin, &bl, &u, &y, &ys, skip)?;
+        Ok((
+            core::regressor::solve_factor(&factor, &names, moving)?,
+            moving,
+        ))
     })?;
-    Ok((
-        ls_out(py, ls)?,
-        vec_f64(py, reg.x),
-        vec_bool(py, reg.f1),
-        vec_bool(py, reg.f2),
-    ))
+    Ok((ls_out(py, ls)?, moving))
 }
 
-/// One iteration of the sandwich algorithm (eq 33-36). Returns (theta, rss, cov, rcond),
-/// x, f1, f2.
+/// One iteration of the sandwich algorithm (eq 33-36), streamed like `cascade_iteration`.
+/// Returns ((theta, rss, cov, rcond), moving_fraction).
 #[pyfunction]
 #[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, r, s, u, w, skip, names))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
@@ -473,21 +471,18 @@ fn sandwich_iteration<'py>(
     w: PyReadonlyArrayDyn<'py, f64>,
     skip: usize,
     names: Vec<String>,
-) -> PyResult<(LsOut<'py>, SignalOut<'py>, FlagOut<'py>, FlagOut<'py>)> {
+) -> PyResult<(LsOut<'py>, f64)> {
     let (u, w) = (signal(py, "u", &u)?, signal(py, "w", &w)?);
-    let (ls, reg) = run(py, || {
+    let (ls, moving) = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
         let out = core::LinearBlock::new(r, s)?;
-        let reg = core::regressor::sandwich_regression(&lin, &bl, &out, &u, &w, skip)?;
-        let ls = reg.solve(&names, skip)?;
-        Ok((ls, reg))
+        let (factor, moving) = core::regressor::sandwich_factor(&lin, &bl, &out, &u, &w, skip)?;
+        Ok((
+            core::regressor::solve_factor(&factor, &names, moving)?,
+            moving,
+        ))
     })?;
-    Ok((
-        ls_out(py, ls)?,
-        vec_f64(py, reg.x),
-        vec_bool(py, reg.f1),
-        vec_bool(py, reg.f2),
-    ))
+    Ok((ls_out(py, ls)?, moving))
 }
 
 /// ARX least squares y(t) = sum a_i u(t-delay+1-i) - sum b_j y(t-j): (theta, rss, cov, rcond).
@@ -567,6 +562,71 @@ fn sandwich_sensitivity<'py>(
     sensitivity_out(py, sens)
 }
 
+type FactorOut<'py> = (Bound<'py, PyArray2<f64>>, f64);
+
+fn factor_out<'py>(
+    py: Python<'py>,
+    (factor, cost): (core::TriangularFactor, f64),
+) -> PyResult<FactorOut<'py>> {
+    let n = factor.cols() + 1;
+    let r = factor.r_aug().to_vec().into_pyarray(py).reshape([n, n])?;
+    Ok((r, cost))
+}
+
+/// The cascade's output-error problem in factored form, streamed (no N x p Jacobian):
+/// (R_aug, cost) with R_aug^T R_aug = [J | r]^T [J | r] over t >= warmup, J = dy_sim/dtheta,
+/// r = y - y_sim, cost = sum r^2.
+#[pyfunction]
+#[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, u, y, warmup))]
+#[allow(clippy::too_many_arguments)]
+fn cascade_oe_factor<'py>(
+    py: Python<'py>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c_left: f64,
+    c_right: f64,
+    m_left: Vec<f64>,
+    m_right: Vec<f64>,
+    u: PyReadonlyArrayDyn<'py, f64>,
+    y: PyReadonlyArrayDyn<'py, f64>,
+    warmup: usize,
+) -> PyResult<FactorOut<'py>> {
+    let (u, y) = (signal(py, "u", &u)?, signal(py, "y", &y)?);
+    let out = run(py, || {
+        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
+        core::sensitivity::cascade_oe_factor(&lin, &bl, &u, &y, warmup)
+    })?;
+    factor_out(py, out)
+}
+
+/// The sandwich's output-error problem in factored form, streamed: (R_aug, cost) over
+/// t >= warmup with J = dw_sim/dtheta, r = w - w_sim.
+#[pyfunction]
+#[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, r, s, u, w, warmup))]
+#[allow(clippy::too_many_arguments)]
+fn sandwich_oe_factor<'py>(
+    py: Python<'py>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c_left: f64,
+    c_right: f64,
+    m_left: Vec<f64>,
+    m_right: Vec<f64>,
+    r: Vec<f64>,
+    s: Vec<f64>,
+    u: PyReadonlyArrayDyn<'py, f64>,
+    w: PyReadonlyArrayDyn<'py, f64>,
+    warmup: usize,
+) -> PyResult<FactorOut<'py>> {
+    let (u, w) = (signal(py, "u", &u)?, signal(py, "w", &w)?);
+    let out = run(py, || {
+        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
+        let out = core::LinearBlock::new(r, s)?;
+        core::sensitivity::sandwich_oe_factor(&lin, &bl, &out, &u, &w, warmup)
+    })?;
+    factor_out(py, out)
+}
+
 /// Free-run output of an estimate (cascade when r is empty, else sandwich), from rest.
 #[pyfunction]
 #[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, r, s, u))]
@@ -610,5 +670,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sandwich_iteration, m)?)?;
     m.add_function(wrap_pyfunction!(cascade_sensitivity, m)?)?;
     m.add_function(wrap_pyfunction!(sandwich_sensitivity, m)?)?;
+    m.add_function(wrap_pyfunction!(cascade_oe_factor, m)?)?;
+    m.add_function(wrap_pyfunction!(sandwich_oe_factor, m)?)?;
     Ok(())
 }

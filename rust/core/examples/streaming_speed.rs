@@ -1,0 +1,125 @@
+//! Time per sample of the streaming regressions and output-error factor against the dense
+//! path (regressor matrix + QR). Run: cargo run --release -p backlashid-core --example
+//! streaming_speed [N...]
+use std::time::Instant;
+
+use backlashid_core::regressor::{
+    cascade_factor_threads, cascade_regression, sandwich_factor_threads, sandwich_regression,
+};
+use backlashid_core::sensitivity::{
+    cascade_oe_factor_threads, cascade_sensitivity, sandwich_oe_factor_threads,
+};
+use backlashid_core::{CascadeModel, GeneralBacklash, LinearBlock, SandwichModel};
+
+fn input(n: usize) -> Vec<f64> {
+    let mut s = 12345u64;
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        })
+        .collect()
+}
+
+/// The solve before this change: column-scaled N x p matrix, faer QR, explicit residual.
+fn faer_dense(a: &[f64], rows: usize, p: usize, b: &[f64]) -> Vec<f64> {
+    use faer::linalg::solvers::SolveLstsq;
+    let mut scale = vec![0.0; p];
+    for r in 0..rows {
+        for j in 0..p {
+            scale[j] += a[r * p + j] * a[r * p + j];
+        }
+    }
+    let scale: Vec<f64> = scale.iter().map(|s: &f64| s.sqrt()).collect();
+    let m = faer::Mat::<f64>::from_fn(rows, p, |r, j| a[r * p + j] / scale[j]);
+    let rhs = faer::Mat::<f64>::from_fn(rows, 1, |r, _| b[r]);
+    let sol = m.qr().solve_lstsq(rhs.as_ref());
+    (0..p).map(|j| sol[(j, 0)] / scale[j]).collect()
+}
+
+fn best<T>(reps: usize, n: usize, mut f: impl FnMut() -> T) -> f64 {
+    let mut best = f64::INFINITY;
+    for _ in 0..reps {
+        let t = Instant::now();
+        std::hint::black_box(f());
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    best / n as f64 * 1e9
+}
+
+fn main() {
+    let sizes: Vec<usize> = std::env::args()
+        .skip(1)
+        .map(|a| a.parse::<f64>().expect("N") as usize)
+        .collect();
+    let sizes = if sizes.is_empty() {
+        vec![1_000_000, 10_000_000]
+    } else {
+        sizes
+    };
+    let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
+    let bl = GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap();
+    let (l2, b2, o2) = (
+        LinearBlock::new(vec![0.8, 0.2], vec![0.2, -0.2]).unwrap(),
+        GeneralBacklash::new(0.4, 0.5, vec![1.0, 0.1, 0.3], vec![0.75, 0.2, 0.6]).unwrap(),
+        LinearBlock::new(vec![1.0, 0.15], vec![-0.2, 0.35]).unwrap(),
+    );
+    let names: Vec<String> = (0..14).map(|j| format!("p{j}")).collect();
+    println!("ns per sample (best of reps); cascade p = 11, sandwich p = 14");
+    for &n in &sizes {
+        let u = input(n);
+        let m = CascadeModel::new(lin.clone(), bl.clone());
+        let y = m.simulate(&u, &m.rest_state()).unwrap();
+        let sm = SandwichModel::new(l2.clone(), b2.clone(), o2.clone());
+        let w = sm.simulate(&u, &sm.rest_state()).unwrap();
+        let reps = if n <= 2_000_000 { 3 } else { 1 };
+        println!("N = {n:e}");
+        if n <= 2_000_000 {
+            let t = best(reps, n, || {
+                let reg = cascade_regression(&lin, &bl, &u, &y, &y, 0).unwrap();
+                reg.solve(&names[..11], 0).unwrap()
+            });
+            println!("  cascade dense (regression + lstsq::solve): {t:7.1}");
+            let t = best(reps, n, || {
+                let reg = sandwich_regression(&l2, &b2, &o2, &u, &w, 0).unwrap();
+                reg.solve(&names, 0).unwrap()
+            });
+            println!("  sandwich dense (regression + lstsq::solve): {t:6.1}");
+            let t = best(reps, n, || {
+                let reg = cascade_regression(&lin, &bl, &u, &y, &y, 0).unwrap();
+                faer_dense(&reg.phi, reg.rows, reg.cols, &reg.target)
+            });
+            println!("  cascade dense, faer QR of N x p (before):  {t:7.1}");
+            let t = best(reps, n, || cascade_sensitivity(&lin, &bl, &u).unwrap());
+            println!("  cascade dense sensitivity (J only, no QR): {t:7.1}");
+        }
+        for threads in [1, 2] {
+            let t = best(reps, n, || {
+                let (f, _) = cascade_factor_threads(&lin, &bl, &u, &y, &y, 0, threads).unwrap();
+                f.solve(&names[..11]).unwrap()
+            });
+            println!("  cascade_factor + solve, {threads} thread(s):    {t:7.1}");
+        }
+        for threads in [1, 2] {
+            let t = best(reps, n, || {
+                let (f, _) = sandwich_factor_threads(&l2, &b2, &o2, &u, &w, 0, threads).unwrap();
+                f.solve(&names).unwrap()
+            });
+            println!("  sandwich_factor + solve, {threads} thread(s):   {t:7.1}");
+        }
+        for threads in [1, 2] {
+            let t = best(reps, n, || {
+                cascade_oe_factor_threads(&lin, &bl, &u, &y, 0, threads).unwrap()
+            });
+            println!("  cascade_oe_factor, {threads} thread(s):         {t:7.1}");
+        }
+        for threads in [1, 2] {
+            let t = best(reps, n, || {
+                sandwich_oe_factor_threads(&l2, &b2, &o2, &u, &w, 0, threads).unwrap()
+            });
+            println!("  sandwich_oe_factor, {threads} thread(s):        {t:7.1}");
+        }
+    }
+}
