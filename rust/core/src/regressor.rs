@@ -141,6 +141,50 @@ fn backlash_part(
     k
 }
 
+/// A regression whose rows are built on demand from the internal signals of an estimate
+/// (eq 18 for the cascade, eq 33 for the sandwich).
+trait RowSource: Sync {
+    fn cols(&self) -> usize;
+    /// The first usable row for a warm-up of `skip` samples.
+    fn first_row(&self, skip: usize) -> usize;
+    fn len(&self) -> usize;
+    /// The row of sample t into `row`; returns its target.
+    fn fill(&self, t: usize, row: &mut [f64]) -> f64;
+    /// x of eq (22) and the switching functions f1, f2 of every sample.
+    fn signals(self) -> (Vec<f64>, Vec<bool>, Vec<bool>);
+    fn flags(&self) -> (&[bool], &[bool]);
+}
+
+/// All rows from `skip` on as a dense row-major matrix.
+fn dense<R: RowSource>(rows: R, skip: usize) -> Regression {
+    let (cols, start) = (rows.cols(), rows.first_row(skip).min(rows.len()));
+    let mut phi = vec![0.0; (rows.len() - start) * cols];
+    let target: Vec<f64> = (start..rows.len())
+        .map(|t| rows.fill(t, &mut phi[(t - start) * cols..(t - start + 1) * cols]))
+        .collect();
+    let (x, f1, f2) = rows.signals();
+    Regression {
+        rows: target.len(),
+        cols,
+        phi,
+        target,
+        x,
+        f1,
+        f2,
+    }
+}
+
+/// All rows from `skip` on folded into a triangular factor on `threads` threads, with the
+/// moving fraction.
+fn factor<R: RowSource>(rows: &R, skip: usize, threads: usize) -> (TriangularFactor, f64) {
+    let start = rows.first_row(skip).min(rows.len());
+    let factor = fold_parallel(rows.len() - start, rows.cols(), threads, |i, row| {
+        rows.fill(start + i, row)
+    });
+    let (f1, f2) = rows.flags();
+    (factor, moving_fraction(f1, f2, skip))
+}
+
 /// The cascade's regression at an estimate: x by eq (22) and f1, f2 by eq (25)-(26) for
 /// every sample; rows are built from them on demand.
 struct CascadeRows<'a> {
@@ -190,6 +234,28 @@ impl<'a> CascadeRows<'a> {
             f2,
         })
     }
+}
+
+impl RowSource for CascadeRows<'_> {
+    fn cols(&self) -> usize {
+        self.cols
+    }
+
+    fn first_row(&self, skip: usize) -> usize {
+        skip
+    }
+
+    fn len(&self) -> usize {
+        self.u.len()
+    }
+
+    fn signals(self) -> (Vec<f64>, Vec<bool>, Vec<bool>) {
+        (self.x, self.f1, self.f2)
+    }
+
+    fn flags(&self) -> (&[bool], &[bool]) {
+        (&self.f1, &self.f2)
+    }
 
     /// phi(t) of eq (18) into `row`; returns the target y(t) - y(t-1)[1 - f1][1 - f2] (21).
     fn fill(&self, t: usize, row: &mut [f64]) -> f64 {
@@ -223,22 +289,10 @@ pub fn cascade_regression(
     y_switch: &[f64],
     skip: usize,
 ) -> Result<Regression> {
-    let rows = CascadeRows::new(linear, backlash, u, y, y_switch)?;
-    let cols = rows.cols;
-    let start = skip.min(u.len());
-    let mut phi = vec![0.0; (u.len() - start) * cols];
-    let target: Vec<f64> = (start..u.len())
-        .map(|t| rows.fill(t, &mut phi[(t - start) * cols..(t - start + 1) * cols]))
-        .collect();
-    Ok(Regression {
-        rows: target.len(),
-        cols,
-        phi,
-        target,
-        x: rows.x,
-        f1: rows.f1,
-        f2: rows.f2,
-    })
+    Ok(dense(
+        CascadeRows::new(linear, backlash, u, y, y_switch)?,
+        skip,
+    ))
 }
 
 /// The rows of `cascade_regression` folded into a triangular factor on the default number
@@ -265,11 +319,7 @@ pub fn cascade_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     let rows = CascadeRows::new(linear, backlash, u, y, y_switch)?;
-    let start = skip.min(u.len());
-    let factor = fold_parallel(u.len() - start, rows.cols, threads, |i, row| {
-        rows.fill(start + i, row)
-    });
-    Ok((factor, moving_fraction(&rows.f1, &rows.f2, skip)))
+    Ok(factor(&rows, skip, threads))
 }
 
 /// The sandwich's regression at an estimate: x by eq (22), the backlash output y by eq (35)
@@ -323,6 +373,28 @@ impl<'a> SandwichRows<'a> {
             f2,
         })
     }
+}
+
+impl RowSource for SandwichRows<'_> {
+    fn cols(&self) -> usize {
+        self.cols
+    }
+
+    fn first_row(&self, skip: usize) -> usize {
+        skip.max(1) // eq (33) starts from the backlash at t - 1
+    }
+
+    fn len(&self) -> usize {
+        self.u.len()
+    }
+
+    fn signals(self) -> (Vec<f64>, Vec<bool>, Vec<bool>) {
+        (self.x, self.f1, self.f2)
+    }
+
+    fn flags(&self) -> (&[bool], &[bool]) {
+        (&self.f1, &self.f2)
+    }
 
     /// Phi(t) of eq (33) into `row` (t >= 1); returns the target of eq (34).
     fn fill(&self, t: usize, row: &mut [f64]) -> f64 {
@@ -366,22 +438,10 @@ pub fn sandwich_regression(
     w: &[f64],
     skip: usize,
 ) -> Result<Regression> {
-    let rows = SandwichRows::new(input_linear, backlash, output_linear, u, w)?;
-    let cols = rows.cols;
-    let start = skip.max(1).min(u.len());
-    let mut phi = vec![0.0; (u.len() - start) * cols];
-    let target: Vec<f64> = (start..u.len())
-        .map(|t| rows.fill(t, &mut phi[(t - start) * cols..(t - start + 1) * cols]))
-        .collect();
-    Ok(Regression {
-        rows: target.len(),
-        cols,
-        phi,
-        target,
-        x: rows.x,
-        f1: rows.f1,
-        f2: rows.f2,
-    })
+    Ok(dense(
+        SandwichRows::new(input_linear, backlash, output_linear, u, w)?,
+        skip,
+    ))
 }
 
 /// The rows of `sandwich_regression` folded into a triangular factor on the default number
@@ -416,11 +476,7 @@ pub fn sandwich_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     let rows = SandwichRows::new(input_linear, backlash, output_linear, u, w)?;
-    let start = skip.max(1).min(u.len());
-    let factor = fold_parallel(u.len() - start, rows.cols, threads, |i, row| {
-        rows.fill(start + i, row)
-    });
-    Ok((factor, moving_fraction(&rows.f1, &rows.f2, skip)))
+    Ok(factor(&rows, skip, threads))
 }
 
 /// ARX regression y(t) = sum a_i u(t-delay+1-i) - sum b_j y(t-j): rows

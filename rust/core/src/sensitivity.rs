@@ -59,6 +59,9 @@ impl Layout {
     }
 }
 
+/// x, y and dy/dtheta (row-major, `cols` wide) of the cascade part, with the column layout.
+type Chain = (Vec<f64>, Vec<f64>, Vec<f64>, Layout);
+
 /// x and y of the cascade with dx/dtheta (linear columns) and dy/dtheta (all backlash-model
 /// columns, `cols` wide) in row-major order.
 fn backlash_chain(
@@ -66,7 +69,7 @@ fn backlash_chain(
     backlash: &GeneralBacklash,
     u: &[f64],
     cols: usize,
-) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, Layout)> {
+) -> Result<Chain> {
     let n = backlash.left().coefficients().len();
     if backlash.right().coefficients().len() != n {
         return Err(Error::Model("both branches need the same degree n".into()));

@@ -104,10 +104,10 @@ mod tests {
             .collect();
         let s = switching_form(&bl, &x, 0.0).unwrap();
         let y = bl.simulate(&x, 0.0).unwrap();
-        for t in 0..x.len() {
-            assert!((s.y[t] - y[t]).abs() < 1e-12);
-            assert!(!(s.f1[t] && s.f2[t]));
+        for (ys, yt) in s.y.iter().zip(&y) {
+            assert!((ys - yt).abs() < 1e-12);
         }
+        assert!(s.f1.iter().zip(&s.f2).all(|(a, b)| !(a & b)));
         assert!(s.f1.iter().any(|&f| f) && s.f2.iter().any(|&f| f));
         assert!(s.f1.iter().zip(&s.f2).any(|(a, b)| !a && !b));
     }

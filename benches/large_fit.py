@@ -1,0 +1,45 @@
+"""A full default cascade fit on a long record: wall time and peak memory.
+
+    python benches/large_fit.py 1e7 1e8
+
+Example 1 driven by uniform |u| < 1, output SNR 25. Each size runs in a fresh process so that
+its peak resident memory (ru_maxrss) is its own; "beyond inputs" subtracts the peak before the
+fit, which already holds u, y and the simulation that made y.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+CHILD = r"""
+import resource, sys, time
+import numpy as np
+import backlashid as bid
+
+n = int(float(sys.argv[1]))
+model = bid.example1()
+rng = np.random.default_rng(0)
+u = rng.uniform(-1, 1, n)
+y = model.simulate(u)
+y += np.std(y) / 25 * rng.standard_normal(n)
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+t0 = time.perf_counter()
+result = bid.fit_cascade(u, y)
+seconds = time.perf_counter() - t0
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+err = max(abs(v) for v in result.errors(model).values())
+print(f"{n:>12.0e} {seconds:>9.1f} {result.iterations:>6} {result.refinement_steps:>5} {err:>10.2e} "
+      f"{peak:>9.0f} {peak - before:>9.0f}")
+"""
+
+
+def main() -> None:
+    sizes = sys.argv[1:] or ["1e6", "1e7"]
+    print(f"{'N':>12} {'fit [s]':>9} {'iters':>6} {'LM':>5} {'max err':>10} {'peak MB':>9} {'+fit MB':>9}")
+    for n in sizes:
+        subprocess.run([sys.executable, "-c", CHILD, n], check=True)
+
+
+if __name__ == "__main__":
+    main()
