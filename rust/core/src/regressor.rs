@@ -490,18 +490,74 @@ pub fn arx_regression(
     delay: usize,
     skip: usize,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    check_signal("u", u)?;
-    check_signal("y", y)?;
-    check_same_length(u, y, "y")?;
-    let lag = |s: &[f64], t: usize, k: usize| if k <= t { s[t - k] } else { 0.0 };
-    let mut phi = Vec::with_capacity(u.len() * (na + nb));
-    let mut target = Vec::with_capacity(u.len());
-    for t in skip..u.len() {
-        phi.extend((1..=na).map(|i| lag(u, t, delay + i - 1)));
-        phi.extend((1..=nb).map(|j| -lag(y, t, j)));
-        target.push(y[t]);
-    }
+    let rows = ArxRows::new(u, y, na, nb, delay)?;
+    let start = skip.min(u.len());
+    let mut phi = vec![0.0; (u.len() - start) * rows.cols];
+    let target = (start..u.len())
+        .map(|t| {
+            rows.fill(
+                t,
+                &mut phi[(t - start) * rows.cols..(t - start + 1) * rows.cols],
+            )
+        })
+        .collect();
     Ok((phi, target))
+}
+
+/// The rows of `arx_regression` folded into a triangular factor (no N x (na + nb) matrix).
+pub fn arx_factor(
+    u: &[f64],
+    y: &[f64],
+    na: usize,
+    nb: usize,
+    delay: usize,
+    skip: usize,
+) -> Result<TriangularFactor> {
+    let rows = ArxRows::new(u, y, na, nb, delay)?;
+    let start = skip.min(u.len());
+    Ok(fold_parallel(
+        u.len() - start,
+        rows.cols,
+        default_threads(),
+        |i, row| rows.fill(start + i, row),
+    ))
+}
+
+/// ARX rows [u(t-delay)..u(t-delay-na+1), -y(t-1..t-nb)] with target y(t).
+struct ArxRows<'a> {
+    u: &'a [f64],
+    y: &'a [f64],
+    na: usize,
+    nb: usize,
+    delay: usize,
+    cols: usize,
+}
+
+impl<'a> ArxRows<'a> {
+    fn new(u: &'a [f64], y: &'a [f64], na: usize, nb: usize, delay: usize) -> Result<Self> {
+        check_signal("u", u)?;
+        check_signal("y", y)?;
+        check_same_length(u, y, "y")?;
+        Ok(ArxRows {
+            u,
+            y,
+            na,
+            nb,
+            delay,
+            cols: na + nb,
+        })
+    }
+
+    fn fill(&self, t: usize, row: &mut [f64]) -> f64 {
+        let lag = |s: &[f64], k: usize| if k <= t { s[t - k] } else { 0.0 };
+        for i in 1..=self.na {
+            row[i - 1] = lag(self.u, self.delay + i - 1);
+        }
+        for j in 1..=self.nb {
+            row[self.na + j - 1] = -lag(self.y, j);
+        }
+        self.y[t]
+    }
 }
 
 #[cfg(test)]
@@ -559,6 +615,26 @@ mod tests {
         for (g, w) in ls.theta.iter().zip(want) {
             assert!((g - w).abs() < 1e-9, "{:?}", ls.theta);
         }
+    }
+
+    #[test]
+    fn streamed_arx_equals_the_dense_one() {
+        let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
+        let u = input(5000);
+        let mut x = lin.simulate(&u, &lin.rest_state()).unwrap();
+        for (k, v) in x.iter_mut().enumerate() {
+            *v += 0.01 * ((k * 7919 % 101) as f64 - 50.0) / 50.0; // deterministic "noise"
+        }
+        let (phi, target) = arx_regression(&u, &x, 2, 2, 2, 3).unwrap();
+        let dense = solve(&phi, target.len(), 4, &target, &names(4)).unwrap();
+        let streamed = arx_factor(&u, &x, 2, 2, 2, 3)
+            .unwrap()
+            .solve(&names(4))
+            .unwrap();
+        for (d, s) in dense.theta.iter().zip(&streamed.theta) {
+            assert!((d - s).abs() < 1e-10 * d.abs().max(1.0));
+        }
+        assert!((dense.rss - streamed.rss).abs() < 1e-9 * dense.rss);
     }
 
     #[test]

@@ -502,8 +502,7 @@ fn arx<'py>(
         .chain((1..=nb).map(|j| format!("b{j}")))
         .collect();
     let ls = run(py, || {
-        let (phi, target) = core::regressor::arx_regression(&u, &y, na, nb, delay, skip)?;
-        core::lstsq::solve(&phi, target.len(), na + nb, &target, &names)
+        core::regressor::arx_factor(&u, &y, na, nb, delay, skip)?.solve(&names)
     })?;
     ls_out(py, ls)
 }
