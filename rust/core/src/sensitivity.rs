@@ -54,121 +54,35 @@ impl Layout {
     fn m_r(&self, i: usize) -> usize {
         self.c_r() + i - 1 // i = 2..n
     }
-    fn cols(&self) -> usize {
-        self.linear() + 2 * self.n + 1
-    }
 }
 
-/// x, y and dy/dtheta (row-major, `cols` wide) of the cascade part, with the column layout.
-type Chain = (Vec<f64>, Vec<f64>, Vec<f64>, Layout);
-
-/// x and y of the cascade with dx/dtheta (linear columns) and dy/dtheta (all backlash-model
-/// columns, `cols` wide) in row-major order.
-fn backlash_chain(
-    linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    u: &[f64],
-    cols: usize,
-) -> Result<Chain> {
-    let n = backlash.left().coefficients().len();
-    if backlash.right().coefficients().len() != n {
-        return Err(Error::Model("both branches need the same degree n".into()));
-    }
-    let lay = Layout {
-        na: linear.na(),
-        nb: linear.nb(),
-        n,
-    };
-    let b = linear.b();
-    let nl = lay.linear();
-    let len = u.len();
-    let x = linear.simulate(u, &linear.rest_state())?;
-    let mut dx = vec![0.0; len * nl];
-    let mut y = vec![0.0; len];
-    let mut dy = vec![0.0; len * cols];
-    let mut y_prev = 0.0;
-    for t in 0..len {
-        // dx(t)
-        for k in 0..nl {
-            let mut acc = if k < lay.na {
-                let i = k + 1;
-                if i <= t {
-                    u[t - i]
-                } else {
-                    0.0
-                }
-            } else {
-                let j = k - lay.na + 1;
-                if j <= t {
-                    -x[t - j]
-                } else {
-                    0.0
-                }
-            };
-            for (jj, bj) in b.iter().enumerate() {
-                let lagj = jj + 1;
-                if lagj <= t {
-                    acc -= bj * dx[(t - lagj) * nl + k];
-                }
-            }
-            dx[t * nl + k] = acc;
-        }
-        let yt = backlash.step(x[t], y_prev);
-        let l = backlash.left().value(x[t]);
-        let row = t * cols;
-        if l <= y_prev {
-            let xi1 = x[t] + backlash.c_left();
-            let slope = backlash.left().slope(x[t]);
-            for k in 0..nl {
-                dy[row + k] = slope * dx[t * nl + k];
-            }
-            dy[row + lay.c_l()] = slope;
-            let mut p = xi1;
-            for i in 2..=n {
-                p *= xi1;
-                dy[row + lay.m_l(i)] = p;
-            }
-        } else if backlash.right().value(x[t]) >= y_prev {
-            let xi2 = x[t] - backlash.c_right();
-            let slope = backlash.right().slope(x[t]);
-            for k in 0..nl {
-                dy[row + k] = slope * dx[t * nl + k];
-            }
-            dy[row + lay.c_r()] = -slope;
-            dy[row + lay.m_r1()] = xi2;
-            let mut p = xi2;
-            for i in 2..=n {
-                p *= xi2;
-                dy[row + lay.m_r(i)] = p;
-            }
-        } else if t > 0 {
-            let (prev, this) = dy.split_at_mut(row);
-            this[..cols].copy_from_slice(&prev[row - cols..row]);
-        }
-        y[t] = yt;
-        y_prev = yt;
-    }
-    Ok((x, y, dy, lay))
+/// Jacobian columns of the cascade: a, b, c_L, m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn.
+fn cascade_cols(linear: &LinearBlock, backlash: &GeneralBacklash) -> usize {
+    linear.na() + linear.nb() + 2 * backlash.left().coefficients().len() + 1
 }
 
-/// The cascade output y and d y / d theta.
+/// The cascade output y and d y / d theta (dense: N x p; the fits use `cascade_oe_factor`).
 pub fn cascade_sensitivity(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
     u: &[f64],
 ) -> Result<Sensitivity> {
     check_signal("u", u)?;
-    let cols = linear.na() + linear.nb() + 2 * backlash.left().coefficients().len() + 1;
-    let (_, y, dy, lay) = backlash_chain(linear, backlash, u, cols)?;
-    debug_assert_eq!(lay.cols(), cols);
-    Ok(Sensitivity {
-        output: y,
-        jacobian: dy,
+    let cols = cascade_cols(linear, backlash);
+    let mut out = Sensitivity {
+        output: Vec::with_capacity(u.len()),
+        jacobian: Vec::with_capacity(u.len() * cols),
         cols,
-    })
+    };
+    walk_cascade(linear, backlash, u, |_, yt, row| {
+        out.output.push(yt);
+        out.jacobian.extend_from_slice(row);
+        Ok(())
+    })?;
+    Ok(out)
 }
 
-/// The sandwich output w and d w / d theta.
+/// The sandwich output w and d w / d theta (dense: N x p; the fits use `sandwich_oe_factor`).
 pub fn sandwich_sensitivity(
     input_linear: &LinearBlock,
     backlash: &GeneralBacklash,
@@ -176,55 +90,27 @@ pub fn sandwich_sensitivity(
     u: &[f64],
 ) -> Result<Sensitivity> {
     check_signal("u", u)?;
-    let (r, s) = (output_linear.a(), output_linear.b());
-    let (nr, ns) = (r.len(), s.len());
-    let inner =
-        input_linear.na() + input_linear.nb() + 2 * backlash.left().coefficients().len() + 1;
-    let cols = inner + (nr - 1) + ns;
-    let (_, y, dy, _) = backlash_chain(input_linear, backlash, u, cols)?;
-    let len = u.len();
-    let mut w = vec![0.0; len];
-    let mut dw = vec![0.0; len * cols];
-    for t in 0..len {
-        let row = t * cols;
-        let mut wt = 0.0;
-        for (ii, ri) in r.iter().enumerate() {
-            let i = ii + 1;
-            if i <= t {
-                wt += ri * y[t - i];
-                for k in 0..cols {
-                    dw[row + k] += ri * dy[(t - i) * cols + k];
-                }
-                if i >= 2 {
-                    dw[row + inner + i - 2] += y[t - i];
-                }
-            }
-        }
-        for (jj, sj) in s.iter().enumerate() {
-            let j = jj + 1;
-            if j <= t {
-                wt -= sj * w[t - j];
-                for k in 0..cols {
-                    dw[row + k] -= sj * dw[(t - j) * cols + k];
-                }
-                dw[row + inner + nr - 1 + jj] -= w[t - j];
-            }
-        }
-        w[t] = wt;
-    }
-    crate::linear::check_no_overflow(output_linear, &w, "w")?;
-    Ok(Sensitivity {
-        output: w,
-        jacobian: dw,
+    let cols = cascade_cols(input_linear, backlash)
+        + output_linear.na().saturating_sub(1)
+        + output_linear.nb();
+    let mut out = Sensitivity {
+        output: Vec::with_capacity(u.len()),
+        jacobian: Vec::with_capacity(u.len() * cols),
         cols,
-    })
+    };
+    walk_sandwich(input_linear, backlash, output_linear, u, |_, wt, row| {
+        out.output.push(wt);
+        out.jacobian.extend_from_slice(row);
+        Ok(())
+    })?;
+    Ok(out)
 }
 
 // ---- streaming: the output-error factor of [J | r] without the N x p Jacobian ----------------
 
 /// The cascade chain run one sample at a time: x(t), y(t), dx(t) (last nb + 1 rows kept) and
-/// dy(t) (`cols` wide; the columns after the backlash model's stay zero), the same arithmetic
-/// as `backlash_chain`.
+/// dy(t) (`cols` wide; the columns after the backlash model's stay zero): the recursions of the
+/// module header, used by both the dense Jacobian and the streamed factor.
 struct ChainStepper<'a> {
     linear: &'a LinearBlock,
     backlash: &'a GeneralBacklash,
@@ -390,18 +276,32 @@ pub fn cascade_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, y, "y")?;
-    let cols = linear.na() + linear.nb() + 2 * backlash.left().coefficients().len() + 1;
-    let mut chain = ChainStepper::new(linear, backlash, u, cols)?;
-    debug_assert_eq!(chain.lay.cols(), cols);
-    finish(fold_stream(cols, threads, |sink| {
-        for (t, &measured) in y.iter().enumerate() {
-            let yt = chain.step(t)?;
-            if t >= warmup {
-                sink.push(&chain.dy, measured - yt)?;
-            }
-        }
-        Ok(())
-    }))
+    finish(fold_stream(
+        cascade_cols(linear, backlash),
+        threads,
+        |sink| {
+            walk_cascade(linear, backlash, u, |t, yt, row| match t >= warmup {
+                true => sink.push(row, y[t] - yt),
+                false => Ok(()),
+            })
+        },
+    ))
+}
+
+/// The cascade's output y(t) and Jacobian row dy(t), handed to `visit(t, y(t), dy(t))` for
+/// t = 0, 1, ... (the one place the cascade's sensitivity recursions run).
+fn walk_cascade(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    mut visit: impl FnMut(usize, f64, &[f64]) -> Result<()>,
+) -> Result<()> {
+    let mut chain = ChainStepper::new(linear, backlash, u, cascade_cols(linear, backlash))?;
+    for t in 0..u.len() {
+        let yt = chain.step(t)?;
+        visit(t, yt, &chain.dy)?;
+    }
+    Ok(())
 }
 
 /// The output-error least-squares problem of the sandwich in factored form: R_aug of
@@ -439,10 +339,35 @@ pub fn sandwich_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, w, "w")?;
+    let cols = cascade_cols(input_linear, backlash)
+        + output_linear.na().saturating_sub(1)
+        + output_linear.nb();
+    finish(fold_stream(cols, threads, |sink| {
+        walk_sandwich(
+            input_linear,
+            backlash,
+            output_linear,
+            u,
+            |t, wt, row| match t >= warmup {
+                true => sink.push(row, w[t] - wt),
+                false => Ok(()),
+            },
+        )
+    }))
+}
+
+/// The sandwich's output w(t) and Jacobian row dw(t), handed to `visit(t, w(t), dw(t))` for
+/// t = 0, 1, ...; y, dy, w, dw are kept in rings of nr + 1 and ns + 1 samples.
+fn walk_sandwich(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    mut visit: impl FnMut(usize, f64, &[f64]) -> Result<()>,
+) -> Result<()> {
     let (r, s) = (output_linear.a(), output_linear.b());
     let (nr, ns) = (r.len(), s.len());
-    let inner =
-        input_linear.na() + input_linear.nb() + 2 * backlash.left().coefficients().len() + 1;
+    let inner = cascade_cols(input_linear, backlash);
     let cols = inner + nr.saturating_sub(1) + ns;
     let mut chain = ChainStepper::new(input_linear, backlash, u, cols)?;
     // rings: y(t), dy(t) over nr + 1 samples, w(t), dw(t) over ns + 1
@@ -451,59 +376,55 @@ pub fn sandwich_oe_factor_threads(
     let mut dy_ring = vec![0.0; ry * cols];
     let mut w_ring = vec![0.0; rw];
     let mut dw_ring = vec![0.0; rw * cols];
-    finish(fold_stream(cols, threads, |sink| {
-        for (t, &measured) in w.iter().enumerate() {
-            let yt = chain.step(t)?;
-            let cy = t % ry;
-            y_ring[cy] = yt;
-            dy_ring[cy * cols..(cy + 1) * cols].copy_from_slice(&chain.dy);
-            let cw = t % rw;
-            let (before, rest) = dw_ring.split_at_mut(cw * cols);
-            let (dw, after) = rest.split_at_mut(cols);
-            dw.fill(0.0);
-            let mut wt = 0.0;
-            for (ii, ri) in r.iter().enumerate() {
-                let i = ii + 1;
-                if i <= t {
-                    let k = (t - i) % ry;
-                    let y_lag = y_ring[k];
-                    wt += ri * y_lag;
-                    let dy_lag = &dy_ring[k * cols..(k + 1) * cols];
-                    for (d, v) in dw.iter_mut().zip(dy_lag) {
-                        *d += ri * v;
-                    }
-                    if i >= 2 {
-                        dw[inner + i - 2] += y_lag;
-                    }
+    for t in 0..u.len() {
+        let yt = chain.step(t)?;
+        let cy = t % ry;
+        y_ring[cy] = yt;
+        dy_ring[cy * cols..(cy + 1) * cols].copy_from_slice(&chain.dy);
+        let cw = t % rw;
+        let (before, rest) = dw_ring.split_at_mut(cw * cols);
+        let (dw, after) = rest.split_at_mut(cols);
+        dw.fill(0.0);
+        let mut wt = 0.0;
+        for (ii, ri) in r.iter().enumerate() {
+            let i = ii + 1;
+            if i <= t {
+                let k = (t - i) % ry;
+                let y_lag = y_ring[k];
+                wt += ri * y_lag;
+                let dy_lag = &dy_ring[k * cols..(k + 1) * cols];
+                for (d, v) in dw.iter_mut().zip(dy_lag) {
+                    *d += ri * v;
                 }
-            }
-            for (jj, sj) in s.iter().enumerate() {
-                let j = jj + 1;
-                if j <= t {
-                    let k = (t - j) % rw;
-                    let w_lag = w_ring[k];
-                    wt -= sj * w_lag;
-                    let dw_lag = if k < cw {
-                        &before[k * cols..(k + 1) * cols]
-                    } else {
-                        &after[(k - cw - 1) * cols..(k - cw) * cols]
-                    };
-                    for (d, v) in dw.iter_mut().zip(dw_lag) {
-                        *d -= sj * v;
-                    }
-                    dw[inner + nr - 1 + jj] -= w_lag;
+                if i >= 2 {
+                    dw[inner + i - 2] += y_lag;
                 }
-            }
-            if !wt.is_finite() {
-                return Err(crate::linear::overflow(output_linear, "w", t));
-            }
-            w_ring[cw] = wt;
-            if t >= warmup {
-                sink.push(dw, measured - wt)?;
             }
         }
-        Ok(())
-    }))
+        for (jj, sj) in s.iter().enumerate() {
+            let j = jj + 1;
+            if j <= t {
+                let k = (t - j) % rw;
+                let w_lag = w_ring[k];
+                wt -= sj * w_lag;
+                let dw_lag = if k < cw {
+                    &before[k * cols..(k + 1) * cols]
+                } else {
+                    &after[(k - cw - 1) * cols..(k - cw) * cols]
+                };
+                for (d, v) in dw.iter_mut().zip(dw_lag) {
+                    *d -= sj * v;
+                }
+                dw[inner + nr - 1 + jj] -= w_lag;
+            }
+        }
+        if !wt.is_finite() {
+            return Err(crate::linear::overflow(output_linear, "w", t));
+        }
+        w_ring[cw] = wt;
+        visit(t, wt, dw)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
