@@ -81,20 +81,7 @@ impl GeneralBacklash {
                 )));
             }
         }
-        check_coefficients("m_L", &m_left, false)?;
-        check_coefficients("m_R", &m_right, false)?;
-        let bl = GeneralBacklash {
-            c_left,
-            c_right,
-            left: Branch {
-                shift: c_left,
-                m: m_left,
-            },
-            right: Branch {
-                shift: -c_right,
-                m: m_right,
-            },
-        };
+        let bl = Self::from_estimate(c_left, c_right, m_left, m_right)?;
         let check = bl.check_branches(-c_left, c_right);
         for (name, branch, bad) in [
             ("L", &bl.left, &check.left_not_increasing),
