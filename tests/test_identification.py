@@ -246,3 +246,15 @@ def test_paper_command_reproduces_example1_and_writes_its_figures(tmp_path):
     names = sorted(p.name for p in tmp_path.glob("*.png"))
     assert names == ["example1_fig4_characteristic.png", "example1_fig5_linear.png", "example1_fig6_backlash.png"]
     assert all(p.stat().st_size > 10_000 for p in tmp_path.glob("*.png"))
+
+
+def test_high_branch_degree_keeps_a_valid_model_and_the_fit():
+    # degree 13 for a cubic truth: the extra powers must not cost the fit its validity
+    truth = bid.example1()
+    d = bid.example_data(truth, 5000, snr=25, seed=0)
+    cubic = fit_cascade(d.u, d.noisy)
+    high = fit_cascade(d.u, d.noisy, degree=13)
+    assert high.model.backlash.degree == 13 and high.model.linear.is_stable()
+    assert high.simulation_rmse <= cubic.simulation_rmse * 1.001
+    for name in ("a1", "a2", "b1", "b2", "c_L", "c_R", "m_R1"):
+        assert abs(high.parameters[name] - cubic.parameters[name]) < 0.01, name

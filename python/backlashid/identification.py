@@ -19,7 +19,7 @@ from . import _core
 from ._convert import as_signal
 from .errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from .models import CascadeModel, SandwichModel
-from .refine import refine_output_error, simulate, spectral_radius
+from .refine import is_stable, refine_output_error, simulate, spectral_radius
 from .structure import Model, Structure
 
 __all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
@@ -239,6 +239,17 @@ def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], s
     return run
 
 
+def _is_valid(structure: Structure, theta: NDArray[np.float64]) -> bool:
+    """Stable blocks and branches that increase across the dead band (a model can be built)."""
+    if not is_stable(structure, theta):
+        return False
+    try:
+        structure.model(theta)
+    except ModelError:
+        return False
+    return True
+
+
 def _ls_covariance(structure: Structure, last_ls: tuple[NDArray[np.float64], float, NDArray[np.float64], int]) -> NDArray[np.float64]:
     """Covariance of the physical vector from the last least-squares step, with the delta
     method for c_R = c_2 / m_R1."""
@@ -339,7 +350,9 @@ def _fit(
                 except BacklashIdError:
                     continue
         if candidates:
-            refined = min(candidates, key=lambda c: c.cost)
+            # The cheapest candidate that is a valid model (increasing branches, stable blocks);
+            # an invalid one only when no candidate is valid (it is then reported as such).
+            refined = min(candidates, key=lambda c: (not _is_valid(structure, c.theta), c.cost))
             # The simulation error is piecewise smooth: LM can stop at a kink or in a shallow
             # local minimum. Restarts from seeded perturbations keep a result only if cheaper.
             rng = np.random.default_rng(seed)
@@ -351,7 +364,10 @@ def _fit(
                     trial = refine_output_error(structure, u_arr, y_arr, start, warmup=warmup)
                 except BacklashIdError:
                     continue
-                if trial.cost < refined.cost:
+                if (not _is_valid(structure, trial.theta), trial.cost) < (
+                    not _is_valid(structure, refined.theta),
+                    refined.cost,
+                ):
                     refined = trial
             theta, steps = refined.theta, refined.iterations
     rmse = _rmse(structure, theta, u_arr, y_arr, warmup)
