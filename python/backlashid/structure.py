@@ -115,7 +115,8 @@ class Structure:
         model = normalise(model)
         lin = model.input_linear if isinstance(model, SandwichModel) else model.linear
         bl = model.backlash
-        if (lin.na, lin.nb, bl.degree) != (self.na, self.nb, self.degree):
+        # a lower branch degree embeds exactly (the higher coefficients are zero)
+        if (lin.na, lin.nb) != (self.na, self.nb) or bl.degree > self.degree:
             raise DataError(f"the model has orders ({lin.na}, {lin.nb}) and degree {bl.degree}, not {self}")
         n = self.degree
         m_l = np.zeros(n)
@@ -124,6 +125,9 @@ class Structure:
         m_r[: len(bl.m_right)] = bl.m_right
         parts = [lin.a, lin.b, [bl.c_left], m_l[1:], [m_r[0], bl.c_right], m_r[1:]]
         if isinstance(model, SandwichModel):
+            out = model.output_linear
+            if (out.na, out.nb) != (self.nr, self.ns):
+                raise DataError(f"the model's output block has orders ({out.na}, {out.nb}), not nr={self.nr}, ns={self.ns}")
             parts += [model.r[1:], model.s]
         return np.concatenate([np.asarray(p, dtype=np.float64) for p in parts])
 
