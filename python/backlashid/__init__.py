@@ -19,6 +19,7 @@ from .errors import BacklashIdError, DataError, ModelError, NotConvergedError, N
 from .examples import ExampleData, example1, example2, example_data
 from .identification import FitResult, fit_cascade, fit_sandwich
 from .linear import LinearBlock
+from .metrics import Metrics, evaluate
 from .models import (
     CascadeModel,
     CascadeSimulation,
@@ -42,6 +43,7 @@ __all__ = [
     "FitResult",
     "GeneralBacklash",
     "LinearBlock",
+    "Metrics",
     "ModelError",
     "NotConvergedError",
     "NotIdentifiableError",
@@ -52,6 +54,7 @@ __all__ = [
     "__version__",
     "example1",
     "example2",
+    "evaluate",
     "example_data",
     "fit_cascade",
     "fit_many",
