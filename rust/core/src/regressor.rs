@@ -10,7 +10,7 @@ use crate::backlash::GeneralBacklash;
 use crate::error::{Error, Result};
 use crate::linear::LinearBlock;
 use crate::lstsq::{solve, LeastSquares};
-use crate::signal::check_signal;
+use crate::signal::{check_same_length, check_signal};
 use crate::streaming::{default_threads, fold_parallel, TriangularFactor};
 use crate::switching::switching;
 
@@ -79,17 +79,6 @@ pub fn solve_factor(
     factor
         .solve(names)
         .map_err(|e| with_moving_fraction(e, moving_fraction))
-}
-
-fn check_same_length(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
-    if u.len() != y.len() {
-        return Err(Error::Data(format!(
-            "u has {} samples but {y_name} has {}: give input and output of the same record",
-            u.len(),
-            y.len()
-        )));
-    }
-    Ok(())
 }
 
 /// Degree n of an estimate (both branches have n coefficients in the regressions).

@@ -11,7 +11,7 @@
 use crate::backlash::GeneralBacklash;
 use crate::error::{Error, Result};
 use crate::linear::LinearBlock;
-use crate::signal::check_signal;
+use crate::signal::{check_same_length, check_signal};
 use crate::streaming::{default_threads, fold_stream, TriangularFactor};
 
 /// Threads of the default output-error factors: the recursion, plus one folding thread when
@@ -241,14 +241,7 @@ fn finish(folded: Result<(TriangularFactor, f64)>) -> Result<(TriangularFactor, 
 fn check_pair(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
     check_signal("u", u)?;
     check_signal(y_name, y)?;
-    if u.len() != y.len() {
-        return Err(Error::Data(format!(
-            "u has {} samples but {y_name} has {}: give input and output of the same record",
-            u.len(),
-            y.len()
-        )));
-    }
-    Ok(())
+    check_same_length(u, y, y_name)
 }
 
 /// The output-error least-squares problem of the cascade in factored form: R_aug of

@@ -38,3 +38,15 @@ pub fn check_coefficients(name: &str, values: &[f64], allow_empty: bool) -> Resu
     }
     Ok(())
 }
+
+/// Input and output of one record must have the same length.
+pub(crate) fn check_same_length(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
+    if u.len() != y.len() {
+        return Err(Error::Data(format!(
+            "u has {} samples but {y_name} has {}: give input and output of the same record",
+            u.len(),
+            y.len()
+        )));
+    }
+    Ok(())
+}
