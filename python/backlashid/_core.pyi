@@ -53,17 +53,10 @@ def sandwich_iteration(
     a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
     r: list[float], s: list[float], u: _F, w: _F, skip: int, names: list[str],
 ) -> tuple[_LS, float]: ...  # (ls, moving_fraction)
-def cascade_sensitivity(
-    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float], u: _F,
-) -> tuple[_F, NDArray[np.float64]]: ...
-def sandwich_sensitivity(
-    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
-    r: list[float], s: list[float], u: _F,
-) -> tuple[_F, NDArray[np.float64]]: ...
 
 # Output-error problem in factored form, streamed (no N x p Jacobian): (R_aug, cost) with
 # R_aug ((p+1) x (p+1), upper triangular) satisfying R_aug^T R_aug = [J | r]^T [J | r] over
-# t >= warmup, J = d output / d theta (the columns of *_sensitivity), r = measured - simulated,
+# t >= warmup, J = d output / d theta (the columns of the core's sensitivity functions), r = measured - simulated,
 # cost = sum r^2.
 def cascade_oe_factor(
     a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],

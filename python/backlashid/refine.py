@@ -48,16 +48,6 @@ def simulate(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.flo
     return _core.simulate_estimate(*p.chain(), p.r, p.s, u)
 
 
-def sensitivity(
-    structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Output and dense Jacobian (samples x parameters): for checks and small records."""
-    p = structure.unpack(theta)
-    if structure.is_sandwich:
-        return _core.sandwich_sensitivity(*p.chain(), p.r, p.s, u)
-    return _core.cascade_sensitivity(*p.chain(), u)
-
-
 def oe_factor(
     structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int
 ) -> tuple[NDArray[np.float64], float]:

@@ -507,60 +507,6 @@ fn arx<'py>(
     ls_out(py, ls)
 }
 
-fn sensitivity_out<'py>(
-    py: Python<'py>,
-    sens: core::sensitivity::Sensitivity,
-) -> PyResult<(SignalOut<'py>, Bound<'py, PyArray2<f64>>)> {
-    let rows = sens.output.len();
-    let jac = sens.jacobian.into_pyarray(py).reshape([rows, sens.cols])?;
-    Ok((vec_f64(py, sens.output), jac))
-}
-
-/// Cascade output y and its Jacobian (samples x parameters) for the output-error fit.
-#[pyfunction]
-#[allow(clippy::too_many_arguments, clippy::type_complexity)]
-fn cascade_sensitivity<'py>(
-    py: Python<'py>,
-    a: Vec<f64>,
-    b: Vec<f64>,
-    c_left: f64,
-    c_right: f64,
-    m_left: Vec<f64>,
-    m_right: Vec<f64>,
-    u: PyReadonlyArrayDyn<'py, f64>,
-) -> PyResult<(SignalOut<'py>, Bound<'py, PyArray2<f64>>)> {
-    let u = signal(py, "u", &u)?;
-    let sens = run(py, || {
-        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
-        core::sensitivity::cascade_sensitivity(&lin, &bl, &u)
-    })?;
-    sensitivity_out(py, sens)
-}
-
-/// Sandwich output w and its Jacobian (samples x parameters) for the output-error fit.
-#[pyfunction]
-#[allow(clippy::too_many_arguments, clippy::type_complexity)]
-fn sandwich_sensitivity<'py>(
-    py: Python<'py>,
-    a: Vec<f64>,
-    b: Vec<f64>,
-    c_left: f64,
-    c_right: f64,
-    m_left: Vec<f64>,
-    m_right: Vec<f64>,
-    r: Vec<f64>,
-    s: Vec<f64>,
-    u: PyReadonlyArrayDyn<'py, f64>,
-) -> PyResult<(SignalOut<'py>, Bound<'py, PyArray2<f64>>)> {
-    let u = signal(py, "u", &u)?;
-    let sens = run(py, || {
-        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
-        let out = core::LinearBlock::new(r, s)?;
-        core::sensitivity::sandwich_sensitivity(&lin, &bl, &out, &u)
-    })?;
-    sensitivity_out(py, sens)
-}
-
 type FactorOut<'py> = (Bound<'py, PyArray2<f64>>, f64);
 
 fn factor_out<'py>(
@@ -667,8 +613,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(arx, m)?)?;
     m.add_function(wrap_pyfunction!(cascade_iteration, m)?)?;
     m.add_function(wrap_pyfunction!(sandwich_iteration, m)?)?;
-    m.add_function(wrap_pyfunction!(cascade_sensitivity, m)?)?;
-    m.add_function(wrap_pyfunction!(sandwich_sensitivity, m)?)?;
     m.add_function(wrap_pyfunction!(cascade_oe_factor, m)?)?;
     m.add_function(wrap_pyfunction!(sandwich_oe_factor, m)?)?;
     Ok(())
