@@ -248,6 +248,7 @@ def _shift_test(mask: NDArray[np.bool_], e2: NDArray[np.float64]) -> tuple[float
 
 
 def _simulate(model: Any, u: NDArray[np.float64], initial_state: Any) -> tuple[Any, float]:
+    state: CascadeState | SandwichState
     if isinstance(model, CascadeModel):
         if initial_state is not None and not isinstance(initial_state, CascadeState):
             raise DataError(f"initial_state must be a CascadeState for a CascadeModel, got {type(initial_state).__name__}")

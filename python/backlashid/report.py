@@ -92,7 +92,7 @@ class Candidate:
         return bool(self.gap_closed >= CLOSES_HALF and self.p_value < 0.05)
 
     def to_dict(self) -> dict[str, Any]:
-        return jsonable(
+        out: dict[str, Any] = jsonable(
             {
                 "effect": self.effect,
                 "gap_closed": self.gap_closed,
@@ -106,6 +106,7 @@ class Candidate:
                 "model": _model_dict(self.model),
             }
         )
+        return out
 
 
 @dataclass
@@ -248,7 +249,7 @@ class DiagnosisReport:
         """JSON-safe (``json.dumps`` works): scalars, the candidates and the analyses; the
         signals are left out."""
         best = self.best
-        return jsonable(
+        out: dict[str, Any] = jsonable(
             {
                 "best_effect": self.best_effect,
                 "best_gap_closed": best.gap_closed if best else None,
@@ -267,6 +268,7 @@ class DiagnosisReport:
                 "drift": self.drift.to_dict() if self.drift is not None else None,
             }
         )
+        return out
 
     # ------------------------------------------------------------------ figure
     def plot(self, path: Any = None, **kw: Any) -> Any:
@@ -297,7 +299,7 @@ class DiagnosisReport:
 
             fig = _pyplot().figure(figsize=figsize, dpi=dpi)
         gs = fig.add_gridspec(
-            4, 2, height_ratios=[1.1, 1.0, 1.0, 1.0], hspace=0.45, wspace=0.22, top=0.94, bottom=0.04, left=0.07, right=0.98
+            4, 2, height_ratios=[1.1, 1.0, 1.0, 1.0], hspace=0.45, wspace=0.22, top=0.94, bottom=0.04, left=0.13, right=0.98
         )
         self._plot_signals(fig.add_subplot(gs[0, :]))
         self._plot_error(fig.add_subplot(gs[1, :]))
