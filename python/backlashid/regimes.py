@@ -72,6 +72,8 @@ class RegimeShare:
     p_value: float  # circular-shift test, two-sided, this regime alone
     p_adjusted: float  # Holm-adjusted over the regimes
     alpha: float
+    z: float = float("nan")  # MSE difference in standard deviations of its shift distribution
+
 
     @property
     def ratio(self) -> float:
@@ -99,6 +101,7 @@ class RegimeShare:
             "mse_rest": json_float(self.mse_rest),
             "p_value": json_float(self.p_value),
             "p_adjusted": json_float(self.p_adjusted),
+            "z": json_float(self.z),
             "significant": self.significant,
             "excess": self.excess,
         }
@@ -129,8 +132,8 @@ class RegimeShares:
 
     @property
     def concentrated(self) -> tuple[str, ...]:
-        """Regimes with significantly more error than elsewhere, largest ratio first."""
-        hits = sorted((r for r in self.regimes if r.excess), key=lambda r: -r.ratio)
+        """Regimes with significantly more error than elsewhere, strongest (largest z) first."""
+        hits = sorted((r for r in self.regimes if r.excess), key=lambda r: -r.z)
         return tuple(r.name for r in hits)
 
     def labels(self) -> NDArray[np.int8]:
@@ -159,7 +162,7 @@ class RegimeShares:
             mark = " <- excess" if r.excess else (" (less)" if r.significant else "")
             lines.append(
                 f"  {r.name:16s} samples {100 * r.sample_share:5.1f} %  error {100 * r.energy_share:5.1f} %  "
-                f"x{r.ratio:5.2f}  p = {r.p_value:.2g}{mark}"
+                f"x{r.ratio:5.2f}  z {r.z:5.1f}  p = {r.p_value:.2g}{mark}"
             )
         return "\n".join(lines)
 
@@ -224,14 +227,16 @@ def regime_masks(
     return {name: m & evaluated for name, m in masks.items()}, k
 
 
-def _shift_test(mask: NDArray[np.bool_], e2: NDArray[np.float64]) -> tuple[float, float, float]:
-    """(mse in, mse out, two-sided circular-shift p-value) of e2 over the mask."""
+def _shift_test(mask: NDArray[np.bool_], e2: NDArray[np.float64]) -> tuple[float, float, float, float]:
+    """(mse in, mse out, two-sided circular-shift p-value, z) of e2 over the mask; z is the
+    observed MSE difference in standard deviations of its shift distribution (it still
+    orders regimes whose p-values all sit at the resolution 1 / (shifts + 1))."""
     n = e2.size
     n_in = int(mask.sum())
     total = float(e2.sum())
     if n_in == 0 or n_in == n:
         inside = float(e2[mask].mean()) if n_in else float("nan")
-        return inside, float("nan") if n_in == n else float(e2.mean()), float("nan")
+        return inside, float("nan") if n_in == n else float(e2.mean()), float("nan"), float("nan")
     m = mask.astype(np.float64)
     # c[s] = sum_t m(t) e2(t + s) for every circular shift s, by FFT
     c = np.fft.irfft(np.conj(np.fft.rfft(m)) * np.fft.rfft(e2), n)
@@ -240,11 +245,13 @@ def _shift_test(mask: NDArray[np.bool_], e2: NDArray[np.float64]) -> tuple[float
     min_shift = max(MIN_SHIFT, int(MIN_SHIFT_FRACTION * n))
     shifts = np.arange(min_shift, n - min_shift + 1)
     if shifts.size < 20:
-        return float(c[0] / n_in), float((total - c[0]) / (n - n_in)), float("nan")
-    null = np.abs(diff[shifts])
+        return float(c[0] / n_in), float((total - c[0]) / (n - n_in)), float("nan"), float("nan")
+    null = diff[shifts]
     tol = 1e-12 * max(abs(observed), total / n)
-    p = (1.0 + np.count_nonzero(null >= abs(observed) - tol)) / (1.0 + shifts.size)
-    return float(c[0] / n_in), float((total - c[0]) / (n - n_in)), float(p)
+    p = (1.0 + np.count_nonzero(np.abs(null) >= abs(observed) - tol)) / (1.0 + shifts.size)
+    spread = float(null.std())
+    z = (observed - float(null.mean())) / spread if spread > 0 else float("nan")
+    return float(c[0] / n_in), float((total - c[0]) / (n - n_in)), float(p), float(z)
 
 
 def _simulate(model: Any, u: NDArray[np.float64], initial_state: Any) -> tuple[Any, float]:
@@ -290,8 +297,8 @@ def regime_shares(
     raw = []
     for name in REGIMES:
         m = masks[name][warmup:]
-        mse_in, mse_out, p = _shift_test(m, e2)
-        raw.append((name, int(m.sum()), float(e2[m].sum()), mse_in, mse_out, p))
+        mse_in, mse_out, p, z = _shift_test(m, e2)
+        raw.append((name, int(m.sum()), float(e2[m].sum()), mse_in, mse_out, p, z))
     adjusted = holm([r[5] for r in raw])
     shares = tuple(
         RegimeShare(
@@ -305,7 +312,8 @@ def regime_shares(
             p_value=p,
             p_adjusted=float(p_adj),
             alpha=ALPHA,
+            z=z,
         )
-        for (name, count, energy, mse_in, mse_out, p), p_adj in zip(raw, adjusted)
+        for (name, count, energy, mse_in, mse_out, p, z), p_adj in zip(raw, adjusted)
     )
     return RegimeShares(regimes=shares, n=n, warmup=warmup, total_mse=total / n, window=k, masks=masks)

@@ -185,7 +185,7 @@ class DiagnosisReport:
             if hits:
                 parts = [
                     f"{h.name} ({_pct(h.energy_share).strip()} of the error on {_pct(h.sample_share).strip()} "
-                    f"of the samples, x{h.ratio:.2f}, p {h.p_adjusted:.1e})"
+                    f"of the samples, x{h.ratio:.2f}, z {h.z:.1f}, p {h.p_adjusted:.1e})"
                     for h in hits[:3]
                 ]
                 lines.append("  regimes with more error: " + "; ".join(parts))
