@@ -27,8 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
-from .errors import DataError
-from .residual_tests import checked_record, json_float
+from .residual_tests import checked_record, json_float, snap_constant
 
 __all__ = ["ChangePoint", "TimeAnalysis", "time_analysis"]
 
@@ -165,8 +164,9 @@ def long_run_variance(d: NDArray[np.float64]) -> float:
     return lrv / (1.0 - rho) ** 2
 
 
-def _cusum_split(z: NDArray[np.float64], min_segment: int) -> tuple[int, float]:
-    """(candidate split k, p-value) of one segment."""
+def _cusum_split(z: NDArray[np.float64], min_segment: int, scale: float) -> tuple[int, float]:
+    """(candidate split k, p-value) of one segment; variation below 1e-12 ``scale`` (the
+    size of the series' values) is rounding, not a change."""
     n = z.size
     zc = z - z.mean()
     s = np.cumsum(zc)[:-1]  # S_k for k = 1..n-1 (split before sample k)
@@ -177,20 +177,20 @@ def _cusum_split(z: NDArray[np.float64], min_segment: int) -> tuple[int, float]:
     k = int(ks[allowed][np.argmax(np.abs(s[allowed]))])
     fit = np.r_[np.full(k, z[:k].mean()), np.full(n - k, z[k:].mean())]
     lrv = long_run_variance(z - fit)
-    if lrv <= 0.0:
-        return k, 0.0 if np.ptp(fit) > 0 else 1.0
+    if lrv <= (1e-12 * scale) ** 2:
+        return k, 0.0 if np.ptp(fit) > 1e-12 * scale else 1.0
     stat = abs(s[k - 1]) / np.sqrt(lrv * n)
     return k, float(stats.kstwobign.sf(stat))
 
 
-def _binary_segmentation(z: NDArray[np.float64], min_segment: int) -> list[tuple[int, float]]:
+def _binary_segmentation(z: NDArray[np.float64], min_segment: int, scale: float) -> list[tuple[int, float]]:
     found: list[tuple[int, float]] = []
     stack = [(0, z.size)]
     while stack and len(found) < MAX_CHANGES:
         a, b = stack.pop()
         if b - a < 2 * min_segment:
             continue
-        k, p = _cusum_split(z[a:b], min_segment)
+        k, p = _cusum_split(z[a:b], min_segment, scale)
         if k > 0 and p < LEVEL:
             found.append((a + k, p))
             stack += [(a, a + k), (a + k, b)]
@@ -204,11 +204,9 @@ def _segment_values(e: NDArray[np.float64], cuts: list[int]) -> list[NDArray[np.
 
 def time_analysis(residual: ArrayLike) -> TimeAnalysis:
     """Trends and change points of ``residual`` over its record (pass the samples after the
-    warm-up)."""
-    e = checked_record(residual, "residual", min_length=MIN_SAMPLES, what="a drift analysis")
+    warm-up). A constant residual has no drift and no change point."""
+    e = snap_constant(checked_record(residual, "residual", min_length=MIN_SAMPLES, what="a drift analysis"))
     n = e.size
-    if np.ptp(e) == 0.0:
-        raise DataError("the residual is constant: there is no drift to analyse")
     min_segment = max(30, n // 50)
 
     blocks = np.array_split(np.arange(n), block_count(n))
@@ -224,14 +222,15 @@ def time_analysis(residual: ArrayLike) -> TimeAnalysis:
         rms_ratio, rms_p = float("nan"), 1.0
 
     changes: list[ChangePoint] = []
-    mean_cuts = _binary_segmentation(e, min_segment)
+    scale = float(np.abs(e).max())
+    mean_cuts = _binary_segmentation(e, min_segment, scale)
     for k, p in mean_cuts:
         prev = max([c for c, _ in mean_cuts if c < k], default=0)
         nxt = min([c for c, _ in mean_cuts if c > k], default=n)
         changes.append(ChangePoint(k, "mean", p, float(e[prev:k].mean()), float(e[k:nxt].mean())))
     segments = _segment_values(e, [k for k, _ in mean_cuts])
     dev = np.concatenate([s - s.mean() for s in segments])
-    var_cuts = _binary_segmentation(dev**2, min_segment)
+    var_cuts = _binary_segmentation(dev**2, min_segment, scale**2)
     for k, p in var_cuts:
         prev = max([c for c, _ in var_cuts if c < k], default=0)
         nxt = min([c for c, _ in var_cuts if c > k], default=n)

@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import DataError
 from .models import CascadeModel, CascadeState, SandwichModel, SandwichState
-from .residual_tests import checked_record, holm, json_float, same_length
+from .residual_tests import checked_record, holm, json_float, same_length, snap_constant
 
 __all__ = ["REGIMES", "RegimeShare", "RegimeShares", "regime_masks", "regime_shares"]
 
@@ -279,7 +279,8 @@ def regime_shares(
 ) -> RegimeShares:
     """Error shares of ``residual`` (measured minus the nominal model's simulation, the whole
     record) by the regimes the nominal ``model`` passes through when driven by ``u`` from
-    ``initial_state``; the first ``warmup`` samples are left out."""
+    ``initial_state``; the first ``warmup`` samples are left out. A zero residual counts as
+    spread over the regimes as the samples are (no regime stands out)."""
     if not isinstance(warmup, (int, np.integer)) or isinstance(warmup, bool) or warmup < 0:
         raise DataError(f"warmup = {warmup!r}: give a non-negative integer number of samples")
     warmup = int(warmup)
@@ -289,10 +290,8 @@ def regime_shares(
     sim, x_before = _simulate(model, u_arr, initial_state)
     evaluated = np.arange(e.size) >= warmup
     masks, k = regime_masks(np.asarray(sim.x), np.asarray(sim.f1), np.asarray(sim.f2), x_before, evaluated)
-    e2 = e[warmup:] ** 2
+    e2 = snap_constant(e[warmup:] ** 2)
     total = float(e2.sum())
-    if total == 0.0:
-        raise DataError("the residual is zero after the warm-up: there is no error to locate")
     n = e2.size
     raw = []
     for name in REGIMES:
@@ -306,7 +305,7 @@ def regime_shares(
             description=_description(name, k),
             n_samples=count,
             sample_share=count / n,
-            energy_share=energy / total,
+            energy_share=energy / total if total > 0 else count / n,  # no error: spread as the samples
             mse=mse_in if count else 0.0,
             mse_rest=mse_out,
             p_value=p,

@@ -13,7 +13,7 @@ noise model), over the samples after the warm-up.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -130,6 +130,7 @@ class DiagnosisReport:
     y_nominal: NDArray[np.float64]
     y_best: NDArray[np.float64]
     elapsed: float  # seconds
+    details: dict[str, Any] = field(default_factory=dict)  # the diagnoser's extra numbers (in to_dict)
 
     # ------------------------------------------------------------------ derived
     @property
@@ -222,7 +223,8 @@ class DiagnosisReport:
             f"excluded, {self.elapsed:.2f} s",
             f"Verdict: {self._verdict()}",
             f"Nominal free-run simulation RMSE {self.nominal_validation_rmse:.4g}; noise std {self.noise_std:.4g} ({src}); "
-            f"gap above the noise floor (MSE) {self.gap:.3g} = {self.gap_ratio:.2f} x noise variance",
+            f"gap above the noise floor (MSE) {self.gap:.3g}"
+            + (f" = {self.gap_ratio:.2f} x noise variance" if math.isfinite(self.gap_ratio) else ""),
         ]
         if self.ranking:
             lines += [
@@ -266,6 +268,7 @@ class DiagnosisReport:
                 "regimes": self.regimes.to_dict() if self.regimes is not None else None,
                 "spectrum": self.spectrum.to_dict() if self.spectrum is not None else None,
                 "drift": self.drift.to_dict() if self.drift is not None else None,
+                "details": self.details,
             }
         )
         return out

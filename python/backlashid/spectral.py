@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import signal, stats
 
 from .errors import DataError
-from .residual_tests import checked_record, holm, json_float, same_length
+from .residual_tests import checked_record, holm, json_float, same_length, snap_constant
 
 __all__ = ["Band", "FrequencyAnalysis", "frequency_analysis"]
 
@@ -79,7 +79,7 @@ class Band:
             "hi": self.hi,
             "n_bins": self.n_bins,
             "power": float(self.power),
-            "ratio": float(self.ratio),
+            "ratio": json_float(self.ratio),
             "ratio_db": json_float(self.ratio_db),
             "energy_share": float(self.energy_share),
             "p_value": float(self.p_value),
@@ -189,8 +189,9 @@ def _effective_segments(n: int, nseg: int) -> float:
 
 def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | None = None) -> FrequencyAnalysis:
     """The residual's spectrum by band against the noise floor and its coherence with the
-    input ``u`` (pass the samples after the warm-up, of one record)."""
-    e = checked_record(residual, "residual", min_length=MIN_SAMPLES, what="a spectrum by band")
+    input ``u`` (pass the samples after the warm-up, of one record). ``noise_std = 0``
+    (noise-free data) puts every band with any power above the floor."""
+    e = snap_constant(checked_record(residual, "residual", min_length=MIN_SAMPLES, what="a spectrum by band"), centre=True)
     u_arr = checked_record(u, "u", min_length=MIN_SAMPLES, what="a spectrum by band")
     same_length(e.size, u=u_arr)
     n = e.size
@@ -199,11 +200,8 @@ def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | 
             s = float(noise_std)
         except (TypeError, ValueError):
             raise DataError(f"noise_std = {noise_std!r}: give a positive number or None to estimate it") from None
-        if not (np.isfinite(s) and s > 0.0):
-            raise DataError(f"noise_std = {noise_std!r}: give a positive finite number, or None to estimate it")
-    e = e - e.mean()
-    if not np.any(e):
-        raise DataError("the residual is constant: there is no spectrum to analyse")
+        if not (np.isfinite(s) and s >= 0.0):
+            raise DataError(f"noise_std = {noise_std!r}: give a non-negative finite number, or None to estimate it")
 
     spectrum = np.abs(np.fft.rfft(e)) ** 2 * (2.0 / n)  # one-sided periodogram density
     freqs = np.arange(spectrum.size) / n
@@ -215,14 +213,13 @@ def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | 
         upper = spectrum[interior & (freqs >= FLOOR_FROM)]
         floor, estimated = float(np.median(upper) / np.log(2.0)), True
         m_floor = max(1, int(0.5 * upper.size))  # the median uses about half the information
-        if floor <= 0.0:
-            raise DataError("the residual has no power above f = 0.25: give noise_std to set the floor")
     total = float(spectrum[interior].sum())
 
     nseg = int(min(MAX_SEGMENT, 2 ** int(np.floor(np.log2(n / 8)))))
     nseg = max(nseg, 16)
     f_w, psd = signal.welch(e, nperseg=nseg)
-    _, coh = signal.coherence(e, u_arr - u_arr.mean(), nperseg=nseg)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a zero residual has no coherence (NaN)
+        _, coh = signal.coherence(e, u_arr - u_arr.mean(), nperseg=nseg)
     k_eff = _effective_segments(n, nseg)
     coh_bins = (f_w > 0.0) & (f_w < 0.5)
     n_coh = int(coh_bins.sum())
@@ -235,16 +232,21 @@ def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | 
         in_band = interior & (freqs >= lo) & (freqs < hi)
         m = int(in_band.sum())
         power = float(spectrum[in_band].mean()) if m else float("nan")
-        ratio = power / floor
+        if floor > 0.0:
+            ratio = power / floor
+        else:  # noise-free: any power is above the floor
+            ratio = float("inf") if power > 0.0 else 1.0
         if m == 0:
             p = float("nan")
+        elif floor == 0.0:
+            p = 0.0 if power > 0.0 else 1.0
         elif estimated:
             p = float(stats.f.sf(ratio, 2 * m, 2 * m_floor))
         else:
             p = float(stats.chi2.sf(2 * m * ratio, 2 * m))
         share = float(spectrum[in_band].sum() / total) if total > 0 else 0.0
         c_band = coh_bins & (f_w >= lo) & (f_w < hi)
-        if c_band.any():
+        if c_band.any() and np.isfinite(coh[c_band]).all():
             c_max = float(coh[c_band].max())
             p_bin = (1.0 - min(c_max, 1.0)) ** max(k_eff - 1.0, 1.0)
             c_p = float(min(1.0, p_bin * int(c_band.sum())))
