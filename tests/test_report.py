@@ -79,6 +79,9 @@ def test_summary_verdicts_none_and_unexplained(report):
     unexplained = dataclasses.replace(report, best_effect="unexplained")
     text = unexplained.summary()
     assert "Verdict: unexplained" in text and "branch_degree, closes 91 %" in text
+    # a gap near zero makes shares huge: they are shown as bounds, not digits
+    tiny = dataclasses.replace(report.ranking[1], gap_closed=-9.2e5)
+    assert "<-999 %" in dataclasses.replace(report, ranking=[tiny]).summary()
 
 
 def test_to_dict_is_json_safe_and_small(report):

@@ -63,7 +63,11 @@ def _model_dict(model: Any) -> Any:
 
 
 def _pct(v: float) -> str:
-    return f"{100 * v:4.0f} %" if math.isfinite(v) else "  n/a"
+    if not math.isfinite(v):
+        return "  n/a"
+    if abs(v) >= 9.995:  # a tiny gap makes the share meaningless: do not print its digits
+        return ">999 %" if v > 0 else "<-999 %"
+    return f"{100 * v:4.0f} %"
 
 
 def _p(v: float) -> str:
@@ -302,7 +306,7 @@ class DiagnosisReport:
 
             fig = _pyplot().figure(figsize=figsize, dpi=dpi)
         gs = fig.add_gridspec(
-            4, 2, height_ratios=[1.1, 1.0, 1.0, 1.0], hspace=0.45, wspace=0.22, top=0.94, bottom=0.04, left=0.13, right=0.98
+            4, 2, height_ratios=[1.1, 1.0, 1.0, 1.0], hspace=0.45, wspace=0.22, top=0.94, bottom=0.04, left=0.16, right=0.98
         )
         self._plot_signals(fig.add_subplot(gs[0, :]))
         self._plot_error(fig.add_subplot(gs[1, :]))
@@ -345,6 +349,10 @@ class DiagnosisReport:
             ax.scatter(t, err, s=3, lw=0, color="0.35", label="error")
         for sign in (-2.0, 2.0):
             ax.axhline(sign * self.noise_std, color="k", ls="--", lw=0.8)
+        after = err[self.warmup :]
+        if after.size and np.ptp(after) > 0:  # scale to the evaluated samples, not the transient
+            pad = 0.08 * float(np.ptp(after))
+            ax.set_ylim(min(float(after.min()), -2 * self.noise_std) - pad, max(float(after.max()), 2 * self.noise_std) + pad)
         ax.set_title("Nominal model's error (measured - simulated) by backlash state; dashed: +-2 noise std")
         ax.set_xlabel("sample")
         ax.set_ylabel("error")
@@ -400,16 +408,19 @@ class DiagnosisReport:
             return
         ranked = self.ranking[:12]
         pos = np.arange(len(ranked))
-        closed = np.array([c.gap_closed if math.isfinite(c.gap_closed) else 0.0 for c in ranked])
+        raw = np.array([c.gap_closed if math.isfinite(c.gap_closed) else 0.0 for c in ranked])
+        lo, hi = -0.25, 1.1  # a tiny gap gives huge shares either way: show them clipped
+        closed = np.clip(raw, lo, hi)
         colors = ["C2" if c.explains else ("C1" if c.p_value < 0.05 else "0.65") for c in ranked]
         ax.barh(pos, closed, color=colors)
         ax.set_yticks(pos)
-        ax.set_yticklabels([f"{c.effect}{'' if c.signature_removed else ' (sig. remains)'}" for c in ranked], fontsize=8)
+        ax.set_yticklabels([f"{c.effect}{'' if c.signature_removed else ' (sig. remains)'}" for c in ranked], fontsize=7)
         ax.invert_yaxis()
         ax.axvline(CLOSES_HALF, color="k", ls="--", lw=0.8)
         ax.axvline(1.0, color="k", lw=0.8)
         ax.set_xlim(min(0.0, float(closed.min()) - 0.05), max(1.05, float(closed.max()) + 0.05))
-        ax.set_xlabel("share of the gap closed on validation (green: >= half and p < 0.05)")
+        clipped = " (clipped)" if np.any(closed != raw) else ""
+        ax.set_xlabel(f"share of the gap closed on validation{clipped} (green: >= half and p < 0.05)")
         ax.set_title("Candidates, best first")
         ax.grid(alpha=0.3, axis="x")
 
@@ -429,8 +440,8 @@ class DiagnosisReport:
         t = np.arange(n)[sl]
         ax.plot(t, y[sl], color="0.45", lw=1.0, label="measured")
         ax.plot(t, nominal[sl], color="C0", lw=1.0, label="nominal")
-        name = self.best.effect if self.best is not None else self.best_effect
-        if self.y_best is not None and np.asarray(self.y_best).size == n:
+        if self.best is not None and self.y_best is not None and np.asarray(self.y_best).size == n:
+            name = self.best.effect
             best = np.asarray(self.y_best)
             rmse_b = float(np.sqrt(np.mean((y[sl] - best[sl]) ** 2)))
             ax.plot(t, best[sl], color="C2", lw=1.0, ls="--", label=f"augmented: {name} (RMSE {rmse_b:.3g})")
