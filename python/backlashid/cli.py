@@ -58,7 +58,7 @@ def _clean_errors(command: F) -> F:
 def _progress(stages: list[str]) -> Iterator[Callable[[str], None]]:
     """A progress bar on stderr over the named stages of a command (plain lines when stderr is
     not a terminal); call the yielded function with the stage that starts."""
-    err = click.get_text_stream("stderr")
+    err = sys.stderr
     if not err.isatty():
         yield lambda stage: click.echo(f"backlashid: {stage} ...", err=True)
         return
@@ -297,7 +297,7 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
     if output:
         columns.update({"y": record.y, "residual": record.y - y_sim})
     out.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.10g")
+    np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
     click.echo(f"simulated {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else ""))
     if output:
         click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, skip=skip)))
@@ -327,8 +327,6 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
     Example:
       backlashid diagnose log.csv -i u -o y --model model.json --split 0.5 --png dashboard.png
     """
-    from .diagnosis import diagnose as run_diagnosis
-
     if (model_file is None) == (not fit_cascade):
         raise DataError("give either --model MODEL.json or --fit-cascade")
     stages = ["loading data"] + (["fitting the cascade"] if fit_cascade else []) + ["diagnosing"]
@@ -350,6 +348,8 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
             stage("fitting the cascade")
             model = _fit_model("cascade", est[0], est[1], na, nb, 0, 0, degree, warmup, 50).model
         stage("diagnosing")
+        from .diagnosis import diagnose as run_diagnosis
+
         noise = None if noise_std is None else noise_std / abs(scaling.output_scale)
         report = run_diagnosis(model, estimation=est, validation=val, noise_std=noise)
     if not scaling.is_identity:

@@ -208,6 +208,9 @@ def _csv_column(path: Path, header: list[str], body: list[list[str]], selector: 
 
 
 def _load_npz(path: Path) -> dict[str, NDArray]:
+    with path.open("rb") as fh:
+        if fh.read(4) != b"PK\x03\x04":
+            raise DataError(f"{path}: not a readable .npz file (not a zip archive); save the arrays with numpy.savez")
     try:
         with np.load(path, allow_pickle=False) as data:
             return {k: data[k] for k in data.files}
@@ -219,12 +222,13 @@ def _load_npz(path: Path) -> dict[str, NDArray]:
 
 def _load_mat(path: Path) -> dict[str, NDArray]:
     from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
 
     try:
         data = loadmat(path, squeeze_me=False)
     except NotImplementedError:
         raise DataError(f"{path}: a MATLAB v7.3 (HDF5) file; save it with save(..., '-v7') or export a CSV") from None
-    except (ValueError, OSError, TypeError) as exc:
+    except (ValueError, OSError, TypeError, MatReadError) as exc:
         raise DataError(f"{path}: not a readable MATLAB .mat file ({exc})") from None
     return {k: v for k, v in data.items() if not k.startswith("__")}
 
