@@ -56,6 +56,9 @@ def test_fit_recovers_example1_and_writes_json_and_figures(tmp_path, csv_file):
         png = out / "figs" / f"{name}.png"
         assert png.read_bytes()[:8] == PNG and str(png) in r.output
     assert "free-run simulation" in r.output and "one-step prediction" in r.output
+    # progress goes to stderr (stage lines when it is not a terminal), results to stdout
+    assert "backlashid: fitting the cascade" in r.stderr and "writing figures" in r.stderr
+    assert "fitting the cascade" not in r.stdout
 
 
 def test_fit_in_measured_units_with_scaling_then_simulate(tmp_path, example):
