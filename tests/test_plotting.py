@@ -61,6 +61,8 @@ def test_characteristic_and_trajectories(ex1):
     ax = plot_characteristic(ex1.backlash, sim.x, sim.output)
     assert [line.get_label() for line in ax.lines[:2]] == ["L(x)", "R(x)"]
     history = np.array([[1.0, 2.0], [1.5, 2.5], [1.6, 2.4]])
-    ax = plot_trajectories(history, ["a", "b"], ["b"], truth={"b": 2.4})
+    ax = plot_trajectories(history, ["a", "b"], ["b"], truth={"b": 2.4}, final={"a": 1.7, "b": 2.45})
     np.testing.assert_array_equal(ax.lines[0].get_ydata(), [2.0, 2.5, 2.4])
     np.testing.assert_array_equal(ax.lines[0].get_xdata(), [1, 2, 3])
+    star = [line for line in ax.lines if line.get_marker() == "*"]
+    assert len(star) == 1 and list(star[0].get_xdata()) == [4] and list(star[0].get_ydata()) == [2.45]

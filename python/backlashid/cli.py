@@ -234,12 +234,12 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, skip: int) -> l
     groups = {k: v for k, v in groups.items() if v}
     fig, axes = plt.subplots(1, len(groups), figsize=(5.5 * len(groups), 4))
     for ax, (title, shown) in zip(np.atleast_1d(axes), groups.items()):
-        plot_trajectories(result.history, names, shown, ax=ax, title=title)
+        plot_trajectories(result.history, names, shown, final=result.parameters, ax=ax, title=f"{title}; stars: final estimate")
     paths.append(_save(plt, fig, out / "iterations.png"))
     record, which = (sel.validation, "validation") if sel.validation is not None else (sel.estimation, "estimation")
     skip_here = skip if which == "validation" else max(skip, result.warmup)
     y_sim = simulate_scaled(result.model, scaling, record.u)
-    ax = plot_simulation(record.y, y_sim, skip=skip_here, title=f"Measured and simulated output, {which} record")
+    ax = plot_simulation(record.y, y_sim, skip=skip_here, ylabel=sel.description["output"], title=f"Measured and simulated output, {which} record")
     paths.append(_save(plt, ax.figure, out / "simulation.png"))
     fig = plot_residuals((record.y - y_sim)[skip_here:], record.u[skip_here:],
                          title=f"Residual diagnostics, free-run simulation error on the {which} record")

@@ -101,11 +101,13 @@ def plot_trajectories(
     shown: list[str],
     *,
     truth: dict[str, float] | None = None,
+    final: dict[str, float] | None = None,
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
     """Parameter estimates over the iterations (the paper's Figs 5, 6, 8-10); dotted lines
-    mark the true values when given."""
+    mark the true values when given, stars the ``final`` estimates (after the refinement) one
+    step after the last iteration."""
     plt = _pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 4))
@@ -116,6 +118,8 @@ def plot_trajectories(
         ax.plot(its, h[:, names.index(name)], "-o", ms=3, color=color, label=name)
         if truth is not None:
             ax.axhline(truth[name], color=color, ls=":", lw=1)
+        if final is not None:
+            ax.plot([len(h) + 1], [final[name]], "*", ms=10, color=color)
     from matplotlib.ticker import MaxNLocator
 
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -133,6 +137,7 @@ def plot_simulation(
     *,
     skip: int = 0,
     dt: float = 1.0,
+    ylabel: str = "output",
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
@@ -152,7 +157,7 @@ def plot_simulation(
     if skip:
         ax.axvspan(t[0], t[skip - 1], color="0.9", zorder=0, label=f"skipped transient ({skip} samples)")
     ax.set_xlabel("time" if dt != 1.0 else "sample")
-    ax.set_ylabel("output")
+    ax.set_ylabel(ylabel)
     ax.set_title(title or "Measured and simulated output")
     ax.legend(loc="upper right", fontsize="small")
     ax.grid(alpha=0.3)
