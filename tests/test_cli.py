@@ -218,6 +218,20 @@ def test_documented_friction_damper_command(tmp_path):
     assert np.isfinite(payload["metrics"]["validation"]["simulation_rmse"])
 
 
+@pytest.mark.skipif(not FRICTION.is_dir(), reason="shared data folder absent")
+@pytest.mark.skipif(importlib.util.find_spec("backlashid.diagnosis") is None, reason="backlashid.diagnosis not merged yet")
+def test_documented_friction_damper_diagnosis(tmp_path):
+    files = ["--estimation-file", FRICTION / "d2_char_1Hz36lbtension0.5amplitude.npz",
+             "--validation-file", FRICTION / "d2_eq_ImperialValleyDBE.npz", "-i", "x_in", "-o", "F_kip"]
+    r = run("fit", *files, "--decimate", "8", "--scale", "auto", "--warmup", "20", "--json", tmp_path / "damper.json")
+    assert r.exit_code == 0, r.output
+    r = run("diagnose", *files, "--model", tmp_path / "damper.json", "--png", tmp_path / "d.png", "--json", tmp_path / "d.json")
+    assert r.exit_code == 0, r.output
+    report = json.loads((tmp_path / "d.json").read_text())["report"]
+    assert report["best_effect"] in (*bx.EFFECTS, "none", "unexplained")
+    assert (tmp_path / "d.png").read_bytes()[:8] == PNG
+
+
 @pytest.mark.skipif(not SHARED.is_dir(), reason="shared data folder absent")
 def test_fit_on_shared_csv(tmp_path):
     r = run("fit", SHARED / "coupled_electric_drives" / "DATAPRBS.csv", "-i", "u1", "-o", "z1", "--na", "2", "--nb", "2", "--degree", "1",
