@@ -32,11 +32,28 @@ autodoc_default_options = {"members": True, "undoc-members": False, "show-inheri
 
 
 
+def _rst_problems(text: str) -> str:
+    """What docutils warns about in ``text`` (Sphinx roles stand in as literals)."""
+    import io
+    import re
+
+    from docutils.core import publish_doctree
+
+    text = re.sub(r":[a-z:]+:`([^`]*)`", r"``\1``", text)
+    stream = io.StringIO()
+    publish_doctree(text, settings_overrides={"report_level": 2, "halt_level": 5, "warning_stream": stream})
+    return stream.getvalue()
+
+
 def _plain_text_docstrings(app, what, name, obj, options, lines):  # noqa: ARG001
     """The docstrings are written as plain text with the paper's notation: |u| is an absolute
-    value, not an RST substitution."""
+    value, not an RST substitution. A docstring that is still not valid reStructuredText (a
+    list that ends without a blank line, say) is shown as it is written, in a literal block."""
     for k, line in enumerate(lines):
         lines[k] = line.replace("|", "\\|")
+    if lines and _rst_problems("\n".join(lines)):
+        plain = [line.replace("\\|", "|") for line in lines]
+        lines[:] = ["::", ""] + ["    " + line for line in plain] + [""]
 
 
 def setup(app):
