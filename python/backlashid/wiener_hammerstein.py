@@ -292,12 +292,18 @@ def _subsets(roots: NDArray[np.complex128], sizes: range) -> list[tuple[list[com
 
 def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], n1: int, n2: int) -> list[tuple[list[complex], ...]]:
     """(G1 poles, G2 poles, G1 zeros, G2 zeros) with n1 poles in G1, n2 in G2, and at most
-    n - 1 zeros in each (each block keeps its one-sample delay)."""
+    n - 1 zeros in each (each block keeps its one-sample delay). Zeros that fit in neither
+    block (e.g. a complex pair when each block has room for one zero) are left out: the
+    refinement moves the numerators anyway."""
     out = []
     for p1, p2 in _subsets(poles, range(n1, n1 + 1)):
-        for z1, z2 in _subsets(zeros, range(0, n1)):
-            if len(z2) <= n2 - 1:
-                out.append((p1, p2, z1, z2))
+        for z1, rest in _subsets(zeros, range(0, n1)):
+            if len(rest) <= n2 - 1:
+                out.append((p1, p2, z1, rest))
+                continue
+            fits = [z2 for z2, _ in _subsets(np.asarray(rest), range(0, n2))]
+            most = max(len(z2) for z2 in fits)
+            out += [(p1, p2, z1, z2) for z2 in fits if len(z2) == most]
     return out
 
 
