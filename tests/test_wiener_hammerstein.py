@@ -60,6 +60,21 @@ def test_recovers_a_planted_wiener_hammerstein_system():
     assert fit.baseline_rmse > 10 * fit.simulation_rmse
 
 
+def test_recovers_a_planted_wiener_hammerstein_system_with_feedthrough():
+    truth = wiener_hammerstein_model([0.2, 0.3, 0.15], B, M, [0.4, 0.5, -0.1], S, feedthrough=True)
+    rng = np.random.default_rng(1)
+    u = rng.normal(0.0, 0.5, 6000)
+    w = truth.simulate(u)
+    fit = fit_wiener_hammerstein(u, w, degree=3, orders=(2, 2), warmup=50, feedthrough=True)
+    assert fit.model.input_linear.feedthrough and fit.model.output_linear.feedthrough
+    assert {"a0", "r0"} <= set(fit.parameters)
+    u_val = rng.normal(0.0, 0.5, 3000)
+    w_val = truth.simulate(u_val)
+    assert np.sqrt(np.mean((fit.model.simulate(u_val) - w_val) ** 2)) < 1e-7 * np.std(w_val)
+    k = fit.model.input_linear.a[0] / 0.2
+    np.testing.assert_allclose(fit.model.input_linear.a / k, [0.2, 0.3, 0.15], rtol=1e-6)
+
+
 @pytest.mark.skipif(not DATA.exists(), reason="the SYSID 2009 Wiener-Hammerstein data are not in /work/shared/data")
 def test_benchmark_slice_beats_the_linear_baseline_tenfold():
     """20 000 training samples, degree 8: the WH model's free-run test error is at least 10x

@@ -63,18 +63,25 @@ def _radius(den: NDArray[np.float64]) -> float:
     return float(np.abs(np.roots(den)).max()) if len(den) > 1 else 0.0
 
 
-def wiener_hammerstein_model(a: ArrayLike, b: ArrayLike, m: ArrayLike, r: ArrayLike, s: ArrayLike) -> SandwichModel:
+def wiener_hammerstein_model(
+    a: ArrayLike, b: ArrayLike, m: ArrayLike, r: ArrayLike, s: ArrayLike, *, feedthrough: bool = False
+) -> SandwichModel:
     """The sandwich u -> G1(a, b) -> f -> G2(r, s) with f(x) = sum_i m_i x^i: a zero-width
-    backlash with tied branches (c_L = c_R = 0, m_L = m_R = m). Needs m_1 > 0."""
+    backlash with tied branches (c_L = c_R = 0, m_L = m_R = m). Needs m_1 > 0.
+    ``feedthrough=True``: a and r start at lag 0 (both blocks)."""
     m_list = [float(v) for v in np.atleast_1d(np.asarray(m, dtype=np.float64))]
-    return SandwichModel(LinearBlock(a, b), GeneralBacklash(0.0, 0.0, m_list, m_list), LinearBlock(r, s))
+    return SandwichModel(
+        LinearBlock(a, b, feedthrough=feedthrough),
+        GeneralBacklash(0.0, 0.0, m_list, m_list),
+        LinearBlock(r, s, feedthrough=feedthrough),
+    )
 
 
 @dataclass(frozen=True)
 class LinearBaseline:
     """The best linear approximation: w(t) = G(q) u(t) + offset, an output-error model
-    x(t) = sum_{i=delay}^{n} a_i u(t-i) - sum_j b_j x(t-j) (``a`` holds lags 1..n, the first
-    delay - 1 of them zero) plus a constant output offset."""
+    of order n1 + n2 (input lags from 2, the two blocks' delays, or from 0 with feedthrough;
+    the lag-1 coefficient is then zero) plus a constant output offset."""
 
     linear: LinearBlock
     offset: float
@@ -118,11 +125,17 @@ class WienerHammersteinFit:
 
     @property
     def parameters(self) -> dict[str, float]:
-        """a1.., b1.. (G1), m1..mn (f), r1.., s1.. (G2)."""
+        """a1.., b1.. (G1), m1..mn (f), r1.., s1.. (G2); a0 and r0 with feedthrough."""
         g1, g2 = self.model.input_linear, self.model.output_linear
         out: dict[str, float] = {}
-        for prefix, values in (("a", g1.a), ("b", g1.b), ("m", self.m), ("r", g2.a), ("s", g2.b)):
-            out.update({f"{prefix}{i}": float(v) for i, v in enumerate(values, 1)})
+        for prefix, lags, values in (
+            ("a", g1.lags, g1.a),
+            ("b", range(1, g1.nb + 1), g1.b),
+            ("m", range(1, len(self.m) + 1), self.m),
+            ("r", g2.lags, g2.a),
+            ("s", range(1, g2.nb + 1), g2.b),
+        ):
+            out.update({f"{prefix}{i}": float(v) for i, v in zip(lags, values)})
         return out
 
     def summary(self) -> str:
@@ -158,17 +171,27 @@ class WienerHammersteinFit:
 
 @dataclass(frozen=True)
 class _Param:
-    """theta = [a (lags 1..n1), b (n1), c_1..c_n (Chebyshev coefficients of f in x / k),
-    r (lags 1..n2), s (n2)], with f(x) = sum_i c_i (T_i(x / k) - T_i(0)) so that f(0) = 0."""
+    """theta = [a (lags d..n1), b (n1), c_1..c_n (Chebyshev coefficients of f in x / k),
+    r (lags d..n2), s (n2)], with f(x) = sum_i c_i (T_i(x / k) - T_i(0)) so that f(0) = 0;
+    the first lag d is 0 with feedthrough, else 1."""
 
     n1: int
     n2: int
     degree: int
+    feedthrough: bool = False
     k: float = 1.0
 
     @property
+    def delay(self) -> int:
+        return 0 if self.feedthrough else 1
+
+    @property
     def sizes(self) -> list[int]:
-        return [self.n1, self.n1, self.degree, self.n2, self.n2]
+        d = self.delay
+        return [self.n1 + 1 - d, self.n1, self.degree, self.n2 + 1 - d, self.n2]
+
+    def numerator(self, coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.r_[np.zeros(self.delay), coefficients]
 
     def split(self, theta: NDArray[np.float64]) -> list[NDArray[np.float64]]:
         return np.split(theta, np.cumsum(self.sizes)[:-1])
@@ -193,10 +216,10 @@ class _Param:
 
     def simulate(self, theta: NDArray[np.float64], u: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
         a, b, c, r, s = self.split(theta)
-        x = lfilter(np.r_[0.0, a], np.r_[1.0, b], u)
+        x = lfilter(self.numerator(a), np.r_[1.0, b], u)
         basis, dbasis = self.basis(x)
         f = basis @ c
-        w = lfilter(np.r_[0.0, r], np.r_[1.0, s], f)
+        w = lfilter(self.numerator(r), np.r_[1.0, s], f)
         return x, basis, dbasis, f, w
 
     def residuals(self, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int) -> NDArray[np.float64]:
@@ -213,16 +236,17 @@ class _Param:
             return np.zeros((len(y) - warmup, len(theta)))
         a, b, c, r, s = self.split(theta)
         x, basis, dbasis, f, w = self.simulate(theta, u)
-        den1, num2, den2 = np.r_[1.0, b], np.r_[0.0, r], np.r_[1.0, s]
+        d = self.delay
+        den1, num2, den2 = np.r_[1.0, b], self.numerator(r), np.r_[1.0, s]
         u_f, x_f = lfilter([1.0], den1, u), lfilter([1.0], den1, x)
         dx = np.column_stack(
-            [_delayed(u_f, i) for i in range(1, self.n1 + 1)] + [-_delayed(x_f, j) for j in range(1, self.n1 + 1)]
+            [_delayed(u_f, i) for i in range(d, self.n1 + 1)] + [-_delayed(x_f, j) for j in range(1, self.n1 + 1)]
         )
         j_g1 = lfilter(num2, den2, dx * (dbasis @ c)[:, None], axis=0)
         j_f = lfilter(num2, den2, basis, axis=0)
         f_f, w_f = lfilter([1.0], den2, f), lfilter([1.0], den2, w)
         j_g2 = np.column_stack(
-            [_delayed(f_f, i) for i in range(1, self.n2 + 1)] + [-_delayed(w_f, j) for j in range(1, self.n2 + 1)]
+            [_delayed(f_f, i) for i in range(d, self.n2 + 1)] + [-_delayed(w_f, j) for j in range(1, self.n2 + 1)]
         )
         return np.hstack([j_g1, j_f, j_g2])[warmup:]
 
@@ -290,30 +314,31 @@ def _subsets(roots: NDArray[np.complex128], sizes: range) -> list[tuple[list[com
     return out
 
 
-def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], n1: int, n2: int) -> list[tuple[list[complex], ...]]:
+def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], n1: int, n2: int, room: tuple[int, int]) -> list[tuple[list[complex], ...]]:
     """(G1 poles, G2 poles, G1 zeros, G2 zeros) with n1 poles in G1, n2 in G2, and at most
-    n - 1 zeros in each (each block keeps its one-sample delay). Zeros that fit in neither
+    n1 and n2 zeros (n - 1 when the block keeps a one-sample delay). Zeros that fit in neither
     block (e.g. a complex pair when each block has room for one zero) are left out: the
     refinement moves the numerators anyway."""
     out = []
     for p1, p2 in _subsets(poles, range(n1, n1 + 1)):
-        for z1, rest in _subsets(zeros, range(0, n1)):
-            if len(rest) <= n2 - 1:
+        for z1, rest in _subsets(zeros, range(0, room[0] + 1)):
+            if len(rest) <= room[1]:
                 out.append((p1, p2, z1, rest))
                 continue
-            fits = [z2 for z2, _ in _subsets(np.asarray(rest), range(0, n2))]
+            fits = [z2 for z2, _ in _subsets(np.asarray(rest), range(0, room[1] + 1))]
             most = max(len(z2) for z2 in fits)
             out += [(p1, p2, z1, z2) for z2 in fits if len(z2) == most]
     return out
 
 
 def _theta_from_split(param: _Param, u: NDArray[np.float64], split: tuple[list[complex], ...], gain: float) -> NDArray[np.float64]:
-    """G1 = q^-(n1-len(z1)) Z1/P1 scaled so that max |x| = k, f(x) = x, G2 carries the gain."""
+    """G1 = Z1/P1 (lagged to its order) scaled so that max |x| = k, f(x) = x, G2 carries the gain."""
     p1, p2, z1, z2 = split
+    d = param.delay
     b, s = np.poly(p1).real, np.poly(p2).real
-    a = np.r_[np.zeros(param.n1 - 1 - len(z1)), np.poly(z1).real]
-    r = np.r_[np.zeros(param.n2 - 1 - len(z2)), np.poly(z2).real] * gain
-    x = lfilter(np.r_[0.0, a], b, u)
+    a = np.r_[np.zeros(param.n1 - d - len(z1)), np.poly(z1).real]
+    r = np.r_[np.zeros(param.n2 - d - len(z2)), np.poly(z2).real] * gain
+    x = lfilter(param.numerator(a), b, u)
     scale = np.max(np.abs(x)) / param.k
     c = np.zeros(param.degree)
     c[0] = param.k  # c_1 T_1(x / k) = x
@@ -353,12 +378,14 @@ def fit_wiener_hammerstein(
     split_samples: int = 20_000,
     split_degree: int = 3,
     split_iter: int = 15,
+    feedthrough: bool = False,
 ) -> WienerHammersteinFit:
     """Identify u -> G1 -> f -> G2 -> y (a sandwich with a tied, zero-width backlash).
 
     ``degree``: degree n of f (13-25 for a sharp nonlinearity such as a diode; the cost of
     each iteration grows linearly with it). ``orders = (n1, n2)``: orders of G1 and G2 (each
-    with a one-sample delay, so the model's total delay is 2 samples). ``warmup`` samples at
+    with a one-sample delay, so the model's total delay is 2 samples; ``feedthrough=True``
+    gives both a lag-0 term instead, ``LinearBlock(.., feedthrough=True)``). ``warmup`` samples at
     the start are left out of every criterion (the record does not start at rest).
     ``max_iter`` bounds the function evaluations of the final Levenberg-Marquardt run;
     ``split_samples``, ``split_degree`` and ``split_iter`` set the short refinement that
@@ -371,17 +398,19 @@ def fit_wiener_hammerstein(
     u_arr, y_arr = _check(u, y, degree, orders, warmup)
     n1, n2 = int(orders[0]), int(orders[1])
     started = time.perf_counter()
-    num, den, offset = _best_linear(u_arr, y_arr, n1 + n2, 2, warmup)
-    baseline = LinearBaseline(LinearBlock(num[1:], den[1:]), offset)
+    delay = 0 if feedthrough else 2
+    num, den, offset = _best_linear(u_arr, y_arr, n1 + n2, delay, warmup)
+    baseline = LinearBaseline(LinearBlock(num, den[1:], feedthrough=True) if feedthrough else LinearBlock(num[1:], den[1:]), offset)
     baseline_rmse = float(np.sqrt(np.mean((baseline.simulate(u_arr) - y_arr)[warmup:] ** 2)))
     lead = np.trim_zeros(num, "f")
     poles, zeros = np.roots(den), np.roots(lead)
 
-    short = _Param(n1, n2, min(split_degree, degree))
+    short = _Param(n1, n2, min(split_degree, degree), feedthrough)
     n_short = min(len(u_arr), max(split_samples, warmup + 10 * (2 * (n1 + n2) + short.degree)))
     u_s, y_s = u_arr[:n_short], y_arr[:n_short]
     ranked = []
-    for split in _splits(poles, zeros, n1, n2):
+    room = (n1 - short.delay, n2 - short.delay)
+    for split in _splits(poles, zeros, n1, n2, room):
         theta = _theta_from_split(short, u_s, split, float(lead[0]))
         if not short.stable(theta):
             continue
@@ -394,7 +423,7 @@ def fit_wiener_hammerstein(
     ranked.sort(key=lambda item: item[0])
     _, theta_short, split = ranked[0]
 
-    full = _Param(n1, n2, degree)
+    full = _Param(n1, n2, degree, feedthrough)
     a, b, c_short, r, s = short.split(theta_short)
     c = np.zeros(degree)
     c[: short.degree] = c_short
@@ -404,7 +433,7 @@ def fit_wiener_hammerstein(
     if m[0] < 0:  # f'(0) < 0: use -x as the internal signal, so that m_1 > 0
         a, m = -a, m * (-1.0) ** np.arange(1, degree + 1)
     try:
-        model = wiener_hammerstein_model(a, b, m, r, s)
+        model = wiener_hammerstein_model(a, b, m, r, s, feedthrough=feedthrough)
     except ModelError as exc:
         raise NotConvergedError(f"the fitted static block is not usable as tied branches: {exc}") from None
     rmse = float(np.sqrt(np.mean((model.simulate(u_arr) - y_arr)[warmup:] ** 2)))
