@@ -316,19 +316,19 @@ def _subsets(roots: NDArray[np.complex128], sizes: range) -> list[tuple[list[com
 
 def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], n1: int, n2: int, room: tuple[int, int]) -> list[tuple[list[complex], ...]]:
     """(G1 poles, G2 poles, G1 zeros, G2 zeros) with n1 poles in G1, n2 in G2, and at most
-    n1 and n2 zeros (n - 1 when the block keeps a one-sample delay). Zeros that fit in neither
-    block (e.g. a complex pair when each block has room for one zero) are left out: the
-    refinement moves the numerators anyway."""
-    out = []
+    n1 and n2 zeros (n - 1 when the block keeps a one-sample delay). Only when no split keeps
+    every zero (e.g. a complex pair when each block has room for one zero) are zeros left out:
+    the refinement moves the numerators anyway."""
+    whole, partial = [], []
     for p1, p2 in _subsets(poles, range(n1, n1 + 1)):
         for z1, rest in _subsets(zeros, range(0, room[0] + 1)):
             if len(rest) <= room[1]:
-                out.append((p1, p2, z1, rest))
+                whole.append((p1, p2, z1, rest))
                 continue
             fits = [z2 for z2, _ in _subsets(np.asarray(rest), range(0, room[1] + 1))]
             most = max(len(z2) for z2 in fits)
-            out += [(p1, p2, z1, z2) for z2 in fits if len(z2) == most]
-    return out
+            partial += [(p1, p2, z1, z2) for z2 in fits if len(z2) == most]
+    return whole or partial
 
 
 def _theta_from_split(param: _Param, u: NDArray[np.float64], split: tuple[list[complex], ...], gain: float) -> NDArray[np.float64]:
