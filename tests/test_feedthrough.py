@@ -216,3 +216,12 @@ def test_structure_checks():
     with pytest.raises(DataError, match="feedthrough"):
         Structure(2, 2, 3).pack(ex1_feedthrough())
     assert Structure(2, 2, 3, 2, 2, feedthrough=True, output_feedthrough=True).shift == 2
+
+
+def test_one_step_prediction_uses_the_output_feedthrough():
+    """With the exact model and noise-free data the one-step prediction is exact, r_0 y(t) included."""
+    model = ex2_feedthrough()
+    u = np.random.default_rng(7).uniform(-1, 1, 500)
+    w = model.simulate(u)
+    np.testing.assert_allclose(bid.metrics.one_step_prediction(model, u, w), w, atol=1e-12)
+    assert bid.evaluate(model, u, w, skip=10).prediction_rmse < 1e-12
