@@ -225,3 +225,17 @@ def test_one_step_prediction_uses_the_output_feedthrough():
     w = model.simulate(u)
     np.testing.assert_allclose(bid.metrics.one_step_prediction(model, u, w), w, atol=1e-12)
     assert bid.evaluate(model, u, w, skip=10).prediction_rmse < 1e-12
+
+
+def test_a_feedthrough_model_is_the_lagged_model_one_sample_later():
+    """The identity the fit relies on (structure.py): with the coefficients a_0..a_na moved to
+    lags 1..na+1 (and r_0..r_nr likewise), the model's output at t + shift is the feedthrough
+    model's output at t, shift = number of feedthrough blocks."""
+    u = np.random.default_rng(8).uniform(-1, 1, 400)
+    cas = ex1_feedthrough()
+    lagged = CascadeModel(LinearBlock(cas.linear.a, cas.linear.b), cas.backlash)
+    np.testing.assert_allclose(lagged.simulate(u)[1:], cas.simulate(u)[:-1], atol=1e-13)
+    sw = ex2_feedthrough()
+    lagged_sw = SandwichModel(LinearBlock(sw.input_linear.a, sw.input_linear.b), sw.backlash, LinearBlock(sw.r, sw.s))
+    np.testing.assert_allclose(lagged_sw.simulate(u)[2:], sw.simulate(u)[:-2], atol=1e-13)
+    assert np.all(lagged_sw.simulate(u)[:2] == 0.0)  # from rest: the zeros the fit prepends
