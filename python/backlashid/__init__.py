@@ -31,6 +31,7 @@ from .models import (
     model_from_json,
 )
 from .parallel import fit_many
+from .wiener_hammerstein import LinearBaseline, WienerHammersteinFit, fit_wiener_hammerstein, wiener_hammerstein_model
 
 __all__ = [
     "BacklashIdError",
@@ -42,6 +43,7 @@ __all__ = [
     "ExampleData",
     "FitResult",
     "GeneralBacklash",
+    "LinearBaseline",
     "LinearBlock",
     "Metrics",
     "ModelError",
@@ -51,6 +53,7 @@ __all__ = [
     "SandwichSimulation",
     "SandwichState",
     "SwitchingSignals",
+    "WienerHammersteinFit",
     "__version__",
     "example1",
     "example2",
@@ -61,4 +64,6 @@ __all__ = [
     "fit_sandwich",
     "model_from_dict",
     "model_from_json",
+    "fit_wiener_hammerstein",
+    "wiener_hammerstein_model",
 ]

@@ -167,12 +167,12 @@ def _initial_theta(structure: Structure, u: NDArray[np.float64], y: NDArray[np.f
     gain makes the paper's sandwich iterations diverge; NOTES.md item 5)."""
     s = structure
     delay = 2 if s.is_sandwich and not literal else 1
-    lin = _core.arx(u, y, s.na, s.nb, delay, warmup)[0]
+    lin = _core.arx(u, y, s.n_a, s.nb, delay, warmup)[0]
     m_r1, c_l, c_r = start
     n = s.degree
     theta = np.concatenate([lin, [c_l], np.zeros(n - 1), [m_r1, c_r], np.zeros(n - 1)])
     if s.is_sandwich:
-        theta = np.concatenate([theta, np.zeros(s.nr - 1 + s.ns)])
+        theta = np.concatenate([theta, np.zeros(s.n_r - 1 + s.ns)])
     return theta
 
 
@@ -213,7 +213,7 @@ def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], s
             break
         new = theta + step * (new - theta)
         if reflect:
-            sl_b = slice(s.na, s.na + s.nb)
+            sl_b = slice(s.n_a, s.n_a + s.nb)
             new[sl_b] = _reflect(new[sl_b])
             if s.is_sandwich and s.ns:
                 new[-s.ns :] = _reflect(new[-s.ns :])
@@ -319,6 +319,13 @@ def _fit(
     if max_iter < 1:
         raise DataError(f"max_iter = {max_iter}: give at least 1")
     u_arr, y_arr = _check_data(u, y, structure, warmup, y_name)
+    # A feedthrough block is fitted as the same block one sample later (structure.py): the
+    # core's model output at t + shift is the measured output at t. The shifted record starts
+    # with `shift` zeros, exact from rest and otherwise inside the (then lengthened) warm-up.
+    user_warmup, shift = warmup, structure.shift
+    if shift:
+        y_arr = np.concatenate([np.zeros(shift), y_arr[:-shift]])
+        warmup = warmup + shift if warmup else 0
     if paper:
         starts, switching, step, refine, reflect = [initial], "measured", 1.0, False, False
     else:
@@ -393,7 +400,7 @@ def _fit(
     except ModelError as exc:
         raise NotConvergedError(f"the final estimate is not a valid model ({exc})", best_info) from None
     sim = model.simulate(u_arr, internals=True)
-    moving = float(np.mean((sim.f1 | sim.f2)[warmup:]))
+    moving = float(np.mean((sim.f1 | sim.f2)[user_warmup:]))
     if moving < min_moving:
         raise NotIdentifiableError(
             f"only {100 * moving:.1f} % of samples move the backlash output off its dead band "
@@ -420,7 +427,7 @@ def _fit(
         noise_std=float(np.sqrt(noise_var)),
         moving_fraction=moving,
         method="paper" if paper else "default",
-        warmup=warmup,
+        warmup=user_warmup,
         iterative_theta=np.asarray(theta_iter, dtype=np.float64),
         refinement_steps=steps,
     )
@@ -446,6 +453,7 @@ def fit_cascade(
     restarts: int | None = None,
     perturbation: float = 0.05,
     seed: int = 0,
+    feedthrough: bool = False,
 ) -> FitResult:
     """Identify a cascade u -> linear block (16) -> general backlash (1) -> y (Section 3).
 
@@ -460,9 +468,12 @@ def fit_cascade(
     are reproducible), each kept only if it lowers the simulation error. By default 4 restarts
     run on records of up to 20 000 samples (after the warm-up) and none on longer ones,
     where the cost surface is smooth enough that they change nothing.
+
+    ``feedthrough=True`` adds the lag-0 term a_0 u(t) to the linear block (parameters a0..a_na;
+    the model's block is ``LinearBlock(a, b, feedthrough=True)``).
     """
     return _fit(
-        Structure(na, nb, degree), u, y, y_name="y", initial=initial, starts=starts, max_iter=max_iter,
+        Structure(na, nb, degree, feedthrough=feedthrough), u, y, y_name="y", initial=initial, starts=starts, max_iter=max_iter,
         tol=tol, switching=switching, step=step, refine=refine, paper=paper, warmup=warmup, min_moving=min_moving,
         restarts=restarts, perturbation=perturbation, seed=seed,
     )
@@ -489,12 +500,16 @@ def fit_sandwich(
     restarts: int | None = None,
     perturbation: float = 0.05,
     seed: int = 0,
+    feedthrough: bool = False,
+    output_feedthrough: bool = False,
 ) -> FitResult:
     """Identify a sandwich u -> linear (16) -> general backlash (1) -> linear (29) -> w
     (Section 4). Options as in :func:`fit_cascade`; the default ``step`` is 0.5 and pole
-    reflection is on, since the plain iterations diverge for most noise draws."""
+    reflection is on, since the plain iterations diverge for most noise draws.
+    ``feedthrough`` adds a_0 u(t) to the input block, ``output_feedthrough`` r_0 y(t) to the
+    output block (then r_0 = 1 is the fixed normalisation and r1..r_nr are estimated)."""
     return _fit(
-        Structure(na, nb, degree, nr, ns), u, w, y_name="w", initial=initial, starts=starts, max_iter=max_iter,
+        Structure(na, nb, degree, nr, ns, feedthrough=feedthrough, output_feedthrough=output_feedthrough), u, w, y_name="w", initial=initial, starts=starts, max_iter=max_iter,
         tol=tol, switching="simulated", step=step, refine=refine, paper=paper, warmup=warmup, min_moving=min_moving,
         restarts=restarts, perturbation=perturbation, seed=seed,
     )

@@ -9,7 +9,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import _core
 from ._convert import as_coefficients, as_signal, format_list, frozen
-from .errors import DataError
+from .errors import DataError, ModelError
 
 __all__ = ["LinearBlock"]
 
@@ -19,21 +19,47 @@ class LinearBlock:
 
     ``a`` needs at least one coefficient; ``b`` may be empty (an FIR block). In a sandwich the
     output block (eq 29) is a LinearBlock with ``a = r`` and ``b = s``.
+
+    ``feedthrough=True`` adds the lag-0 term (not in the paper; sampled real systems often
+    respond within the sample): x(t) = a_0 u(t) + sum_{i=1}^{na} a_i u(t-i) - ..., and then
+    ``a = [a_0, a_1, .., a_na]`` starts at lag 0, with na >= 1 (give a_1 = 0 for a block with
+    a_0 alone). ``na`` is always the largest input lag (the length of ``u_past``).
     """
 
-    __slots__ = ("_a", "_b", "_native")
+    __slots__ = ("_a", "_b", "_feedthrough", "_native")
 
-    def __init__(self, a: ArrayLike, b: ArrayLike = ()) -> None:
+    def __init__(self, a: ArrayLike, b: ArrayLike = (), *, feedthrough: bool = False) -> None:
         a_list = as_coefficients(a, "a")
         b_list = as_coefficients(b, "b", allow_empty=True)
-        self._native = _core.LinearBlock(a_list, b_list)  # validates, raises ModelError
+        if not isinstance(feedthrough, (bool, np.bool_)):
+            raise ModelError(f"feedthrough must be True or False, got {feedthrough!r}")
+        if feedthrough:
+            if len(a_list) < 2:
+                raise ModelError(
+                    f"feedthrough=True takes a = [a_0, a_1, ..] with at least a_0 and a_1, got {a_list}: "
+                    "give a_1 = 0 for a block with a lag-0 term only"
+                )
+            self._native = _core.LinearBlock(a_list[1:], b_list, a_list[0])
+        else:
+            self._native = _core.LinearBlock(a_list, b_list)  # validates, raises ModelError
+        self._feedthrough = bool(feedthrough)
         self._a = frozen(a_list)
         self._b = frozen(b_list)
 
     @property
     def a(self) -> NDArray[np.float64]:
-        """Input coefficients a_1..a_na (read-only)."""
+        """Input coefficients a_1..a_na, or a_0..a_na with feedthrough (read-only)."""
         return self._a
+
+    @property
+    def feedthrough(self) -> bool:
+        """True when ``a`` starts with the lag-0 coefficient a_0."""
+        return self._feedthrough
+
+    @property
+    def lags(self) -> NDArray[np.int64]:
+        """The input lag of each entry of ``a`` (0.. with feedthrough, 1.. without)."""
+        return np.arange(len(self._a)) + (0 if self._feedthrough else 1)
 
     @property
     def b(self) -> NDArray[np.float64]:
@@ -42,7 +68,8 @@ class LinearBlock:
 
     @property
     def na(self) -> int:
-        return len(self._a)
+        """Largest input lag: the number of past inputs the block remembers."""
+        return len(self._a) - int(self._feedthrough)
 
     @property
     def nb(self) -> int:
@@ -93,7 +120,7 @@ class LinearBlock:
 
     def equation(self, input: str = "u", output: str = "x") -> str:
         """The difference equation as text, e.g. 'x(t) = 0.7 u(t-1) + 0.2 x(t-1)'."""
-        terms = [(float(c), f"{input}(t-{i})") for i, c in enumerate(self._a, 1)]
+        terms = [(float(c), f"{input}(t-{i})" if i else f"{input}(t)") for i, c in zip(self.lags, self._a)]
         terms += [(-float(c), f"{output}(t-{j})") for j, c in enumerate(self._b, 1)]
         text = ""
         for k, (c, sym) in enumerate(terms):
@@ -104,23 +131,37 @@ class LinearBlock:
         return f"{output}(t) = {text}"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"a": self._a.tolist(), "b": self._b.tolist()}
+        """{"a": .., "b": ..}, plus "feedthrough": true when a starts at lag 0 (dicts
+        without the key, e.g. from earlier versions, load as blocks without feedthrough)."""
+        out: dict[str, Any] = {"a": self._a.tolist(), "b": self._b.tolist()}
+        if self._feedthrough:
+            out["feedthrough"] = True
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> LinearBlock:
-        return cls(data["a"], data.get("b", ()))
+        return cls(data["a"], data.get("b", ()), feedthrough=bool(data.get("feedthrough", False)))
 
     def __reduce__(self) -> tuple[Any, ...]:
         # rebuilt from its coefficients: the Rust object behind it does not pickle
-        return (LinearBlock, (self._a.tolist(), self._b.tolist()))
+        return (_rebuild, (self._a.tolist(), self._b.tolist(), self._feedthrough))
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, LinearBlock):
             return NotImplemented
-        return np.array_equal(self._a, other._a) and np.array_equal(self._b, other._b)
+        return (
+            self._feedthrough == other._feedthrough
+            and np.array_equal(self._a, other._a)
+            and np.array_equal(self._b, other._b)
+        )
 
     def __hash__(self) -> int:
-        return hash((tuple(self._a), tuple(self._b)))
+        return hash((tuple(self._a), tuple(self._b), self._feedthrough))
 
     def __repr__(self) -> str:
-        return f"LinearBlock(a={format_list(self._a)}, b={format_list(self._b)})"
+        extra = ", feedthrough=True" if self._feedthrough else ""
+        return f"LinearBlock(a={format_list(self._a)}, b={format_list(self._b)}{extra})"
+
+
+def _rebuild(a: list[float], b: list[float], feedthrough: bool) -> LinearBlock:
+    return LinearBlock(a, b, feedthrough=feedthrough)

@@ -76,8 +76,8 @@ def one_step_prediction(model: Model, u: ArrayLike, y: ArrayLike) -> NDArray[np.
     if isinstance(model, SandwichModel):
         y_sim = model.simulate(u_arr, internals=True).y
         w = np.zeros_like(y_arr)
-        for i, r_i in enumerate(model.r, 1):
-            w += r_i * past(y_sim, i)
+        for i, r_i in zip(model.output_linear.lags, model.r):  # lag 0 first with feedthrough
+            w += r_i * past(y_sim, int(i))
         for j, s_j in enumerate(model.s, 1):
             w -= s_j * past(y_arr, j)
         return w

@@ -274,7 +274,8 @@ class SandwichModel(_ModelIO):
     def __repr__(self) -> str:
         return (
             f"SandwichModel(input_linear={self.input_linear!r}, backlash={self.backlash!r}, "
-            f"output_linear=LinearBlock(r={format_list(self.r)}, s={format_list(self.s)}))"
+            f"output_linear=LinearBlock(r={format_list(self.r)}, s={format_list(self.s)}"
+            f"{', feedthrough=True' if self.output_linear.feedthrough else ''}))"
         )
 
 

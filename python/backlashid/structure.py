@@ -4,6 +4,15 @@ paper's names (eq 19 for the cascade, eq 31 for the sandwich; m_L1 = 1 and r_1 =
 Physical order: a_1..a_na, b_1..b_nb, c_L, m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn, r_2..r_nr,
 s_1..s_ns. The least-squares vector of eq (19)/(31) has c_1 = c_L and c_2 = m_R1 c_R at the
 positions of c_L and c_R (eq 20, 32).
+
+A block with a direct feedthrough (lag 0) is fitted as the same block one sample later:
+x(t) = a_0 u(t) + .. + a_na u(t-na) - .. is x'(t+1) for the eq (16) block with the
+coefficients a_0..a_na at lags 1..na+1. So a structure with ``feedthrough`` (input block)
+and/or ``output_feedthrough`` has a_0..a_na in place of a_1..a_na (r_0 = 1 fixed and
+r_1..r_nr in place of r_1 = 1, r_2..r_nr), the core sees the shifted blocks, and the fit
+compares them with the measured output delayed by one sample per feedthrough
+(:attr:`Structure.shift`). Identifiability is unchanged: the normalisation m_L1 = 1 and the
+first output coefficient = 1 (r_0 with output feedthrough) hold in both readings.
 """
 
 from __future__ import annotations
@@ -51,6 +60,8 @@ class Structure:
     degree: int
     nr: int = 0
     ns: int = 0
+    feedthrough: bool = False  # a_0 u(t) in the input block
+    output_feedthrough: bool = False  # r_0 y(t) in the sandwich's output block
 
     def __post_init__(self) -> None:
         for name, value, least in (("na", self.na, 1), ("nb", self.nb, 0), ("degree", self.degree, 1)):
@@ -58,6 +69,23 @@ class Structure:
                 raise DataError(f"{name} = {value!r}: give a whole number >= {least}")
         if self.is_sandwich and (self.nr < 1 or self.ns < 0):
             raise DataError(f"nr = {self.nr}, ns = {self.ns}: the output block needs nr >= 1, ns >= 0")
+        if self.output_feedthrough and not self.is_sandwich:
+            raise DataError("output_feedthrough is for the sandwich's output block: a cascade has none")
+
+    @property
+    def n_a(self) -> int:
+        """Number of input coefficients (a_0..a_na with feedthrough, a_1..a_na without)."""
+        return self.na + int(self.feedthrough)
+
+    @property
+    def n_r(self) -> int:
+        """Number of output-block coefficients (r_0..r_nr or r_1..r_nr)."""
+        return self.nr + int(self.output_feedthrough) if self.is_sandwich else 0
+
+    @property
+    def shift(self) -> int:
+        """Samples by which the core's (lag >= 1) model runs ahead of the measured output."""
+        return int(self.feedthrough) + int(self.output_feedthrough)
 
     @property
     def is_sandwich(self) -> bool:
@@ -66,11 +94,13 @@ class Structure:
     @property
     def names(self) -> list[str]:
         n = self.degree
-        names = [f"a{i}" for i in range(1, self.na + 1)] + [f"b{j}" for j in range(1, self.nb + 1)]
+        first = 0 if self.feedthrough else 1
+        names = [f"a{i}" for i in range(first, self.na + 1)] + [f"b{j}" for j in range(1, self.nb + 1)]
         names += ["c_L"] + [f"m_L{i}" for i in range(2, n + 1)]
         names += ["m_R1", "c_R"] + [f"m_R{i}" for i in range(2, n + 1)]
         if self.is_sandwich:
-            names += [f"r{i}" for i in range(2, self.nr + 1)] + [f"s{j}" for j in range(1, self.ns + 1)]
+            first = 1 if self.output_feedthrough else 2  # r_0 = 1 or r_1 = 1 is fixed
+            names += [f"r{i}" for i in range(first, self.nr + 1)] + [f"s{j}" for j in range(1, self.ns + 1)]
         return names
 
     @property
@@ -83,7 +113,7 @@ class Structure:
         return len(self.names)
 
     def _slices(self) -> dict[str, Any]:
-        na, nb, n = self.na, self.nb, self.degree
+        na, nb, n = self.n_a, self.nb, self.degree
         k = na + nb
         out: dict[str, Any] = {"a": slice(0, na), "b": slice(na, k), "c_L": k}
         out["m_L"] = slice(k + 1, k + n)  # m_L2..m_Ln
@@ -91,7 +121,7 @@ class Structure:
         out["c_R"] = k + n + 1
         out["m_R"] = slice(k + n + 2, k + 2 * n + 1)  # m_R2..m_Rn
         j = k + 2 * n + 1
-        out["r"] = slice(j, j + self.nr - 1 if self.is_sandwich else j)
+        out["r"] = slice(j, j + self.n_r - 1 if self.is_sandwich else j)
         out["s"] = slice(out["r"].stop, out["r"].stop + self.ns)
         return out
 
@@ -116,8 +146,10 @@ class Structure:
         lin = model.input_linear if isinstance(model, SandwichModel) else model.linear
         bl = model.backlash
         # a lower branch degree embeds exactly (the higher coefficients are zero)
-        if (lin.na, lin.nb) != (self.na, self.nb) or bl.degree > self.degree:
-            raise DataError(f"the model has orders ({lin.na}, {lin.nb}) and degree {bl.degree}, not {self}")
+        if (lin.na, lin.nb, lin.feedthrough) != (self.na, self.nb, self.feedthrough) or bl.degree > self.degree:
+            raise DataError(
+                f"the model has orders ({lin.na}, {lin.nb}), feedthrough {lin.feedthrough} and degree {bl.degree}, not {self}"
+            )
         n = self.degree
         m_l = np.zeros(n)
         m_r = np.zeros(n)
@@ -126,8 +158,11 @@ class Structure:
         parts = [lin.a, lin.b, [bl.c_left], m_l[1:], [m_r[0], bl.c_right], m_r[1:]]
         if isinstance(model, SandwichModel):
             out = model.output_linear
-            if (out.na, out.nb) != (self.nr, self.ns):
-                raise DataError(f"the model's output block has orders ({out.na}, {out.nb}), not nr={self.nr}, ns={self.ns}")
+            if (out.na, out.nb, out.feedthrough) != (self.nr, self.ns, self.output_feedthrough):
+                raise DataError(
+                    f"the model's output block has orders ({out.na}, {out.nb}) and feedthrough {out.feedthrough}, "
+                    f"not nr={self.nr}, ns={self.ns}, output_feedthrough={self.output_feedthrough}"
+                )
             parts += [model.r[1:], model.s]
         return np.concatenate([np.asarray(p, dtype=np.float64) for p in parts])
 
@@ -142,15 +177,17 @@ class Structure:
         """The validated model of a physical vector (raises ModelError if it is not a valid
         backlash, e.g. branches that fall across the dead band)."""
         p = self.unpack(theta)
-        lin = LinearBlock(p.a, p.b)
+        lin = LinearBlock(p.a, p.b, feedthrough=self.feedthrough)
         bl = GeneralBacklash(p.c_left, p.c_right, p.m_left, p.m_right)
         if self.is_sandwich:
-            return SandwichModel(lin, bl, LinearBlock(p.r, p.s))
+            return SandwichModel(lin, bl, LinearBlock(p.r, p.s, feedthrough=self.output_feedthrough))
         return CascadeModel(lin, bl)
 
     def __str__(self) -> str:
         text = f"na={self.na}, nb={self.nb}, degree={self.degree}"
-        return text + (f", nr={self.nr}, ns={self.ns}" if self.is_sandwich else "")
+        text += ", feedthrough" if self.feedthrough else ""
+        text += f", nr={self.nr}, ns={self.ns}" if self.is_sandwich else ""
+        return text + (", output feedthrough" if self.output_feedthrough else "")
 
 
 def normalise(model: Model) -> Model:
@@ -164,8 +201,9 @@ def normalise(model: Model) -> Model:
     m_left, m_right = np.asarray(bl.m_left) * g, np.asarray(bl.m_right) * g
     k = float(m_left[0])  # x' = k x makes m'_L1 = 1
     powers = lambda m: m / k ** np.arange(1, len(m) + 1)  # noqa: E731
-    new_lin = LinearBlock(lin.a * k, lin.b)
+    new_lin = LinearBlock(lin.a * k, lin.b, feedthrough=lin.feedthrough)
     new_bl = GeneralBacklash(bl.c_left * k, bl.c_right * k, powers(m_left), powers(m_right))
     if isinstance(model, SandwichModel):
-        return SandwichModel(new_lin, new_bl, LinearBlock(model.r / g, model.s))
+        out = model.output_linear
+        return SandwichModel(new_lin, new_bl, LinearBlock(model.r / g, model.s, feedthrough=out.feedthrough))
     return CascadeModel(new_lin, new_bl)

@@ -1,6 +1,8 @@
 //! The linear dynamic block of eq (16):
-//!     x(t) = sum_{i=1}^{na} a_i u(t-i) - sum_{j=1}^{nb} b_j x(t-j).
-//! The sandwich's output block (eq 29, coefficients r and s) is the same block.
+//!     x(t) = sum_{i=1}^{na} a_i u(t-i) - sum_{j=1}^{nb} b_j x(t-j),
+//! optionally with a direct feedthrough a_0 u(t) (lag 0) added (not in the paper; real
+//! sampled systems often have one). The sandwich's output block (eq 29, coefficients r and s,
+//! feedthrough r_0) is the same block.
 
 use crate::error::{Error, Result};
 use crate::polynomial::{modulus, monic_roots, Root};
@@ -10,6 +12,8 @@ use crate::signal::check_coefficients;
 pub struct LinearBlock {
     a: Vec<f64>,
     b: Vec<f64>,
+    /// The feedthrough a_0 of u(t); None for eq (16) as the paper has it.
+    a0: Option<f64>,
 }
 
 /// The past of a linear block, most recent first: `u_past = [u(0), u(-1), ..]` (na values)
@@ -25,7 +29,27 @@ impl LinearBlock {
     pub fn new(a: Vec<f64>, b: Vec<f64>) -> Result<Self> {
         check_coefficients("a", &a, false)?;
         check_coefficients("b", &b, true)?;
-        Ok(LinearBlock { a, b })
+        Ok(LinearBlock { a, b, a0: None })
+    }
+
+    /// Eq (16) plus a direct feedthrough: x(t) = a_0 u(t) + sum_{i>=1} a_i u(t-i) - ...;
+    /// `a` (lags 1..na) still needs at least one coefficient (give 0.0 for none).
+    pub fn with_feedthrough(a0: f64, a: Vec<f64>, b: Vec<f64>) -> Result<Self> {
+        check_coefficients("a_0", &[a0], false)?;
+        let mut block = Self::new(a, b)?;
+        block.a0 = Some(a0);
+        Ok(block)
+    }
+
+    /// The feedthrough a_0 (None: no lag-0 term).
+    pub fn feedthrough(&self) -> Option<f64> {
+        self.a0
+    }
+
+    /// a_0 as a number (0 without feedthrough).
+    #[inline(always)]
+    pub fn a0(&self) -> f64 {
+        self.a0.unwrap_or(0.0)
     }
 
     pub fn a(&self) -> &[f64] {
@@ -94,7 +118,7 @@ impl LinearBlock {
     #[inline(always)]
     pub fn output_at(&self, u: &[f64], x: &[f64], t: usize, state: &LinearState) -> f64 {
         let (na, nb) = (self.a.len(), self.b.len());
-        let mut acc = 0.0;
+        let mut acc = self.a0() * u[t];
         if t >= na && t >= nb {
             for (ai, ui) in self.a.iter().zip(u[t - na..t].iter().rev()) {
                 acc += ai * ui;
@@ -203,6 +227,7 @@ impl RecursionUser for Outputs<'_> {
 
 /// Orders fixed at compile time: the loops unroll and the past stays in registers.
 struct Fixed<const NA: usize, const NB: usize> {
+    a0: f64,
     a: [f64; NA],
     b: [f64; NB],
     /// [u(t-1), u(t-2), ..] and [x(t-1), x(t-2), ..]
@@ -214,6 +239,7 @@ impl<const NA: usize, const NB: usize> Fixed<NA, NB> {
     /// None unless the block has exactly these orders (and the state fits them).
     fn new(block: &LinearBlock, state: &LinearState) -> Option<Self> {
         Some(Fixed {
+            a0: block.a0(),
             a: block.a.as_slice().try_into().ok()?,
             b: block.b.as_slice().try_into().ok()?,
             u_past: state.u_past.as_slice().try_into().ok()?,
@@ -234,7 +260,7 @@ fn push_front<const N: usize>(past: &mut [f64; N], v: f64) {
 impl<const NA: usize, const NB: usize> Recursion for Fixed<NA, NB> {
     #[inline(always)]
     fn next(&mut self, u_now: f64) -> f64 {
-        let mut acc = 0.0;
+        let mut acc = self.a0 * u_now; // +-0 without feedthrough: the sums below are unchanged
         for i in 0..NA {
             acc += self.a[i] * self.u_past[i];
         }
@@ -249,6 +275,7 @@ impl<const NA: usize, const NB: usize> Recursion for Fixed<NA, NB> {
 
 /// Any orders: the same sums over the coefficient vectors.
 struct Dynamic {
+    a0: f64,
     a: Vec<f64>,
     b: Vec<f64>,
     u_past: Vec<f64>,
@@ -258,6 +285,7 @@ struct Dynamic {
 impl Dynamic {
     fn new(block: &LinearBlock, state: &LinearState) -> Self {
         Dynamic {
+            a0: block.a0(),
             a: block.a.clone(),
             b: block.b.clone(),
             u_past: state.u_past.clone(),
@@ -276,7 +304,7 @@ fn push_front_slice(past: &mut [f64], v: f64) {
 
 impl Recursion for Dynamic {
     fn next(&mut self, u_now: f64) -> f64 {
-        let mut acc = 0.0;
+        let mut acc = self.a0 * u_now;
         for (ai, ui) in self.a.iter().zip(&self.u_past) {
             acc += ai * ui;
         }
@@ -407,5 +435,50 @@ mod tests {
             g.simulate(&[f64::INFINITY], &g.rest_state()),
             Err(Error::Data(_))
         ));
+    }
+    #[test]
+    fn feedthrough_adds_a0_u_now_in_every_recursion() {
+        let u: Vec<f64> = (0..40)
+            .map(|k| ((k * 37 % 11) as f64 - 5.0) / 5.0)
+            .collect();
+        // orders with a fixed recursion (2, 2) and the dynamic one (3, 3)
+        for (a, b) in [
+            (vec![0.7, 0.5], vec![-0.2, 0.35]),
+            (vec![0.3, 0.2, 0.1], vec![-0.5, 0.2, 0.05]),
+        ] {
+            let g = LinearBlock::with_feedthrough(0.4, a.clone(), b.clone()).unwrap();
+            assert_eq!(g.feedthrough(), Some(0.4));
+            let state = LinearState {
+                u_past: vec![0.3; a.len()],
+                x_past: vec![-0.2; b.len()],
+            };
+            let x = g.simulate(&u, &state).unwrap();
+            // hand loop of x(t) = a0 u(t) + sum a_i u(t-i) - sum b_j x(t-j)
+            let mut want = Vec::new();
+            for t in 0..u.len() {
+                let past = |s: &Vec<f64>, k: usize, before: &Vec<f64>| {
+                    if k <= t {
+                        s[t - k]
+                    } else {
+                        before[k - t - 1]
+                    }
+                };
+                let mut v = 0.4 * u[t];
+                for (i, ai) in a.iter().enumerate() {
+                    v += ai * past(&u, i + 1, &state.u_past);
+                }
+                for (j, bj) in b.iter().enumerate() {
+                    v -= bj * past(&want, j + 1, &state.x_past);
+                }
+                want.push(v);
+                assert!((g.output_at(&u, &want, t, &state) - v).abs() < 1e-14);
+            }
+            for (p, q) in x.iter().zip(&want) {
+                assert!((p - q).abs() < 1e-13, "{p} vs {q}");
+            }
+        }
+        assert!(LinearBlock::with_feedthrough(f64::NAN, vec![1.0], vec![]).is_err());
+        assert!(LinearBlock::with_feedthrough(1.0, vec![], vec![]).is_err());
+        assert_eq!(example1().feedthrough(), None);
     }
 }

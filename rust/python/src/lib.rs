@@ -83,11 +83,16 @@ struct PyLinearBlock(core::LinearBlock);
 
 #[pymethods]
 impl PyLinearBlock {
+    /// `a0`: the feedthrough a_0 of u(t), None for eq (16) as the paper has it.
     #[new]
-    fn new(py: Python<'_>, a: Vec<f64>, b: Vec<f64>) -> PyResult<Self> {
-        core::LinearBlock::new(a, b)
-            .map(Self)
-            .map_err(|e| to_py_err(py, e))
+    #[pyo3(signature = (a, b, a0=None))]
+    fn new(py: Python<'_>, a: Vec<f64>, b: Vec<f64>, a0: Option<f64>) -> PyResult<Self> {
+        match a0 {
+            None => core::LinearBlock::new(a, b),
+            Some(a0) => core::LinearBlock::with_feedthrough(a0, a, b),
+        }
+        .map(Self)
+        .map_err(|e| to_py_err(py, e))
     }
 
     /// Poles as (re, im) pairs.
