@@ -20,6 +20,7 @@ import numpy as np
 
 from . import __version__
 from .errors import BacklashIdError, DataError
+from .models import SandwichModel
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -114,12 +115,17 @@ def _select(data: Path | None, input_: str, output: str, split: float | None, es
     )
 
 
-def _fit_model(kind: str, u: np.ndarray, y: np.ndarray, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int) -> Any:
+def _fit_model(kind: str, u: np.ndarray, y: np.ndarray, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int,
+               max_iter: int, feedthrough: bool) -> Any:
     from .identification import fit_cascade, fit_sandwich
+    from .wiener_hammerstein import fit_wiener_hammerstein
 
     if kind == "cascade":
-        return fit_cascade(u, y, na=na, nb=nb, degree=degree, warmup=warmup, max_iter=max_iter)
-    return fit_sandwich(u, y, na=na, nb=nb, nr=nr, ns=ns, degree=degree, warmup=warmup, max_iter=max_iter)
+        return fit_cascade(u, y, na=na, nb=nb, degree=degree, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough)
+    if kind == "sandwich":
+        return fit_sandwich(u, y, na=na, nb=nb, nr=nr, ns=ns, degree=degree, warmup=warmup, max_iter=max_iter,
+                            feedthrough=feedthrough, output_feedthrough=feedthrough)
+    return fit_wiener_hammerstein(u, y, degree=degree, orders=(nb, ns), warmup=warmup, feedthrough=feedthrough)
 
 
 def _metrics_dict(metrics: Any) -> dict[str, Any]:
@@ -133,14 +139,17 @@ def _write_json(path: Path, payload: dict[str, Any]) -> None:
 
 def _model_options(command: F) -> F:
     options = [
-        click.option("--model", "kind", type=click.Choice(["cascade", "sandwich"]), default="cascade", show_default=True, help="cascade: linear -> backlash; sandwich: linear -> backlash -> linear."),
+        click.option("--model", "kind", type=click.Choice(["cascade", "sandwich", "wiener-hammerstein"]), default="cascade", show_default=True,
+                     help="cascade: linear -> backlash; sandwich: linear -> backlash -> linear; wiener-hammerstein: a sandwich "
+                          "whose middle block is a static polynomial of --degree (zero-width, tied branches), G1 and G2 of orders --nb and --ns."),
+        click.option("--feedthrough", is_flag=True, help="Give the linear blocks a direct (lag-0) term a_0 u(t) (and r_0 w(t))."),
         click.option("--na", default=2, show_default=True, help="Input linear block: number of a (input) coefficients."),
         click.option("--nb", default=2, show_default=True, help="Input linear block: number of b (feedback) coefficients."),
         click.option("--nr", default=2, show_default=True, help="Sandwich output block: number of r coefficients (r1 = 1)."),
         click.option("--ns", default=2, show_default=True, help="Sandwich output block: number of s coefficients."),
         click.option("--degree", default=3, show_default=True, help="Polynomial degree of the backlash branches."),
         click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="Initial samples left out of the fit criterion (unknown initial state)."),
-        click.option("--max-iter", default=50, show_default=True, type=click.IntRange(min=2), help="Iterations of the paper's algorithm before the refinement."),
+        click.option("--max-iter", default=50, show_default=True, type=click.IntRange(min=2), help="Iterations of the paper's algorithm before the refinement (cascade, sandwich)."),
     ]
     for option in reversed(options):
         command = option(command)
@@ -157,7 +166,7 @@ def _model_options(command: F) -> F:
 def fit(data: Path | None, input_: str, output: str, split: float | None, estimation: str | None, validation: str | None,
         estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
         input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
-        kind: str, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
+        kind: str, feedthrough: bool, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
         skip: int | None, json_path: Path | None, plots_dir: Path | None) -> None:
     """Identify a cascade or sandwich model from logged input/output data.
 
@@ -175,7 +184,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         scaling = _scaling(sel.estimation, scale, dict(input_offset=input_offset, input_scale=input_scale, output_offset=output_offset, output_scale=output_scale))
         u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
         stage(f"fitting the {kind}")
-        result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter)
+        result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough)
         stage("computing metrics")
         skip = warmup if skip is None else skip
         metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, skip=max(skip, warmup))}
@@ -198,7 +207,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
             "model": result.model.to_dict(),
             "scaling": scaling.to_dict(),
             "parameters": result.parameters,
-            "standard_errors": result.standard_errors,
+            "standard_errors": getattr(result, "standard_errors", None),  # none for wiener-hammerstein
             "metrics": {name: _metrics_dict(m) for name, m in metrics.items()},
             "metric_labels": METRIC_LABELS,
             "data": {**sel.description, "skip": skip},
@@ -219,23 +228,25 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, skip: int) -> l
     units = "" if scaling.is_identity else " (model units)"
     u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
     sim = result.model.simulate(u_m, internals=True)
-    ax = plot_characteristic(result.model.backlash, sim.x, y_m if not result.structure.is_sandwich else sim.y,
+    is_sandwich = isinstance(result.model, SandwichModel)
+    ax = plot_characteristic(result.model.backlash, sim.x, sim.y if is_sandwich else y_m,
                              title="Estimated branches over the estimation data" + units)
-    if not result.structure.is_sandwich:
+    if not is_sandwich:
         ax.collections[0].set_label("(simulated x(t), measured y(t))")
         ax.legend(loc="upper left")
     paths = [_save(plt, ax.figure, out / "characteristic.png")]
-    names = result.names
-    groups = {
-        "linear block (a, b)": [n for n in names if n[0] in "ab"],
-        "backlash (c, m)": [n for n in names if n[0] in "cm"],
-        "output block (r, s)": [n for n in names if n[0] in "rs"],
-    }
-    groups = {k: v for k, v in groups.items() if v}
-    fig, axes = plt.subplots(1, len(groups), figsize=(5.5 * len(groups), 4))
-    for ax, (title, shown) in zip(np.atleast_1d(axes), groups.items()):
-        plot_trajectories(result.history, names, shown, final=result.parameters, ax=ax, title=f"{title}; stars: final estimate")
-    paths.append(_save(plt, fig, out / "iterations.png"))
+    if hasattr(result, "history"):  # the iterative algorithms (not the Wiener-Hammerstein fit)
+        names = result.names
+        groups = {
+            "linear block (a, b)": [n for n in names if n[0] in "ab"],
+            "backlash (c, m)": [n for n in names if n[0] in "cm"],
+            "output block (r, s)": [n for n in names if n[0] in "rs"],
+        }
+        groups = {k: v for k, v in groups.items() if v}
+        fig, axes = plt.subplots(1, len(groups), figsize=(5.5 * len(groups), 4))
+        for ax, (title, shown) in zip(np.atleast_1d(axes), groups.items()):
+            plot_trajectories(result.history, names, shown, final=result.parameters, ax=ax, title=f"{title}; stars: final estimate")
+        paths.append(_save(plt, fig, out / "iterations.png"))
     record, which = (sel.validation, "validation") if sel.validation is not None else (sel.estimation, "estimation")
     skip_here = skip if which == "validation" else max(skip, result.warmup)
     y_sim = simulate_scaled(result.model, scaling, record.u)
@@ -346,7 +357,7 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
         val = (scaling.input_to_model(sel.validation.u), scaling.output_to_model(sel.validation.y))
         if fit_cascade:
             stage("fitting the cascade")
-            model = _fit_model("cascade", est[0], est[1], na, nb, 0, 0, degree, warmup, 50).model
+            model = _fit_model("cascade", est[0], est[1], na, nb, 0, 0, degree, warmup, 50, False).model
         stage("diagnosing")
         from .diagnosis import diagnose as run_diagnosis
 
