@@ -4,6 +4,7 @@ implementations of the paper's equations, written from the paper, not from the l
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
@@ -23,6 +24,19 @@ settings.register_profile(
     print_blob=True,
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "backlashid"))
+
+def _shared_data() -> Path:
+    """The measured benchmark records, read in place (never copied into the repository):
+    $BACKLASHID_DATA, else shared/data beside the repository or one of its parents."""
+    if "BACKLASHID_DATA" in os.environ:
+        return Path(os.environ["BACKLASHID_DATA"])
+    for parent in Path(__file__).resolve().parents:
+        if (parent / "shared" / "data").is_dir():
+            return parent / "shared" / "data"
+    return Path("/work/shared/data")
+
+
+SHARED_DATA = _shared_data()
 
 X_MAX = 2.0  # inputs x of the backlash are drawn from [-X_MAX, X_MAX]
 

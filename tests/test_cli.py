@@ -16,8 +16,9 @@ from scipy.io import savemat
 import backlashid as bx
 from backlashid.cli import main
 from backlashid.structure import Structure
+from conftest import SHARED_DATA
 
-SHARED = Path("/work/shared/data")
+SHARED = SHARED_DATA
 PNG = b"\x89PNG\r\n\x1a\n"
 
 

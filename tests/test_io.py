@@ -18,8 +18,9 @@ from backlashid.io import (
     select_records,
     split_fraction,
 )
+from conftest import SHARED_DATA
 
-SHARED = Path("/work/shared/data")
+SHARED = SHARED_DATA
 
 
 @pytest.fixture

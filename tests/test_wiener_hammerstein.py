@@ -10,8 +10,9 @@ from scipy.signal import lfilter
 
 import backlashid as bid
 from backlashid import DataError, SandwichModel, fit_wiener_hammerstein, wiener_hammerstein_model
+from conftest import SHARED_DATA
 
-DATA = Path("/work/shared/data/wiener_hammerstein_2009/wh2009.npz")
+DATA = SHARED_DATA / "wiener_hammerstein_2009" / "wh2009.npz"
 
 # planted system: G1 and G2 of order 2, f(x) = x + 0.4 x^2 - 0.3 x^3 (monotone on the range used)
 A, B = [0.3, 0.15], [-1.1, 0.4]
@@ -75,7 +76,7 @@ def test_recovers_a_planted_wiener_hammerstein_system_with_feedthrough():
     np.testing.assert_allclose(fit.model.input_linear.a / k, [0.2, 0.3, 0.15], rtol=1e-6)
 
 
-@pytest.mark.skipif(not DATA.exists(), reason="the SYSID 2009 Wiener-Hammerstein data are not in /work/shared/data")
+@pytest.mark.skipif(not DATA.exists(), reason="the SYSID 2009 Wiener-Hammerstein data are not in shared/data")
 def test_benchmark_slice_beats_the_linear_baseline_tenfold():
     """20 000 training samples, degree 8: the WH model's free-run test error is at least 10x
     below the linear baseline's (about 43 mV) on the standard test split."""
