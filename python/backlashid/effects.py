@@ -20,7 +20,7 @@ from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import optimize, stats
+from scipy import stats
 
 from . import _core
 from ._convert import as_signal
@@ -196,11 +196,54 @@ class _Problem:
         except BacklashIdError:
             return np.full(self.y.size - self.warmup, 1e3 * (np.std(self.y) + 1.0))
         r = (self.y - y_hat)[self.warmup :]
-        return r if np.all(np.isfinite(r)) else np.full(r.size, 1e3 * (np.std(self.y) + 1.0))
+        big = 1e3 * (np.std(self.y) + 1.0)
+        return r if np.all(np.abs(r) < 1e3 * big) else np.full(r.size, big)
 
     def cost(self, theta: Array, kwargs: dict[str, Any]) -> float:
         r = self.residual(theta, kwargs)
         return float(r @ r)
+
+
+def _levenberg_marquardt(fun: Callable[[Array], Array], x0: Array, lower: Array, upper: Array, max_iter: int) -> Array:
+    """Levenberg-Marquardt with a forward-difference Jacobian, Marquardt's scaling and steps
+    projected onto the bounds. Small p (<= ~20), long residual vectors: the normal equations
+    J^T J (p x p) are cheap where a dense SVD of J is not."""
+    x = np.clip(x0, lower, upper)
+    r = fun(x)
+    cost = float(r @ r)
+    lam = 1e-3
+    for _ in range(max_iter):
+        h = 1e-6 * np.maximum(np.abs(x), 1e-2)
+        h = np.where(x + h > upper, -h, h)
+        jac = np.empty((r.size, x.size))
+        for i in range(x.size):
+            xi = x.copy()
+            xi[i] += h[i]
+            jac[:, i] = (fun(xi) - r) / h[i]
+        a = jac.T @ jac
+        g = jac.T @ r
+        d = np.diag(a).copy()
+        d[d <= 0] = 1.0
+        accepted = False
+        for _ in range(8):
+            try:
+                step = -np.linalg.solve(a + lam * np.diag(d), g)
+            except np.linalg.LinAlgError:
+                lam *= 10
+                continue
+            x_new = np.clip(x + step, lower, upper)
+            r_new = fun(x_new)
+            c_new = float(r_new @ r_new)
+            if c_new < cost:
+                accepted = True
+                done = cost - c_new < 1e-8 * cost
+                x, r, cost = x_new, r_new, c_new
+                lam = max(lam / 3, 1e-9)
+                break
+            lam *= 4
+        if not accepted or done:
+            break
+    return x
 
 
 def _refit(
@@ -212,7 +255,7 @@ def _refit(
     ub: Array,
     effect: str,
     fixed: dict[str, float] | None = None,
-    max_nfev: int = 60,
+    max_iter: int = 30,
 ) -> tuple[Array, dict[str, float], float]:
     """Output-error least squares over the nominal parameters and the effect's (continuous)
     parameters ``names`` from (theta0, e0), within bounds; ``fixed`` effect parameters held."""
@@ -226,21 +269,31 @@ def _refit(
     lower = np.concatenate([np.full(n, -np.inf), lb])
     upper = np.concatenate([np.full(n, np.inf), ub])
     fun = lambda p: prob.residual(p[:n], _effect_kwargs(effect, params(p)))  # noqa: E731
-    try:
-        sol = optimize.least_squares(fun, x0, bounds=(lower, upper), x_scale="jac", max_nfev=max_nfev, diff_step=1e-6)
-        p = sol.x
-    except (ValueError, np.linalg.LinAlgError):
-        p = x0
+    p = _levenberg_marquardt(fun, x0, lower, upper, max_iter)
     return p[:n], params(p), prob.cost(p[:n], _effect_kwargs(effect, params(p)))
 
 
-def _best(results: list[tuple[Array, dict[str, float], float]]) -> tuple[Array, dict[str, float], float]:
-    return min(results, key=lambda r: r[2])
+def _multi_start(
+    prob: _Problem,
+    theta0: Array,
+    names: tuple[str, ...],
+    starts: list[tuple[Array, dict[str, float]]],
+    lb: Array,
+    ub: Array,
+    effect: str,
+) -> tuple[Array, dict[str, float], float]:
+    """A short refit from each start (effect values, fixed parameters), then the best one
+    refitted to convergence."""
+    short = [(_refit(prob, theta0, names, e0, lb, ub, effect, fixed, max_iter=5), fixed) for e0, fixed in starts]
+    (theta, params, _), fixed = min(short, key=lambda s: s[0][2])
+    e = np.array([params[k] for k in names])
+    return _refit(prob, theta, names, e, lb, ub, effect, fixed)
 
 
 def _fit_dead_time(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, float], float]:
     # d is discrete: refit the nominal parameters at each d, keep the best
-    return _best([_refit(prob, theta0, (), np.zeros(0), np.zeros(0), np.zeros(0), "dead_time", {"d": d}) for d in range(1, MAX_DELAY + 1)])
+    none = np.zeros(0)
+    return _multi_start(prob, theta0, (), [(none, {"d": d}) for d in range(1, MAX_DELAY + 1)], none, none, "dead_time")
 
 
 def _fit_saturation(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, float], float]:
@@ -255,13 +308,13 @@ def _fit_saturation(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, flo
         e0 = e0 + np.array([1e-9, -1e-9])
         scored.append((prob.cost(theta0, _effect_kwargs("saturation", {"lo": e0[0], "hi": e0[1]})), tuple(e0)))
     scored.sort()
-    return _best([_refit(prob, theta0, ("lo", "hi"), np.array(e0), lb, ub, "saturation") for _, e0 in scored[:2]])
+    return _multi_start(prob, theta0, ("lo", "hi"), [(np.array(e0), {}) for _, e0 in scored[:3]], lb, ub, "saturation")
 
 
 def _fit_friction(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, float], float]:
     s = float(np.std(prob.u))
     lb, ub = np.zeros(2), np.array([2.0 * s + 1e-12, 2.0])
-    return _best([_refit(prob, theta0, ("F_c", "F_v"), np.array([fc * s, 0.0]), lb, ub, "friction") for fc in (0.02, 0.15)])
+    return _multi_start(prob, theta0, ("F_c", "F_v"), [(np.array([fc * s, 0.0]), {}) for fc in (0.02, 0.15)], lb, ub, "friction")
 
 
 def _fit_smooth(effect: str, bound: float) -> Callable[[_Problem, Array], tuple[Array, dict[str, float], float]]:
@@ -288,7 +341,7 @@ def _fit_compliance(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, flo
             k = float(np.clip((d @ r0) / max(float(d @ d), 1e-300), 0.0, 1.5))
             scored.append((float(np.sum((r0 - k * d) ** 2)), (max(k, 1e-3), float(omega), zeta)))
     scored.sort()
-    return _best([_refit(prob, theta0, names, np.array(e0), lb, ub, "compliance") for _, e0 in scored[:2]])
+    return _multi_start(prob, theta0, names, [(np.array(e0), {}) for _, e0 in scored[:3]], lb, ub, "compliance")
 
 
 def _fit_quantization(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, float], float]:
@@ -345,7 +398,7 @@ def _fit_bigger(prob: _Problem, theta0: Array, bigger: Structure, effect: str) -
     old = dict(zip(s.names, theta0))
     start = np.array([old.get(name, 0.0) for name in bigger.names])
     big = _Problem(bigger, prob.u, prob.y, prob.warmup, prob.t0)
-    theta, _, cost = _refit(big, start, (), np.zeros(0), np.zeros(0), np.zeros(0), effect, max_nfev=80)
+    theta, _, cost = _refit(big, start, (), np.zeros(0), np.zeros(0), np.zeros(0), effect, max_iter=40)
     return bigger, theta, cost
 
 
