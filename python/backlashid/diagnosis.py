@@ -72,6 +72,13 @@ def _record(pair: Any, name: str) -> tuple[Array, Array]:
     y = as_signal(pair[1], f"{name}[1] (y)").ravel()
     if u.shape != y.shape:
         raise DataError(f"{name}: u has {u.size} samples and y {y.size}: give the input and output of one record")
+    for what, s in (("u", u), ("y", y)):
+        bad = np.flatnonzero(~np.isfinite(s))
+        if bad.size:
+            raise DataError(
+                f"{name}: {what} holds {bad.size} non-finite values (first at sample {bad[0]}): "
+                "remove or interpolate NaN/inf samples before diagnosing"
+            )
     return u, y
 
 

@@ -429,6 +429,8 @@ def _check(model: CascadeModel, u_est: ArrayLike, y_est: ArrayLike, warmup: int)
     y = as_signal(y_est, "y_est").ravel()
     if u.shape != y.shape:
         raise DataError(f"u_est has {u.size} samples and y_est {y.size}: give one record (same length)")
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
+        raise DataError("u_est or y_est holds NaN or inf: remove or interpolate those samples")
     if not isinstance(warmup, (int, np.integer)) or warmup < 0:
         raise DataError(f"warmup = {warmup!r}: give a whole number of samples >= 0")
     if u.size - warmup < 50:
