@@ -13,7 +13,9 @@
 3. Decision: "none" if neither a candidate nor a black-box correction of the residual improves
    the validation error significantly; else the significant deterministic candidate of lowest
    BIC if it closes at least half of the gap; else colored_noise if its noise model closes at
-   least half and the residual is not explained by the input; else "unexplained".
+   least half and the residual is not explained by the input (a cross-validated black box of
+   input features) nor modulated by the model's output (a drifting gain: prewhitened F-test);
+   else "unexplained".
 
 Noise floor when ``noise_std`` is None: the validation MSE of the best model of the output error
 we can fit without knowing the truth, i.e. the smallest of (a) a black-box linear regression
@@ -135,6 +137,33 @@ def _black_box(model, u_e, y_e, ynom_e, u_v, y_v, ynom_v, warmup, n_est, with_pa
     return r_v[warmup:] - (a_v / scale) @ coef
 
 
+def _modulation_p(residual: Array, y_nom: Array, phi: Array, order: int = 4) -> float:
+    """Is the residual a slowly modulated copy of the model's output (a drifting gain), rather
+    than noise independent of the input? F-test of the residual on y_nom(t) P_k(tau), k = 1..order
+    (Legendre polynomials over the record), both prewhitened by the AR noise model A(q) so that
+    colored noise leaves the test valid (GLS)."""
+    n = residual.size
+    tau = np.linspace(-1.0, 1.0, n)
+    basis = np.polynomial.legendre.legvander(tau, order)[:, 1:]
+    z = basis * y_nom[:, None]
+
+    def whiten(s: Array) -> Array:
+        out = s.copy()
+        for k, c in enumerate(phi, 1):
+            out[k:] -= c * s[:-k] if s.ndim == 1 else c * s[:-k]
+        return out[phi.size :]
+
+    e, zw = whiten(residual), whiten(z)
+    zw = np.column_stack([zw, np.ones(e.size)])
+    coef, *_ = np.linalg.lstsq(zw, e, rcond=None)
+    rss1 = float(np.sum((e - zw @ coef) ** 2))
+    rss0 = float(np.sum((e - e.mean()) ** 2))
+    m, dof = order, e.size - order - 1
+    if rss1 <= 0.0 or dof <= 0:
+        return 1.0
+    return float(stats.f.sf(((rss0 - rss1) / m) / (rss1 / dof), m, dof))
+
+
 def _signature_removed(residual: Array, change: Array) -> bool:
     """The candidate's residual no longer correlates with the change the effect makes."""
     nc = float(np.linalg.norm(change))
@@ -250,6 +279,8 @@ def diagnose(
     else:
         floor = min([float(r_bb @ r_bb) / n, mse0] + [s.mse for s in scored.values()])
         estimated = True
+    phi = scored["colored_noise"].model.ar if "colored_noise" in scored else np.zeros(0)
+    p_modulation = _modulation_p(r0, ynom_v[warmup:], phi)
     gap = max(mse0 - floor, 0.0)
     gap_closed = {e: (mse0 - s.mse) / gap if gap > 0 else 0.0 for e, s in scored.items()}
 
@@ -263,7 +294,12 @@ def diagnose(
         best = "unexplained"
         if deterministic and gap_closed[deterministic[0].effect] >= CLOSE_ENOUGH:
             best = deterministic[0].effect
-        elif "colored_noise" in significant and gap_closed["colored_noise"] >= CLOSE_ENOUGH and p_input >= level:
+        elif (
+            "colored_noise" in significant
+            and gap_closed["colored_noise"] >= CLOSE_ENOUGH
+            and p_input >= level
+            and p_modulation >= level
+        ):
             best = "colored_noise"
 
     ranking = []
@@ -293,6 +329,7 @@ def diagnose(
         screening=screening,
         black_box_p_value=p_black_box,
         input_p_value=p_input,
+        modulation_p_value=p_modulation,
         significance_level=level,
     )
     if _HAVE_ANALYSIS:
