@@ -12,7 +12,8 @@
    extra parameters.
 3. Decision: "none" if neither a candidate nor a black-box correction of the residual improves
    the validation error significantly; else the significant deterministic candidate of lowest
-   BIC if it closes at least half of the gap; else colored_noise if its noise model closes at
+   BIC if it closes at least half of the gap (and, when the nominal residual is a slowly
+   modulated copy of the output, leaves no such modulation in its own residual); else colored_noise if its noise model closes at
    least half and the residual is not explained by the input (a cross-validated black box of
    input features) nor modulated by the model's output (a drifting gain: prewhitened F-test);
    else "unexplained".
@@ -292,8 +293,13 @@ def diagnose(
     best = "none"
     if gap_significant and gap > 0:
         best = "unexplained"
-        if deterministic and gap_closed[deterministic[0].effect] >= CLOSE_ENOUGH:
-            best = deterministic[0].effect
+        closing = [s for s in deterministic if gap_closed[s.effect] >= CLOSE_ENOUGH]
+        if closing and p_modulation < level:
+            # the nominal residual is a slowly modulated copy of the output: the effect named
+            # must leave no such modulation behind (a drifting gain is no width drift)
+            closing = [s for s in closing if _modulation_p(s.residual, ynom_v[warmup:], phi) >= level]
+        if closing and closing[0] is deterministic[0]:
+            best = closing[0].effect
         elif (
             "colored_noise" in significant
             and gap_closed["colored_noise"] >= CLOSE_ENOUGH
