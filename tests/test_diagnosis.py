@@ -96,3 +96,34 @@ def test_caller_arrays_are_not_mutated(clean) -> None:
     bx.diagnose(model, est, val, candidates=["dead_time"])
     for a, b in zip((*est, *val), copies):
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_drifting_output_gain_is_unexplained_not_misattributed() -> None:
+    # outside the catalogue: y * (1 + 0.15 sin(pi t / T)) over the continuous record
+    m = bx.example1()
+    rng = np.random.default_rng(14)
+    u = rng.uniform(-1.5, 1.5, 2 * N)
+    gain = 1.0 + 0.15 * np.sin(np.pi * np.arange(2 * N) / (2 * N))
+    y = m.simulate(u) * gain + 0.03 * rng.standard_normal(2 * N)
+    est, val = (u[:N], y[:N]), (u[N:], y[N:])
+    model = bx.fit_cascade(*est, 2, 2, 3, warmup=50).model
+    assert bx.diagnose(model, est, val).best_effect == "unexplained"
+
+
+def test_colored_noise_is_named_on_prediction_error() -> None:
+    m = bx.example1()
+    rng = np.random.default_rng(15)
+    u = rng.uniform(-1.5, 1.5, 2 * N)
+    c = np.zeros(2 * N)
+    w = 0.05 * rng.standard_normal(2 * N)
+    for t in range(1, 2 * N):
+        c[t] = 0.9 * c[t - 1] + w[t]
+    y = m.simulate(u) + c + 0.02 * rng.standard_normal(2 * N)
+    est, val = (u[:N], y[:N]), (u[N:], y[N:])
+    model = bx.fit_cascade(*est, 2, 2, 3, warmup=50).model
+    report = bx.diagnose(model, est, val)
+    assert report.best_effect == "colored_noise"
+    best = report.ranking[0]
+    # AR(1) plus white noise is ARMA(1, 1): judge the prediction, not phi_1 alone
+    assert best.validation_rmse < 0.75 * report.nominal_validation_rmse
+    assert 0.8 < sum(best.params.values()) < 0.95
