@@ -5,13 +5,19 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ._convert import as_signal
 from .backlash import GeneralBacklash
-from .errors import BacklashIdError
+from .errors import BacklashIdError, DataError
 
-__all__ = ["plot_characteristic"]
+__all__ = [
+    "plot_branches_comparison",
+    "plot_characteristic",
+    "plot_residuals",
+    "plot_simulation",
+    "plot_trajectories",
+]
 
 
 def _pyplot() -> Any:
@@ -95,11 +101,13 @@ def plot_trajectories(
     shown: list[str],
     *,
     truth: dict[str, float] | None = None,
+    final: dict[str, float] | None = None,
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
     """Parameter estimates over the iterations (the paper's Figs 5, 6, 8-10); dotted lines
-    mark the true values when given."""
+    mark the true values when given, stars the ``final`` estimates (after the refinement) one
+    step after the last iteration."""
     plt = _pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 4))
@@ -110,6 +118,8 @@ def plot_trajectories(
         ax.plot(its, h[:, names.index(name)], "-o", ms=3, color=color, label=name)
         if truth is not None:
             ax.axhline(truth[name], color=color, ls=":", lw=1)
+        if final is not None:
+            ax.plot([len(h) + 1], [final[name]], "*", ms=10, color=color)
     from matplotlib.ticker import MaxNLocator
 
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -119,3 +129,88 @@ def plot_trajectories(
     ax.legend(loc="best", fontsize="small", ncol=2)
     ax.grid(alpha=0.3)
     return ax
+
+
+def plot_simulation(
+    y: ArrayLike,
+    y_sim: ArrayLike,
+    *,
+    skip: int = 0,
+    dt: float = 1.0,
+    ylabel: str = "output",
+    ax: Any = None,
+    title: str | None = None,
+) -> Any:
+    """Measured output against the free-run simulation, with the fit % (from sample ``skip``
+    on; the skipped transient is shaded). ``dt`` scales the time axis. Returns the axes."""
+    from .metrics import fit_percent, rmse
+
+    plt = _pyplot()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(10, 3.8))
+    ys, sims = as_signal(y, "y").ravel(), as_signal(y_sim, "y_sim").ravel()
+    t = np.arange(len(ys)) * dt
+    fit = fit_percent(ys, sims, skip=skip)
+    err = rmse(ys, sims, skip=skip)
+    ax.plot(t, ys, color="0.3", lw=1, label="measured")
+    ax.plot(t, sims, color="C3", lw=1, label=f"simulated (free run): fit {fit:.1f} %, RMSE {err:.4g}")
+    if skip:
+        ax.axvspan(t[0], t[skip - 1], color="0.9", zorder=0, label=f"skipped transient ({skip} samples)")
+    ax.set_xlabel("time" if dt != 1.0 else "sample")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title or "Measured and simulated output")
+    ax.legend(loc="upper right", fontsize="small")
+    ax.grid(alpha=0.3)
+    return ax
+
+
+def _correlation(a: NDArray[np.float64], b: NDArray[np.float64], lags: NDArray[np.int_]) -> NDArray[np.float64]:
+    """Normalised cross-correlation r_ab(k) = sum a(t) b(t - k) / (N std a std b)."""
+    a, b = a - a.mean(), b - b.mean()
+    n, scale = len(a), len(a) * a.std() * b.std()
+    if scale == 0.0:
+        return np.zeros(len(lags))
+    return np.array([np.dot(a[k:], b[: n - k]) if k >= 0 else np.dot(a[: n + k], b[-k:]) for k in lags]) / scale
+
+
+def plot_residuals(
+    residual: ArrayLike,
+    u: ArrayLike,
+    *,
+    max_lag: int = 40,
+    fig: Any = None,
+    title: str | None = None,
+) -> Any:
+    """Residual diagnostics: the residual over time, its histogram, its autocorrelation and
+    its cross-correlation with the input, with the 95 % bounds +-1.96/sqrt(N) of a white
+    residual independent of the input. Returns the figure."""
+    plt = _pyplot()
+    e, us = as_signal(residual, "residual").ravel(), as_signal(u, "u").ravel()
+    if e.shape != us.shape:
+        raise DataError(f"residual has {e.size} samples and u {us.size}: give one record")
+    if fig is None:
+        fig = plt.figure(figsize=(11, 6.5))
+    axes = fig.subplots(2, 2)
+    n = len(e)
+    bound = 1.96 / np.sqrt(n)
+    axes[0, 0].plot(e, lw=0.7, color="C0")
+    axes[0, 0].set_title(f"residual (RMS {np.sqrt(np.mean(e ** 2)):.4g})")
+    axes[0, 0].set_xlabel("sample")
+    axes[0, 1].hist(e, bins=50, color="C0", alpha=0.8)
+    axes[0, 1].set_title("residual histogram")
+    lags = np.arange(0, max_lag + 1)
+    auto = _correlation(e, e, lags)
+    axes[1, 0].stem(lags, auto, basefmt=" ")
+    axes[1, 0].set_title("residual autocorrelation")
+    cross_lags = np.arange(-max_lag, max_lag + 1)
+    axes[1, 1].stem(cross_lags, _correlation(e, us, cross_lags), basefmt=" ")
+    axes[1, 1].set_title("cross-correlation residual / input")
+    for ax in (axes[1, 0], axes[1, 1]):
+        ax.axhspan(-bound, bound, color="C2", alpha=0.2, label="95 % bounds (white, independent)")
+        ax.set_xlabel("lag")
+        ax.legend(loc="upper right", fontsize="small")
+    for ax in axes.flat:
+        ax.grid(alpha=0.3)
+    fig.suptitle(title or "Residual diagnostics (free-run simulation error)")
+    fig.tight_layout()
+    return fig
