@@ -58,17 +58,11 @@ CLOSE_ENOUGH = 0.5  # a candidate must close at least this fraction of the gap
 HAC_LAGS = 20  # Newey-West lags of the paired test
 SIGNATURE_Z = 3.0  # |z| of the residual against the effect's change after augmentation
 
-try:  # helper C's analysis modules (branch residuals)
-    from .report import Candidate, DiagnosisReport
-    from .residual_tests import residual_tests
-    from .regimes import regime_shares
-    from .spectral import frequency_analysis
-    from .drift import time_analysis
-
-    _HAVE_ANALYSIS = True
-except ImportError:  # pragma: no cover - minimal private fallback until that branch is merged
-    _HAVE_ANALYSIS = False
-    from ._diagnosis_fallback import Candidate, DiagnosisReport  # type: ignore[assignment]
+from .drift import time_analysis
+from .regimes import regime_shares
+from .report import Candidate, DiagnosisReport
+from .residual_tests import residual_tests
+from .spectral import frequency_analysis
 
 Array = NDArray[np.float64]
 
@@ -233,6 +227,7 @@ def diagnose(
     if noise_std is not None and not (np.isfinite(noise_std) and noise_std > 0):
         raise DataError(f"noise_std = {noise_std!r}: give the noise standard deviation (> 0) or None to estimate it")
     n_min = min(u_e.size, u_v.size)
+    warmup_given = warmup is not None
     if warmup is None:
         warmup = default_warmup(model, n_min)
     elif not isinstance(warmup, (int, np.integer)) or not 0 <= warmup <= n_min - 200:
@@ -337,21 +332,25 @@ def diagnose(
 
     noise = math.sqrt(floor)
     residual_full = y_v - ynom_v
-    extra = dict(
+    details = dict(
         screening=screening,
         black_box_p_value=p_black_box,
         input_p_value=p_input,
         modulation_p_value=p_modulation,
         significance_level=level,
+        noise_floor=(
+            "given noise_std"
+            if not estimated
+            else "estimated: lowest validation MSE of a cross-validated black-box residual model and the refitted candidates"
+        ),
+        warmup_rule="given" if warmup_given else "slowest pole's transient to 1e-4 plus the block memory and dead-time search",
+        screened_order=order,
     )
-    if _HAVE_ANALYSIS:
-        x_v = model.linear.simulate(u_v)
-        tests = residual_tests(residual_full[warmup:], u_v[warmup:], x_v[warmup:])
-        regimes = regime_shares(model, u_v, residual_full, warmup=warmup)
-        spectrum = frequency_analysis(residual_full[warmup:], u_v[warmup:], noise_std=noise)
-        drift = time_analysis(residual_full[warmup:])
-    else:
-        tests = regimes = spectrum = drift = None
+    x_v = model.linear.simulate(u_v)
+    tests = residual_tests(residual_full[warmup:], u_v[warmup:], x_v[warmup:])
+    regimes = regime_shares(model, u_v, residual_full, warmup=warmup)
+    spectrum = frequency_analysis(residual_full[warmup:], u_v[warmup:], noise_std=noise)
+    drift = time_analysis(residual_full[warmup:])
     report = DiagnosisReport(
         best_effect=best,
         ranking=ranking,
@@ -369,9 +368,6 @@ def diagnose(
         y_nominal=ynom_v,
         y_best=y_best,
         elapsed=time.perf_counter() - start,
+        details=details,
     )
-    try:
-        report.details = extra  # type: ignore[attr-defined]
-    except (AttributeError, TypeError):
-        pass
     return report
