@@ -385,7 +385,7 @@ def _fit_hysteresis(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, flo
     # plays explain most of the nominal residual, then refit everything from there
     radii = sx * np.array([0.02, 0.1, 0.3, 0.7, 1.2])
     plays = [play(r)[prob.warmup :] for r in radii]
-    best = (np.inf, None)
+    best: tuple[float, tuple[float, ...]] = (np.inf, (radii[0], 0.0, radii[1], 0.0))
     target = r0[prob.warmup :]
     for i in range(len(radii)):
         for j in range(i + 1, len(radii)):
@@ -393,7 +393,7 @@ def _fit_hysteresis(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, flo
             w, *_ = np.linalg.lstsq(a, target, rcond=None)
             rss = float(np.sum((target - a @ w) ** 2))
             if rss < best[0]:
-                best = (rss, (radii[i], w[0], radii[j], w[1]))
+                best = (rss, (float(radii[i]), float(w[0]), float(radii[j]), float(w[1])))
     e0 = np.array(best[1])
     lb = np.array([0.0, -np.inf] * N_PLAYS)
     ub = np.array([5 * sx, np.inf] * N_PLAYS)
@@ -414,14 +414,14 @@ def _fit_ar(prob: _Problem, theta0: Array) -> tuple[Array, float]:
     """AR(p) model of the nominal output error, p <= MAX_AR chosen by BIC (least squares)."""
     r = (prob.y - _simulate(prob.structure, theta0, {}, prob.u, prob.t0))[prob.warmup :]
     n = r.size
-    best = (n * np.log(np.mean(r * r) + 1e-300), np.zeros(0))
+    best: tuple[float, Array] = (n * np.log(np.mean(r * r) + 1e-300), np.zeros(0))
     for p in range(1, MAX_AR + 1):
         a = np.column_stack([r[p - k : n - k] for k in range(1, p + 1)])
         phi, *_ = np.linalg.lstsq(a, r[p:], rcond=None)
         e = r[p:] - a @ phi
         bic = (n - p) * np.log(np.mean(e * e) + 1e-300) + p * np.log(n)
         if bic < best[0]:
-            best = (bic, phi)
+            best = (bic, np.asarray(phi, dtype=np.float64))
     phi = best[1]
     e = r - _ar_predict(r, phi)
     return phi, float(e @ e)
@@ -528,7 +528,7 @@ def _directions(effect: str, structure: Structure, theta: Array, u: Array, t0: f
     if effect == "width_drift":
         return [sim({"drift_left": h}) / h, sim({"drift_right": h}) / h]
     if effect == "output_offset":
-        t = (t0 + np.arange(u.size)) / TIME_SCALE
+        t = np.asarray((t0 + np.arange(u.size)) / TIME_SCALE, dtype=np.float64)
         return [np.ones(u.size), t]
     if effect == "compliance":
         return [sim({"compliance": 1.0, "omega": w, "zeta": 0.1}) for w in (0.1, 0.4, 1.5)]
