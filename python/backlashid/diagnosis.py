@@ -16,10 +16,10 @@
    - else the significant deterministic candidate of lowest BIC, if it closes at least half of
      the gap (and, when the nominal residual is a slowly modulated copy of the output, leaves
      no such modulation in its own residual);
-   - else colored_noise if no deterministic candidate closes half, its noise model predicts
-     the residual significantly better, and the residual is neither explained by the input (a
-     cross-validated black box of input features) nor modulated by the model's output (a
-     drifting gain: prewhitened F-test);
+   - else colored_noise if no significant deterministic candidate closes a quarter (noise is
+     independent of the input), its noise model predicts the residual significantly better,
+     and the residual is neither explained by the input (a cross-validated black box of input
+     features) nor modulated by the model's output (a drifting gain: prewhitened F-test);
    - else "unexplained".
 
 Caveat: with the floor estimated, the winner's gap closed is 1 by construction whenever it
@@ -55,6 +55,7 @@ __all__ = ["diagnose", "DiagnosisReport", "Candidate", "ALPHA", "CLOSE_ENOUGH"]
 
 ALPHA = 0.01  # family-wise significance level of "the validation error improved"
 CLOSE_ENOUGH = 0.5  # a candidate must close at least this fraction of the gap
+MATERIAL = 0.25  # a significant deterministic candidate closing this much rules out colored noise
 HAC_LAGS = 20  # Newey-West lags of the paired test
 SIGNATURE_Z = 3.0  # |z| of the residual against the effect's change after augmentation
 
@@ -303,7 +304,14 @@ def diagnose(
             closing = [s for s in closing if _modulation_p(s.residual, ynom_v[warmup:], phi) >= level]
         if closing and closing[0] is deterministic[0]:
             best = closing[0].effect
-        elif "colored_noise" in significant and not closing and p_input >= level and p_modulation >= level:
+        elif (
+            "colored_noise" in significant
+            and not any(gap_closed[s.effect] >= MATERIAL for s in deterministic)
+            and p_input >= level
+            and p_modulation >= level
+        ):
+            # noise independent of the input: no deterministic candidate may improve the
+            # validation error materially
             # no "closes half" here: a noise model predicts only the predictable part of colored
             # noise (its innovations are as unpredictable as white noise), so against a known
             # white-noise floor it can close well under half of a genuine colored-noise gap

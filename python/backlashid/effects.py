@@ -314,7 +314,9 @@ def _fit_saturation(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, flo
 def _fit_friction(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, float], float]:
     s = float(np.std(prob.u))
     lb, ub = np.zeros(2), np.array([2.0 * s + 1e-12, 2.0])
-    return _multi_start(prob, theta0, ("F_c", "F_v"), [(np.array([fc * s, 0.0]), {}) for fc in (0.02, 0.15)], lb, ub, "friction")
+    # the error is not convex in (F_c, F_v): short refits from a few corners first
+    starts = [(np.array([fc * s, fv]), {}) for fc, fv in ((0.02, 0.0), (0.15, 0.0), (0.05, 0.3), (0.3, 0.6))]
+    return _multi_start(prob, theta0, ("F_c", "F_v"), starts, lb, ub, "friction")
 
 
 def _fit_smooth(effect: str, bound: float) -> Callable[[_Problem, Array], tuple[Array, dict[str, float], float]]:
