@@ -385,21 +385,20 @@ def _fit_hysteresis(prob: _Problem, theta0: Array) -> tuple[Array, dict[str, flo
 
     # the weights enter linearly at fixed half-widths: pick the pair of half-widths whose
     # plays explain most of the nominal residual, then refit everything from there
-    radii = sx * np.array([0.02, 0.1, 0.3, 0.7, 1.2])
+    radii = sx * np.geomspace(0.01, 2.0, 10)
     plays = [play(r)[prob.warmup :] for r in radii]
-    best: tuple[float, tuple[float, ...]] = (np.inf, (radii[0], 0.0, radii[1], 0.0))
     target = r0[prob.warmup :]
+    pairs = []
     for i in range(len(radii)):
         for j in range(i + 1, len(radii)):
             a = np.column_stack([plays[i], plays[j]])
             w, *_ = np.linalg.lstsq(a, target, rcond=None)
             rss = float(np.sum((target - a @ w) ** 2))
-            if rss < best[0]:
-                best = (rss, (float(radii[i]), float(w[0]), float(radii[j]), float(w[1])))
-    e0 = np.array(best[1])
+            pairs.append((rss, (float(radii[i]), float(w[0]), float(radii[j]), float(w[1]))))
+    pairs.sort()
     lb = np.array([0.0, -np.inf] * N_PLAYS)
     ub = np.array([5 * sx, np.inf] * N_PLAYS)
-    return _refit(prob, theta0, names, e0, lb, ub, "hysteresis_memory")
+    return _multi_start(prob, theta0, names, [(np.array(e0), {}) for _, e0 in pairs[:3]], lb, ub, "hysteresis_memory")
 
 
 def _fit_bigger(prob: _Problem, theta0: Array, bigger: Structure, effect: str) -> tuple[Structure, Array, float]:
