@@ -15,6 +15,8 @@ except PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
 
 from .backlash import BranchCheck, GeneralBacklash, SwitchingSignals
+from .diagnosis import DiagnosisReport, diagnose
+from .effects import EFFECTS, fit_effect
 from .errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from .examples import ExampleData, example1, example2, example_data
 from .identification import FitResult, fit_cascade, fit_sandwich
@@ -39,6 +41,8 @@ __all__ = [
     "CascadeModel",
     "CascadeSimulation",
     "CascadeState",
+    "DiagnosisReport",
+    "EFFECTS",
     "DataError",
     "ExampleData",
     "FitResult",
@@ -55,11 +59,13 @@ __all__ = [
     "SwitchingSignals",
     "WienerHammersteinFit",
     "__version__",
+    "diagnose",
     "example1",
     "example2",
     "evaluate",
     "example_data",
     "fit_cascade",
+    "fit_effect",
     "fit_many",
     "fit_sandwich",
     "model_from_dict",

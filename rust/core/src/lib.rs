@@ -4,6 +4,7 @@
 //! with general backlash": the general backlash (eq 1-15), the cascade linear block ->
 //! backlash (eq 16-17) and the sandwich linear -> backlash -> linear (eq 29).
 
+pub mod augmented;
 pub mod backlash;
 pub mod cascade;
 pub mod error;
@@ -17,6 +18,7 @@ pub mod signal;
 pub mod streaming;
 pub mod switching;
 
+pub use augmented::{simulate_augmented, Effects};
 pub use backlash::{Branch, BranchCheck, GeneralBacklash};
 pub use cascade::{CascadeModel, CascadeSimulation, CascadeState};
 pub use error::{Error, Result};

@@ -3,6 +3,8 @@
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
+mod augmented;
+
 use backlashid_core as core;
 use std::borrow::Cow;
 
@@ -620,5 +622,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sandwich_iteration, m)?)?;
     m.add_function(wrap_pyfunction!(cascade_oe_factor, m)?)?;
     m.add_function(wrap_pyfunction!(sandwich_oe_factor, m)?)?;
+    m.add_function(wrap_pyfunction!(augmented::simulate_augmented, m)?)?;
     Ok(())
 }
