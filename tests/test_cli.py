@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
 import types
@@ -194,7 +193,6 @@ def test_diagnose_passes_model_units_to_diagnose(monkeypatch, tmp_path, example)
     assert json.loads((tmp_path / "d.json").read_text())["report"] == {"best_effect": "none"}
 
 
-@pytest.mark.skipif(importlib.util.find_spec("backlashid.diagnosis") is None, reason="backlashid.diagnosis not merged yet")
 def test_diagnose_runs_end_to_end(tmp_path, csv_file):
     r = run("diagnose", csv_file, "-i", "u", "-o", "y", "--fit-cascade", "--split", "0.5", "--png", tmp_path / "d.png", "--json", tmp_path / "d.json")
     assert r.exit_code == 0, r.output
@@ -220,7 +218,6 @@ def test_documented_friction_damper_command(tmp_path):
 
 
 @pytest.mark.skipif(not FRICTION.is_dir(), reason="shared data folder absent")
-@pytest.mark.skipif(importlib.util.find_spec("backlashid.diagnosis") is None, reason="backlashid.diagnosis not merged yet")
 def test_documented_friction_damper_diagnosis(tmp_path):
     files = ["--estimation-file", FRICTION / "d2_char_1Hz36lbtension0.5amplitude.npz",
              "--validation-file", FRICTION / "d2_eq_ImperialValleyDBE.npz", "-i", "x_in", "-o", "F_kip"]
