@@ -84,6 +84,19 @@ def test_summary_verdicts_none_and_unexplained(report):
     assert "<-999 %" in dataclasses.replace(report, ranking=[tiny]).summary()
 
 
+def test_unexplained_names_the_best_deterministic_candidate_not_the_noise_model(report):
+    # colored_noise is scored on one-step prediction and can top the ranking of a residual that
+    # is not noise; the verdict then names the best simulation candidate and why noise was ruled out
+    noise = Candidate("colored_noise", 1.0, 1e-20, report.ranking[0].model, {"ar1": 0.9}, 1, 0.05, 0.05, -20000.0, False)
+    unexplained = dataclasses.replace(
+        report, best_effect="unexplained", ranking=[noise, *report.ranking],
+        details={"colored_noise_ruled_out": ["the residual depends on the input (p 1e-09)"]},
+    )
+    verdict = unexplained.summary().splitlines()[1]
+    assert "the best, branch_degree, closes 91 %" in verdict
+    assert "colored_noise predicts the residual one step ahead but is not named: the residual depends on the input" in verdict
+
+
 def test_to_dict_is_json_safe_and_small(report):
     d = report.to_dict()
     text = json.dumps(d, allow_nan=False)  # NaN became null, numpy types became Python ones

@@ -317,6 +317,18 @@ def diagnose(
             # white-noise floor it can close well under half of a genuine colored-noise gap
             best = "colored_noise"
 
+    ruled_out = []  # why colored_noise was not named, for the report's verdict
+    if best != "colored_noise" and "colored_noise" in scored:
+        if "colored_noise" not in significant:
+            ruled_out.append("its noise model does not predict significantly better")
+        if p_input < level:
+            ruled_out.append(f"the residual depends on the input (p {p_input:.2g})")
+        if p_modulation < level:
+            ruled_out.append(f"the residual is modulated by the output (p {p_modulation:.2g})")
+        material = [s.effect for s in deterministic if gap_closed[s.effect] >= MATERIAL]
+        if material:
+            ruled_out.append(f"{material[0]} closes over a quarter of the gap")
+
     ranking = []
     for s in sorted(scored.values(), key=lambda s: (s.effect != best, s.criterion)):
         ranking.append(
@@ -353,6 +365,7 @@ def diagnose(
         ),
         warmup_rule="given" if warmup_given else "slowest pole's transient to 1e-4 plus the block memory and dead-time search",
         screened_order=order,
+        colored_noise_ruled_out=ruled_out,
     )
     x_v = model.linear.simulate(u_v)
     tests = residual_tests(residual_full[warmup:], u_v[warmup:], x_v[warmup:])

@@ -164,13 +164,22 @@ class DiagnosisReport:
                 f"noise std {self.noise_std:.4g})"
             )
         if self.best_effect == "unexplained":
-            top = self.ranking[0] if self.ranking else None
+            # colored_noise is judged on one-step prediction, so it can rank first on a residual
+            # that it cannot be: name the best effect that changes the simulation instead
+            top = next((c for c in self.ranking if c.effect != "colored_noise"), None)
             tail = f"; the best, {top.effect}, closes {_pct(top.gap_closed).strip()}" if top else ""
-            return f"unexplained: a significant gap that no candidate closes by half{tail}"
+            if self.ranking and self.ranking[0].effect == "colored_noise":
+                tail += "; colored_noise predicts the residual one step ahead but is not named" + self._not_noise()
+            return f"unexplained: a significant gap that no deterministic candidate closes by half{tail}"
         if best is None:
             return f"{self.best_effect}"
         sig = "its signature is gone" if best.signature_removed else "its signature remains"
         return f"{best.effect}: closes {_pct(best.gap_closed).strip()} of the gap (p = {_p(best.p_value)}); {sig}"
+
+    def _not_noise(self) -> str:
+        """Why the residual is not noise, as the diagnoser recorded it in ``details``."""
+        reasons = self.details.get("colored_noise_ruled_out") or []
+        return ": " + " and ".join(reasons) if reasons else ""
 
     def _where(self) -> list[str]:
         lines = []
