@@ -127,3 +127,27 @@ def test_colored_noise_is_named_on_prediction_error() -> None:
     # AR(1) plus white noise is ARMA(1, 1): judge the prediction, not phi_1 alone
     assert best.validation_rmse < 0.75 * report.nominal_validation_rmse
     assert 0.8 < sum(best.params.values()) < 0.95
+
+
+def test_a_validation_record_that_starts_holding_a_force_is_not_a_gap() -> None:
+    # the device moved, then stood still for 600 samples holding its backlash memory (output
+    # 0.4 off zero) when the validation record starts: no warm-up flushes that memory, so from
+    # rest the nominal model looks wrong; the estimated initial state sees no gap
+    m, rng, noise = bx.example1(), np.random.default_rng(21), 0.03
+    u_e = rng.uniform(-1.5, 1.5, N)
+    u_v = np.r_[np.full(600, 0.6), rng.uniform(-1.5, 1.5, N - 600)]
+    moving = np.r_[rng.uniform(-1.5, 1.5, 300), np.linspace(1.5, 0.6, 50)]  # ends in the dead band
+    sim = m.simulate(moving, internals=True)
+    assert abs(sim.output[-1]) > 0.3
+    y_v = m.simulate(u_v, initial_state=sim.final_state) + noise * rng.standard_normal(N)
+    y_e = m.simulate(u_e) + noise * rng.standard_normal(N)
+    model = bx.fit_cascade(u_e, y_e, 2, 2, 3, warmup=50).model
+    est, val = (u_e, y_e), (u_v, y_v)
+    estimated = bx.diagnose(model, est, val, noise_std=noise)
+    assert estimated.best_effect == "none"
+    assert estimated.nominal_validation_rmse < 1.2 * noise
+    assert "estimated" in estimated.details["initial_state"]
+    from_rest = bx.diagnose(model, est, val, noise_std=noise, initial_state="rest")
+    assert from_rest.best_effect != "none" and from_rest.nominal_validation_rmse > 2 * noise
+    with pytest.raises(bx.DataError, match="initial_state"):
+        bx.diagnose(model, est, val, initial_state="zero")

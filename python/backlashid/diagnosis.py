@@ -44,14 +44,14 @@ from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import stats
+from scipy import optimize, stats
 
 from ._convert import as_signal
 from .effects import EFFECTS, MAX_DELAY, AugmentedModel, Screening, fit_effect, screen
 from .errors import DataError, ModelError
-from .models import CascadeModel
+from .models import CascadeModel, CascadeState
 
-__all__ = ["diagnose", "DiagnosisReport", "Candidate", "ALPHA", "CLOSE_ENOUGH"]
+__all__ = ["diagnose", "DiagnosisReport", "Candidate", "ALPHA", "CLOSE_ENOUGH", "estimated_start", "held_state"]
 
 ALPHA = 0.01  # family-wise significance level of "the validation error improved"
 CLOSE_ENOUGH = 0.5  # a candidate must close at least this fraction of the gap
@@ -96,6 +96,48 @@ def default_warmup(model: CascadeModel, n: int) -> int:
     settle = math.ceil(math.log(1e-4) / math.log(rho)) if 0.0 < rho < 1.0 else 0
     w = settle + model.linear.na + model.linear.nb + MAX_DELAY
     return int(min(max(w, 20), n // 5))
+
+
+INITIAL_STATES = ("estimate", "rest")
+MEMORY_GRID = 33  # backlash memories tried before the 1-D refinement
+
+
+def held_state(model: CascadeModel, u0: float, y_prev: float) -> CascadeState:
+    """The cascade after the input was held at u0: the linear block (16) at its equilibrium
+    x = sum a / (1 + sum b) u0, and the backlash memory y_prev."""
+    a, b = model.linear.a, model.linear.b
+    x_eq = float(np.sum(a)) / (1.0 + float(np.sum(b))) * float(u0)
+    return CascadeState(u_past=(float(u0),) * a.size, x_past=(x_eq,) * b.size, y_prev=float(y_prev))
+
+
+def estimated_start(simulate: Any, u: Array, y: Array, memory_range: tuple[float, float]) -> tuple[Array, float]:
+    """Output of ``simulate(u, y_prev, held=True)`` with the backlash memory y_prev that best fits
+    the record: a grid over the output's range, then a bounded 1-D search around the best point.
+    Returns (output, y_prev). The memory acts only until the backlash first moves, which may be
+    long after the warm-up, so it is fitted on the whole record (one parameter for every model
+    alike, as initial conditions are estimated for validation in common practice); fitted on
+    the warm-up alone, its error persists over a long hold and the paired test would read the
+    differences between models' memories as significant."""
+
+    def cost(y0: float) -> float:
+        r = y - simulate(u, y0, True)
+        return float(r @ r)
+
+    # the cost is flat where the memory lies outside the dead band (it is clamped onto a branch
+    # at once) and quadratic inside: a coarse grid, a fine grid around its best point, then Brent
+    lo, hi = memory_range
+    best, best_cost = lo, math.inf
+    for _ in range(2):
+        grid = np.linspace(lo, hi, MEMORY_GRID)
+        costs = [cost(g) for g in grid]
+        k = int(np.argmin(costs))
+        if costs[k] < best_cost:
+            best, best_cost = float(grid[k]), costs[k]
+        lo, hi = float(grid[max(k - 1, 0)]), float(grid[min(k + 1, grid.size - 1)])
+    res = optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-9 * max(hi - lo, 1e-12)})
+    if res.success and res.fun < best_cost:
+        best = float(res.x)
+    return simulate(u, best, True), best
 
 
 # -- statistics ----------------------------------------------------------------------------------
@@ -185,6 +227,7 @@ def _signature_removed(residual: Array, change: Array) -> bool:
 class _Scored:
     effect: str
     model: AugmentedModel
+    output: Array  # on the validation record (one-step prediction for colored_noise)
     residual: Array
     change: Array
     mse: float
@@ -200,6 +243,7 @@ def diagnose(
     candidates: Sequence[str] | None = None,
     noise_std: float | None = None,
     warmup: int | None = None,
+    initial_state: str = "estimate",
     seed: int = 0,
 ) -> DiagnosisReport:
     """Which effect beyond the nominal cascade ``model`` explains its validation error?
@@ -208,7 +252,12 @@ def diagnose(
     the nominal model was fitted on); ``validation`` = (u_val, y_val) directly follows it in
     time and is where they are scored. ``noise_std``: the measurement noise std if known (else
     estimated, see the module docstring). ``warmup``: samples at the start of each record left
-    out of every criterion (default from the slowest pole, :func:`default_warmup`)."""
+    out of every criterion (default from the slowest pole, :func:`default_warmup`).
+    ``initial_state``: how every model (nominal and augmented) starts the validation record.
+    "estimate" (default): the linear block at its equilibrium with u_val[0] and the backlash
+    memory y(0) that best fits the record (one parameter, for every model alike), so a record
+    that starts with the device holding a force (a memory the warm-up cannot flush) is not read
+    as model error; "rest": from zero, as the paper assumes."""
     start = time.perf_counter()
     if not isinstance(model, CascadeModel):
         raise ModelError(
@@ -225,6 +274,8 @@ def diagnose(
         if unknown or not candidates:
             raise DataError(f"unknown candidate effects {unknown}: choose from {', '.join(EFFECTS)}")
     candidates = tuple(dict.fromkeys(candidates))
+    if initial_state not in INITIAL_STATES:
+        raise DataError(f"initial_state = {initial_state!r}: choose one of {', '.join(map(repr, INITIAL_STATES))}")
     if noise_std is not None and not (np.isfinite(noise_std) and noise_std > 0):
         raise DataError(f"noise_std = {noise_std!r}: give the noise standard deviation (> 0) or None to estimate it")
     n_min = min(u_e.size, u_v.size)
@@ -243,7 +294,18 @@ def diagnose(
 
     # the nominal model
     ynom_e = model.simulate(u_e)
-    ynom_v = model.simulate(u_v)
+    memory_range = (float(min(y_v.min(), y_e.min())), float(max(y_v.max(), y_e.max())))
+    estimate_state = initial_state == "estimate"
+
+    def on_validation(simulate: Any) -> tuple[Array, float]:
+        """simulate(u, y_prev, held) on the validation record, from rest or the estimated state."""
+        if not estimate_state:
+            return simulate(u_v, 0.0, False), 0.0
+        return estimated_start(simulate, u_v, y_v, memory_range)
+
+    ynom_v, y0_nominal = on_validation(
+        lambda u, y0, held: model.simulate(u, initial_state=held_state(model, u[0], y0) if held else None)
+    )
     r0 = (y_v - ynom_v)[warmup:]
     n = r0.size
     mse0 = float(r0 @ r0) / n
@@ -254,11 +316,12 @@ def diagnose(
     scored: dict[str, _Scored] = {}
     for effect in order:
         aug = fit_effect(effect, model, u_e, y_e, warmup=warmup, t0=0.0, seed=seed)
+        sim_v, _ = on_validation(lambda u, y0, held, aug=aug: aug.simulate(u, t0=n_est, y_prev=y0, held=held))
         if effect == "colored_noise":
-            y_hat_v = aug.predict(u_v, y_v, t0=n_est)
+            y_hat_v = aug.predict_from(sim_v, y_v)
             y_hat_e = aug.predict(u_e, y_e, t0=0.0)
         else:
-            y_hat_v = aug.simulate(u_v, t0=n_est)
+            y_hat_v = sim_v
             y_hat_e = aug.simulate(u_e, t0=0.0)
         r = (y_v - y_hat_v)[warmup:]
         mse = float(r @ r) / n
@@ -266,6 +329,7 @@ def diagnose(
         scored[effect] = _Scored(
             effect=effect,
             model=aug,
+            output=y_hat_v,
             residual=r,
             change=(y_hat_v - ynom_v)[warmup:],
             mse=mse,
@@ -347,8 +411,7 @@ def diagnose(
         )
     y_best = ynom_v
     if best in scored:
-        m = scored[best].model
-        y_best = m.predict(u_v, y_v, t0=n_est) if best == "colored_noise" else m.simulate(u_v, t0=n_est)
+        y_best = scored[best].output
 
     noise = math.sqrt(floor)
     residual_full = y_v - ynom_v
@@ -365,11 +428,19 @@ def diagnose(
         ),
         warmup_rule="given" if warmup_given else "slowest pole's transient to 1e-4 plus the block memory and dead-time search",
         screened_order=order,
+        initial_state=(
+            f"estimated: linear block at equilibrium with u_val[0], backlash memory y(0) = {y0_nominal:.6g} fitted on the record"
+            if estimate_state
+            else "from rest"
+        ),
         colored_noise_ruled_out=ruled_out,
     )
     x_v = model.linear.simulate(u_v)
     tests = residual_tests(residual_full[warmup:], u_v[warmup:], x_v[warmup:])
-    regimes = regime_shares(model, u_v, residual_full, warmup=warmup)
+    regimes = regime_shares(
+        model, u_v, residual_full, warmup=warmup,
+        initial_state=held_state(model, u_v[0], y0_nominal) if estimate_state else None,
+    )
     spectrum = frequency_analysis(residual_full[warmup:], u_v[warmup:], noise_std=noise)
     drift = time_analysis(residual_full[warmup:])
     report = DiagnosisReport(

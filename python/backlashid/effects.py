@@ -114,9 +114,17 @@ def _effect_kwargs(effect: str, p: dict[str, float]) -> dict[str, Any]:
     return {}
 
 
-def _simulate(structure: Structure, theta: Array, kwargs: dict[str, Any], u: Array, t0: float) -> Array:
-    est = structure.unpack(theta)
-    return _core.simulate_augmented(*est.chain(), u, t0=float(t0), time_scale=TIME_SCALE, **kwargs)
+def _simulate(
+    structure: Structure, theta: Array, kwargs: dict[str, Any], u: Array, t0: float, y_prev: float = 0.0, held: bool = False
+) -> Array:
+    """``held``: the linear block starts at its equilibrium with u[0] (the input held before
+    the record) instead of at rest; ``y_prev`` is the backlash memory y(0)."""
+    a, b, *rest = structure.unpack(theta).chain()
+    state: dict[str, Any] = {}
+    if held:
+        x_eq = float(np.sum(a)) / (1.0 + float(np.sum(b))) * float(u[0])  # eq 16 at rest: x = sum a / (1 + sum b) u
+        state = {"u_past": [float(u[0])] * len(a), "x_past": [x_eq] * len(b)}
+    return _core.simulate_augmented(a, b, *rest, u, t0=float(t0), time_scale=TIME_SCALE, y_prev=float(y_prev), **state, **kwargs)
 
 
 def _ar_predict(residual: Array, phi: Array) -> Array:
@@ -139,19 +147,24 @@ class AugmentedModel:
     ar: Array = field(default_factory=lambda: np.zeros(0), repr=False)  # colored_noise only
     n_extra: int = 0
 
-    def simulate(self, u: ArrayLike, t0: float = 0.0) -> Array:
-        """Free-run output for the input u, from rest; u[0] is sample t0 of the record."""
+    def simulate(self, u: ArrayLike, t0: float = 0.0, *, y_prev: float = 0.0, held: bool = False) -> Array:
+        """Free-run output for the input u; u[0] is sample t0 of the record. From rest, or with
+        ``held=True`` from the linear block's equilibrium with u[0]; ``y_prev`` is the backlash
+        memory before the first sample."""
         u_arr = as_signal(u, "u").ravel()
-        return _simulate(self.structure, self.theta, self.kwargs, u_arr, t0)
+        return _simulate(self.structure, self.theta, self.kwargs, u_arr, t0, y_prev, held)
 
     def predict(self, u: ArrayLike, y: ArrayLike, t0: float = 0.0) -> Array:
         """One-step prediction: the simulation plus the noise model's prediction of the output
         error from its measured past (equals ``simulate`` without a noise model)."""
-        sim = self.simulate(u, t0)
+        return self.predict_from(self.simulate(u, t0), y)
+
+    def predict_from(self, simulated: Array, y: ArrayLike) -> Array:
+        """One-step prediction from this model's free-run output ``simulated`` of the record."""
         y_arr = as_signal(y, "y").ravel()
-        if y_arr.shape != sim.shape:
-            raise DataError(f"u has {sim.size} samples and y {y_arr.size}: give one record")
-        return sim + _ar_predict(y_arr - sim, self.ar) if self.ar.size else sim
+        if y_arr.shape != simulated.shape:
+            raise DataError(f"u has {simulated.size} samples and y {y_arr.size}: give one record")
+        return simulated + _ar_predict(y_arr - simulated, self.ar) if self.ar.size else simulated
 
     @property
     def nominal(self) -> CascadeModel | None:
