@@ -13,6 +13,7 @@ noise model), over the samples after the warm-up.
 from __future__ import annotations
 
 import math
+import textwrap
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -323,7 +324,7 @@ class DiagnosisReport:
         self._plot_tests(fig.add_subplot(gs[2, 1]))
         self._plot_ranking(fig.add_subplot(gs[3, 0]))
         self._plot_before_after(fig.add_subplot(gs[3, 1]), window)
-        fig.suptitle(f"Diagnosis: {self._verdict()}", fontsize=11)
+        fig.suptitle(textwrap.fill(f"Diagnosis: {self._verdict()}", width=150), fontsize=10)
         if path is not None:
             fig.savefig(path, dpi=dpi)
         return fig
