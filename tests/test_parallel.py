@@ -1,4 +1,4 @@
-"""fit_many (issue 5): many records on Dask distributed, identical to fitting one by one."""
+"""fit_many and diagnose_many (issue 5): many records on Dask distributed, identical to one by one."""
 
 from __future__ import annotations
 
@@ -199,3 +199,30 @@ def test_errors_cross_the_process_boundary_with_their_attributes(monkeypatch):
     exc = payload
     assert type(exc) is NotConvergedError and str(exc) == "the identification diverged"
     assert exc.best["parameters"] == best["parameters"] and np.array_equal(exc.best["history"], best["history"])
+
+
+# -- diagnoses -----------------------------------------------------------------------------------
+
+
+def test_diagnose_many_matches_one_by_one(client):
+    """diagnose_many on the cluster gives the reports of diagnose run here, case by case; a
+    malformed case fails in its slot."""
+    from backlashid import diagnose_many
+    from backlashid.withheld import cases as withheld_cases
+
+    cases, expected = [], []
+    for case in withheld_cases(levels=(3.0,), per_effect=1, effects=("none", "dead_time", "saturation"), seed=5):
+        model = bid.fit_cascade(case.u_est, case.y_est, case.na, case.nb, case.degree, warmup=100).model
+        cases.append((model, (case.u_est, case.y_est), (case.u_val, case.y_val)))
+        expected.append(bid.diagnose(*cases[-1]))
+    cases.append({"model": cases[0][0], "estimation": cases[0][1]})
+    got = diagnose_many(cases, client=client, progress=False)
+    assert isinstance(got[-1], DataError) and "validation" in str(got[-1])
+    assert [r.best_effect for r in got[:-1]] == ["none", "dead_time", "saturation"]
+    for report, want in zip(got, expected):
+        assert report.best_effect == want.best_effect
+        assert [c.effect for c in report.ranking] == [c.effect for c in want.ranking]
+        assert [c.gap_closed for c in report.ranking] == [c.gap_closed for c in want.ranking]
+        assert report.noise_std == want.noise_std
+    with pytest.raises(DataError, match="unknown option"):
+        diagnose_many(cases[:1], client=client, noise=0.1)

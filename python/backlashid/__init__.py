@@ -32,7 +32,7 @@ from .models import (
     model_from_dict,
     model_from_json,
 )
-from .parallel import fit_many
+from .parallel import diagnose_many, fit_many
 from .wiener_hammerstein import LinearBaseline, WienerHammersteinFit, fit_wiener_hammerstein, wiener_hammerstein_model
 
 __all__ = [
@@ -66,6 +66,7 @@ __all__ = [
     "example_data",
     "fit_cascade",
     "fit_effect",
+    "diagnose_many",
     "fit_many",
     "fit_sandwich",
     "model_from_dict",

@@ -12,7 +12,8 @@
    extra parameters.
 3. Decision (family-wise level ALPHA, Bonferroni over the candidates):
    - "none" if neither a candidate nor a black-box correction of the residual improves the
-     validation error significantly;
+     validation error significantly, or if the gap is under 1 % of the noise variance (a
+     consistent but immaterial improvement, e.g. a refit that lands nearer the optimum);
    - else the significant deterministic candidate of lowest BIC, if it closes at least half of
      the gap (and, when the nominal residual is a slowly modulated copy of the output, leaves
      no such modulation in its own residual);
@@ -56,6 +57,7 @@ __all__ = ["diagnose", "DiagnosisReport", "Candidate", "ALPHA", "CLOSE_ENOUGH", 
 ALPHA = 0.01  # family-wise significance level of "the validation error improved"
 CLOSE_ENOUGH = 0.5  # a candidate must close at least this fraction of the gap
 MATERIAL = 0.25  # a significant deterministic candidate closing this much rules out colored noise
+MATERIAL_GAP = 0.01  # a gap under this fraction of the noise variance is "none", however significant
 HAC_LAGS = 20  # Newey-West lags of the paired test
 SIGNATURE_Z = 3.0  # |z| of the residual against the effect's change after augmentation
 
@@ -359,7 +361,7 @@ def diagnose(
     gap_significant = bool(significant) or p_black_box < level
     deterministic = sorted((s for e, s in scored.items() if e in significant and e != "colored_noise"), key=lambda s: s.criterion)
     best = "none"
-    if gap_significant and gap > 0:
+    if gap_significant and gap > MATERIAL_GAP * floor:
         best = "unexplained"
         closing = [s for s in deterministic if gap_closed[s.effect] >= CLOSE_ENOUGH]
         if closing and p_modulation < level:

@@ -10,6 +10,9 @@ identification rejects comes back as the :class:`~backlashid.BacklashIdError` it
 its slot, so one bad record does not lose the fleet's results. The fits are deterministic, so
 each result equals (bit for bit) the one of a call on that record alone.
 
+:func:`diagnose_many` does the same for :func:`~backlashid.diagnose` over many (model,
+estimation, validation) cases.
+
 Needs the ``dask`` extra: ``pip install 'backlashid[dask]'``.
 """
 
@@ -25,7 +28,7 @@ from typing import Any, Callable, Literal, Mapping, Sequence
 from .errors import BacklashIdError, DataError
 from .identification import FitResult, fit_cascade, fit_sandwich
 
-__all__ = ["fit_many"]
+__all__ = ["fit_many", "diagnose_many"]
 
 Kind = Literal["cascade", "sandwich"]
 _FITS: dict[str, Callable[..., FitResult]] = {"cascade": fit_cascade, "sandwich": fit_sandwich}
@@ -77,10 +80,24 @@ def _fit_one(record: tuple[Any, Any], kind: str, options: dict[str, Any]) -> Fit
         return exc
 
 
-def _fit_batch(records: list[tuple[Any, Any]], kind: str, options: dict[str, Any]) -> list[FitResult | BacklashIdError]:
-    """The task: a few records, fitted one after the other (a task costs the scheduler a few
-    milliseconds, as much as a small fit)."""
-    return [_fit_one(record, kind, options) for record in records]
+def _diagnose_one(case: tuple[Any, Any, Any], options: dict[str, Any]) -> Any:
+    """One diagnosis on a worker; an error of the diagnosis is returned, as in :func:`_fit_one`."""
+    from .diagnosis import diagnose
+
+    model, estimation, validation = case
+    try:
+        return diagnose(model, estimation, validation, **options)
+    except BacklashIdError as exc:
+        return exc
+
+
+def _batch(records: list[Any], job: str, options: dict[str, Any]) -> list[Any]:
+    """The task: a few records, fitted (job "cascade" or "sandwich") or diagnosed (job
+    "diagnose") one after the other (a task costs the scheduler a few milliseconds, as much as
+    a small fit)."""
+    if job == "diagnose":
+        return [_diagnose_one(case, options) for case in records]
+    return [_fit_one(record, job, options) for record in records]
 
 
 # -- the client side ---------------------------------------------------------------------------
@@ -125,15 +142,8 @@ def fit_many(
     if fit is None:
         raise DataError(f"kind = {kind!r}: use 'cascade' (fit_cascade) or 'sandwich' (fit_sandwich)")
     _check_options(fit, fit_options)
-    if client is not None and address is not None:
-        raise DataError("give client= or address=, not both")
-    if n_workers is not None:
-        if client is not None or address is not None:
-            raise DataError("n_workers sizes the embedded cluster: leave it out with client= or address=")
-        if not isinstance(n_workers, int) or isinstance(n_workers, bool) or n_workers < 1:
-            raise DataError(f"n_workers = {n_workers!r}: give a whole number >= 1")
+    _check_where(client, address, n_workers)
     distributed = _distributed()
-
     items = list(datasets)
     results: list[Any] = [None] * len(items)
     todo: list[tuple[int, tuple[Any, Any]]] = []
@@ -146,33 +156,107 @@ def fit_many(
         return results
 
     with ExitStack() as stack:
-        if client is None:
-            if address is not None:
-                client = stack.enter_context(distributed.Client(address, set_as_default=False))
-            else:
-                cluster = stack.enter_context(
-                    distributed.LocalCluster(
-                        n_workers=min(n_workers or _cores(), len(todo)),
-                        threads_per_worker=1,
-                        processes=True,
-                        dashboard_address=None,
-                        silence_logs=logging.ERROR,
-                    )
-                )
-                client = stack.enter_context(distributed.Client(cluster, set_as_default=False))
+        client = _client(stack, distributed, client, address, n_workers, len(todo))
         _run(distributed, client, todo, kind, fit_options, progress, results)
+    return results
+
+
+def _check_where(client: Any, address: str | None, n_workers: int | None) -> None:
+    if client is not None and address is not None:
+        raise DataError("give client= or address=, not both")
+    if n_workers is not None:
+        if client is not None or address is not None:
+            raise DataError("n_workers sizes the embedded cluster: leave it out with client= or address=")
+        if not isinstance(n_workers, int) or isinstance(n_workers, bool) or n_workers < 1:
+            raise DataError(f"n_workers = {n_workers!r}: give a whole number >= 1")
+
+
+def _client(stack: ExitStack, distributed: Any, client: Any, address: str | None, n_workers: int | None, n_items: int) -> Any:
+    """The given client; else one of the scheduler at ``address``; else of an embedded
+    LocalCluster of single-threaded worker processes (closed with ``stack``)."""
+    if client is not None:
+        return client
+    if address is not None:
+        return stack.enter_context(distributed.Client(address, set_as_default=False))
+    cluster = stack.enter_context(
+        distributed.LocalCluster(
+            n_workers=min(n_workers or _cores(), n_items),
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        )
+    )
+    return stack.enter_context(distributed.Client(cluster, set_as_default=False))
+
+
+def _case(item: Any, index: int) -> tuple[Any, Any, Any]:
+    """(model, estimation, validation) of one diagnosis: a triple or a mapping with those keys."""
+    if isinstance(item, Mapping):
+        if set(item) != {"model", "estimation", "validation"}:
+            raise DataError(f"cases[{index}] has keys {sorted(map(str, item))}: give the keys model, estimation and validation")
+        return item["model"], item["estimation"], item["validation"]
+    if isinstance(item, (str, bytes)) or not hasattr(item, "__len__") or len(item) != 3:
+        raise DataError(f"cases[{index}] is a {type(item).__name__}: give a (model, (u_est, y_est), (u_val, y_val)) triple")
+    model, estimation, validation = item
+    return model, estimation, validation
+
+
+def diagnose_many(
+    cases: Sequence[Any],
+    *,
+    client: Any = None,
+    address: str | None = None,
+    n_workers: int | None = None,
+    progress: bool = True,
+    **options: Any,
+) -> list[Any]:
+    """:func:`~backlashid.diagnose` every case on Dask distributed, as :func:`fit_many` fits:
+    results in input order, equal to diagnosing one by one (the diagnosis is deterministic).
+
+    ``cases``: (model, (u_est, y_est), (u_val, y_val)) triples, or dicts with keys ``model``,
+    ``estimation`` and ``validation``; ``options`` (candidates, noise_std, warmup,
+    initial_state, seed) pass through to ``diagnose``. ``client``, ``address``, ``n_workers``
+    and ``progress`` as in :func:`fit_many`. A case whose diagnosis raises a
+    :class:`BacklashIdError` gets that exception in its slot instead of a
+    :class:`~backlashid.DiagnosisReport`.
+    """
+    from .diagnosis import diagnose
+
+    allowed = [name for name in inspect.signature(diagnose).parameters if name not in ("model", "estimation", "validation")]
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        raise DataError(f"unknown option(s) {', '.join(unknown)} for diagnose: use {', '.join(allowed)}")
+    _check_where(client, address, n_workers)
+    distributed = _distributed()
+    items = list(cases)
+    results: list[Any] = [None] * len(items)
+    todo: list[tuple[int, Any]] = []
+    for i, item in enumerate(items):
+        try:
+            todo.append((i, _case(item, i)))
+        except DataError as exc:
+            results[i] = exc
+    if not todo:
+        return results
+    with ExitStack() as stack:
+        client = _client(stack, distributed, client, address, n_workers, len(todo))
+        _run(distributed, client, todo, "diagnose", options, progress, results)
     return results
 
 
 def _run(
     distributed: Any,
     client: Any,
-    todo: list[tuple[int, tuple[Any, Any]]],
-    kind: str,
+    todo: list[tuple[int, Any]],
+    job: str,
     options: dict[str, Any],
     progress: bool,
     results: list[Any],
 ) -> None:
+    """Run ``job`` ("cascade" or "sandwich" fits, or "diagnose") on every record of ``todo``
+    in batches, writing each outcome into its slot of ``results``."""
+    label = "diagnose" if job == "diagnose" else f"fit_{job}"
     threads = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
     threads = max(threads, 4)  # a cluster still scaling up reports few workers
     n_tasks = min(len(todo), _TASKS_PER_THREAD * threads)
@@ -183,13 +267,13 @@ def _run(
     # each task runs where its records are.
     data = client.scatter([[record for _, record in batch] for batch in batches], hash=False)
     futures = client.map(
-        _fit_batch, data, kind=kind, options=options, pure=False,
-        key=[f"backlashid-fit_{kind}-{batch[0][0]}-{batch[-1][0]}-{run}" for batch in batches],
+        _batch, data, job=job, options=options, pure=False,
+        key=[f"backlashid-{label}-{batch[0][0]}-{batch[-1][0]}-{run}" for batch in batches],
     )
     slots = {future.key: [i for i, _ in batch] for future, batch in zip(futures, batches)}
     remaining = set(slots)
     del data  # the tasks hold the records now; each is released when its task is done
-    bar = _progress_bar(distributed, futures, kind, progress, len(todo))
+    bar = _progress_bar(distributed, futures, label, progress, len(todo))
     try:
         # Results are fetched in batches of what has finished (one round trip per batch).
         for done in distributed.as_completed(futures, loop=client.loop).batches():
@@ -197,7 +281,7 @@ def _run(
                 if future.status == "error":
                     exc = future.exception()
                     if hasattr(exc, "add_note"):
-                        exc.add_note(f"(in fit_many, fitting one of datasets{slots[future.key]})")
+                        exc.add_note(f"(in {label}, one of the records {slots[future.key]})")
                     raise exc
             for future, payloads in zip(done, client.gather(done)):
                 for i, outcome in zip(slots[future.key], payloads):
@@ -212,7 +296,7 @@ def _run(
             client.cancel([f for f in futures if f.key in remaining])
 
 
-def _progress_bar(distributed: Any, futures: list[Any], kind: str, progress: bool, total: int) -> Any:
+def _progress_bar(distributed: Any, futures: list[Any], label: str, progress: bool, total: int) -> Any:
     if not progress:
         return None
     try:
@@ -220,4 +304,4 @@ def _progress_bar(distributed: Any, futures: list[Any], kind: str, progress: boo
     except ImportError:  # Dask's own text bar; it returns when everything is done
         distributed.progress(futures)
         return None
-    return tqdm(total=total, desc=f"fit_{kind}", unit="fit")
+    return tqdm(total=total, desc=label, unit="record")
