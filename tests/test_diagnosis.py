@@ -151,3 +151,20 @@ def test_a_validation_record_that_starts_holding_a_force_is_not_a_gap() -> None:
     assert from_rest.best_effect != "none" and from_rest.nominal_validation_rmse > 2 * noise
     with pytest.raises(bx.DataError, match="initial_state"):
         bx.diagnose(model, est, val, initial_state="zero")
+
+
+def test_withheld_effect_benchmark_subset() -> None:
+    # a small subset of benches/withheld_effects.py (the generator's own effect code, not the
+    # diagnoser's): the nominal structure fitted on the estimation record, then diagnosed
+    from backlashid.withheld import cases
+
+    effects = ("none", "friction", "quantization", "width_drift", "compliance", "colored_noise", "output_gain_drift")
+    reported = {}
+    for case in cases(levels=(3.0,), per_effect=1, effects=effects, seed=5):
+        model = bx.fit_cascade(case.u_est, case.y_est, case.na, case.nb, case.degree, warmup=100).model
+        report = bx.diagnose(model, (case.u_est, case.y_est), (case.u_val, case.y_val))
+        reported[case.effect] = report.best_effect
+        assert report.elapsed < 10.0
+    # a catalogue effect is named, no effect is "none", a drifting output gain (outside the
+    # catalogue) is "unexplained"
+    assert reported == {**{e: e for e in effects}, "output_gain_drift": "unexplained"}
