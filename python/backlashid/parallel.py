@@ -143,21 +143,29 @@ def fit_many(
         raise DataError(f"kind = {kind!r}: use 'cascade' (fit_cascade) or 'sandwich' (fit_sandwich)")
     _check_options(fit, fit_options)
     _check_where(client, address, n_workers)
+    return _run_all(datasets, _record, kind, fit_options, client, address, n_workers, progress)
+
+
+def _run_all(
+    items: Sequence[Any], parse: Callable[[Any, int], Any], job: str, options: dict[str, Any],
+    client: Any, address: str | None, n_workers: int | None, progress: bool,
+) -> list[Any]:
+    """Parse every item (a malformed one gets its DataError in its slot) and run ``job`` on
+    the others, on the given client, the scheduler at ``address`` or an embedded cluster."""
     distributed = _distributed()
-    items = list(datasets)
+    items = list(items)
     results: list[Any] = [None] * len(items)
-    todo: list[tuple[int, tuple[Any, Any]]] = []
+    todo: list[tuple[int, Any]] = []
     for i, item in enumerate(items):
         try:
-            todo.append((i, _record(item, i)))
+            todo.append((i, parse(item, i)))
         except DataError as exc:
             results[i] = exc
     if not todo:
         return results
-
     with ExitStack() as stack:
         client = _client(stack, distributed, client, address, n_workers, len(todo))
-        _run(distributed, client, todo, kind, fit_options, progress, results)
+        _run(distributed, client, todo, job, options, progress, results)
     return results
 
 
@@ -228,21 +236,7 @@ def diagnose_many(
     if unknown:
         raise DataError(f"unknown option(s) {', '.join(unknown)} for diagnose: use {', '.join(allowed)}")
     _check_where(client, address, n_workers)
-    distributed = _distributed()
-    items = list(cases)
-    results: list[Any] = [None] * len(items)
-    todo: list[tuple[int, Any]] = []
-    for i, item in enumerate(items):
-        try:
-            todo.append((i, _case(item, i)))
-        except DataError as exc:
-            results[i] = exc
-    if not todo:
-        return results
-    with ExitStack() as stack:
-        client = _client(stack, distributed, client, address, n_workers, len(todo))
-        _run(distributed, client, todo, "diagnose", options, progress, results)
-    return results
+    return _run_all(cases, _case, "diagnose", options, client, address, n_workers, progress)
 
 
 def _run(
