@@ -171,8 +171,8 @@ def test_diagnose_passes_model_units_to_diagnose(monkeypatch, tmp_path, example)
         def to_dict(self):
             return {"best_effect": "none"}
 
-    def fake_diagnose(model, *, estimation, validation, noise_std=None):
-        calls.update(model=model, estimation=estimation, validation=validation, noise_std=noise_std)
+    def fake_diagnose(model, *, estimation, validation, noise_std=None, initial_state="estimate"):
+        calls.update(model=model, estimation=estimation, validation=validation, noise_std=noise_std, initial_state=initial_state)
         return Report()
 
     monkeypatch.setitem(sys.modules, "backlashid.diagnosis", types.SimpleNamespace(diagnose=fake_diagnose))
@@ -182,9 +182,9 @@ def test_diagnose_passes_model_units_to_diagnose(monkeypatch, tmp_path, example)
     payload = {"model": bx.example1().to_dict(), "scaling": {"input_offset": 0.0, "input_scale": 2.0, "output_offset": 0.0, "output_scale": 10.0}}
     model_json.write_text(json.dumps(payload))
     r = run("diagnose", data, "-i", "u", "-o", "y", "--model", model_json, "--estimation", ":800", "--validation", "800:",
-            "--noise-std", "0.5", "--png", tmp_path / "d.png", "--json", tmp_path / "d.json")
+            "--noise-std", "0.5", "--initial-state", "rest", "--png", tmp_path / "d.png", "--json", tmp_path / "d.json")
     assert r.exit_code == 0, r.output
-    assert calls["model"] == bx.example1()
+    assert calls["model"] == bx.example1() and calls["initial_state"] == "rest"
     np.testing.assert_allclose(calls["estimation"][0], example.u[:800])
     np.testing.assert_allclose(calls["validation"][1], example.noisy[800:])
     assert calls["noise_std"] == pytest.approx(0.05)

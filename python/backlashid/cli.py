@@ -324,6 +324,8 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
 @click.option("--degree", default=3, show_default=True, help="With --fit-cascade: branch degree.")
 @click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="With --fit-cascade: samples left out of the fit.")
 @click.option("--noise-std", type=float, help="Measurement noise std in output units if known [default: estimated].")
+@click.option("--initial-state", type=click.Choice(["estimate", "rest"]), default="estimate", show_default=True,
+              help="How every model starts the validation record: estimated (linear block at equilibrium, backlash memory fitted) or from rest.")
 @click.option("--png", "png", type=click.Path(dir_okay=False, path_type=Path), help="Write the diagnosis dashboard here.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON here.")
 @_clean_errors
@@ -331,7 +333,7 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
              estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
              input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
              model_file: Path | None, fit_cascade: bool, na: int, nb: int, degree: int, warmup: int,
-             noise_std: float | None, png: Path | None, json_path: Path | None) -> None:
+             noise_std: float | None, initial_state: str, png: Path | None, json_path: Path | None) -> None:
     """Find where a model's error lies and which unmodelled effect explains it.
 
     \b
@@ -362,7 +364,7 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
         from .diagnosis import diagnose as run_diagnosis
 
         noise = None if noise_std is None else noise_std / abs(scaling.output_scale)
-        report = run_diagnosis(model, estimation=est, validation=val, noise_std=noise)
+        report = run_diagnosis(model, estimation=est, validation=val, noise_std=noise, initial_state=initial_state)
     if not scaling.is_identity:
         click.echo("(the diagnosis works in model units: " + ", ".join(f"{k} {v:.6g}" for k, v in scaling.to_dict().items()) + ")")
     click.echo(report.summary())
