@@ -168,3 +168,19 @@ def test_withheld_effect_benchmark_subset() -> None:
     # a catalogue effect is named, no effect is "none", a drifting output gain (outside the
     # catalogue) is "unexplained"
     assert reported == {**{e: e for e in effects}, "output_gain_drift": "unexplained"}
+
+
+def test_a_model_with_feedthrough_is_diagnosed_through_its_shifted_form() -> None:
+    # a_0 u(t) + a_1 u(t-1) + .. equals the same coefficients at lags 1.. on u(t+1)
+    from backlashid.diagnosis import _without_feedthrough
+
+    m, rng = bx.example1(), np.random.default_rng(31)
+    model = bx.CascadeModel(bx.LinearBlock([0.3, 0.7, 0.5], [-0.2, 0.35], feedthrough=True), m.backlash)
+    u = rng.uniform(-1.5, 1.5, 2 * N)
+    clean = model.simulate(u)
+    shifted, u_e, u_v = _without_feedthrough(model, u[:N], u[N:])
+    assert not shifted.linear.feedthrough
+    np.testing.assert_allclose(shifted.simulate(np.r_[u_e, u_v])[50:], clean[50:], atol=1e-9)
+    y = clean + 0.03 * rng.standard_normal(2 * N)
+    report = bx.diagnose(model, (u[:N], y[:N]), (u[N:], y[N:]), noise_std=0.03)
+    assert report.best_effect == "none" and report.nominal_validation_rmse < 1.1 * 0.03

@@ -50,6 +50,7 @@ from scipy import optimize, stats
 from ._convert import as_signal
 from .effects import EFFECTS, MAX_DELAY, AugmentedModel, Screening, fit_effect, screen
 from .errors import DataError, ModelError
+from .linear import LinearBlock
 from .models import CascadeModel, CascadeState
 
 __all__ = ["diagnose", "DiagnosisReport", "Candidate", "ALPHA", "CLOSE_ENOUGH", "estimated_start", "held_state"]
@@ -98,6 +99,16 @@ def default_warmup(model: CascadeModel, n: int) -> int:
     settle = math.ceil(math.log(1e-4) / math.log(rho)) if 0.0 < rho < 1.0 else 0
     w = settle + model.linear.na + model.linear.nb + MAX_DELAY
     return int(min(max(w, 20), n // 5))
+
+
+def _without_feedthrough(model: CascadeModel, u_e: Array, u_v: Array) -> tuple[CascadeModel, Array, Array]:
+    """A block with a lag-0 term a_0 u(t) is the same coefficients at lags 1..na+1 driven by the
+    input one sample ahead, u'(t) = u(t + 1): the augmentations are written for the latter. The
+    validation record follows the estimation record, so u_e' ends with u_v[0]; the last sample of
+    u_v' (a repeat) would only reach an output after the record. The outputs are the same but
+    for the start (a_0 u(0) becomes part of the initial state), which the warm-up absorbs."""
+    shifted = CascadeModel(LinearBlock(model.linear.a, model.linear.b), model.backlash)
+    return shifted, np.r_[u_e[1:], u_v[:1]], np.r_[u_v[1:], u_v[-1:]]
 
 
 INITIAL_STATES = ("estimate", "rest")
@@ -267,6 +278,8 @@ def diagnose(
         )
     u_e, y_e = _record(estimation, "estimation")
     u_v, y_v = _record(validation, "validation")
+    if model.linear.feedthrough:
+        model, u_e, u_v = _without_feedthrough(model, u_e, u_v)
     if candidates is None:
         candidates = EFFECTS
     else:
