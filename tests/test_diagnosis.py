@@ -184,3 +184,14 @@ def test_a_model_with_feedthrough_is_diagnosed_through_its_shifted_form() -> Non
     y = clean + 0.03 * rng.standard_normal(2 * N)
     report = bx.diagnose(model, (u[:N], y[:N]), (u[N:], y[N:]), noise_std=0.03)
     assert report.best_effect == "none" and report.nominal_validation_rmse < 1.1 * 0.03
+
+
+def test_held_start_needs_an_equilibrium() -> None:
+    from backlashid.diagnosis import held_state
+
+    m = bx.example1()
+    state = held_state(m, 0.6, 0.2)
+    assert state.x_past == (m.linear.static_gain * 0.6,) * 2 and state.u_past == (0.6, 0.6)
+    integrator = bx.CascadeModel(bx.LinearBlock([0.5], [-1.0]), m.backlash)  # x(t) = x(t-1) + 0.5 u(t-1)
+    with pytest.raises(bx.ModelError, match="pole at z = 1.*initial_state='rest'"):
+        held_state(integrator, 0.6, 0.2)

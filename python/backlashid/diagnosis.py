@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import optimize, stats
 
 from ._convert import as_signal
-from .effects import EFFECTS, MAX_DELAY, AugmentedModel, Screening, fit_effect, screen
+from .effects import EFFECTS, MAX_DELAY, AugmentedModel, Screening, fit_effect, held_x, screen
 from .errors import DataError, ModelError
 from .linear import LinearBlock
 from .models import CascadeModel, CascadeState
@@ -118,9 +118,8 @@ MEMORY_GRID = 33  # backlash memories tried before the 1-D refinement
 def held_state(model: CascadeModel, u0: float, y_prev: float) -> CascadeState:
     """The cascade after the input was held at u0: the linear block (16) at its equilibrium
     x = sum a / (1 + sum b) u0, and the backlash memory y_prev."""
-    a, b = model.linear.a, model.linear.b
-    x_eq = float(np.sum(a)) / (1.0 + float(np.sum(b))) * float(u0)
-    return CascadeState(u_past=(float(u0),) * a.size, x_past=(x_eq,) * b.size, y_prev=float(y_prev))
+    x_eq = held_x(model.linear, float(u0))
+    return CascadeState(u_past=(float(u0),) * model.linear.na, x_past=(x_eq,) * model.linear.nb, y_prev=float(y_prev))
 
 
 def estimated_start(simulate: Any, u: Array, y: Array, memory_range: tuple[float, float]) -> tuple[Array, float]:

@@ -25,6 +25,7 @@ from scipy import stats
 from . import _core
 from ._convert import as_signal
 from .errors import BacklashIdError, DataError, ModelError
+from .linear import LinearBlock
 from .models import CascadeModel
 from .structure import Structure
 
@@ -114,6 +115,17 @@ def _effect_kwargs(effect: str, p: dict[str, float]) -> dict[str, Any]:
     return {}
 
 
+def held_x(block: LinearBlock, u0: float) -> float:
+    """x of the linear block (16) at rest after the input was held at u0: static gain x u0."""
+    gain = block.static_gain
+    if not np.isfinite(gain):
+        raise ModelError(
+            f"the linear block {block.a.tolist()}, {block.b.tolist()} has a pole at z = 1, so no equilibrium "
+            "holds it at a constant input: start from rest (initial_state='rest')"
+        )
+    return gain * u0
+
+
 def _simulate(
     structure: Structure, theta: Array, kwargs: dict[str, Any], u: Array, t0: float, y_prev: float = 0.0, held: bool = False
 ) -> Array:
@@ -122,7 +134,7 @@ def _simulate(
     a, b, *rest = structure.unpack(theta).chain()
     state: dict[str, Any] = {}
     if held:
-        x_eq = float(np.sum(a)) / (1.0 + float(np.sum(b))) * float(u[0])  # eq 16 at rest: x = sum a / (1 + sum b) u
+        x_eq = held_x(LinearBlock(a, b), float(u[0]))
         state = {"u_past": [float(u[0])] * len(a), "x_past": [x_eq] * len(b)}
     return _core.simulate_augmented(a, b, *rest, u, t0=float(t0), time_scale=TIME_SCALE, y_prev=float(y_prev), **state, **kwargs)
 
