@@ -86,3 +86,18 @@ def test_cli_version_and_help():
     assert r.exit_code == 0 and bx.__version__ in r.output
     r = CliRunner().invoke(main, ["--help"])
     assert r.exit_code == 0 and "demo" in r.output
+
+
+def test_shared_data_folder_is_found_beside_or_named(tmp_path, monkeypatch):
+    import backlashid as bid
+
+    monkeypatch.delenv("BACKLASHID_DATA", raising=False)
+    (tmp_path / "shared" / "data").mkdir(parents=True)
+    deep = tmp_path / "repo" / "examples"
+    deep.mkdir(parents=True)
+    assert bid.shared_data_folder(deep) == (tmp_path / "shared" / "data").resolve()
+    monkeypatch.setenv("BACKLASHID_DATA", str(tmp_path / "repo"))
+    assert bid.shared_data_folder(deep) == tmp_path / "repo"
+    monkeypatch.setenv("BACKLASHID_DATA", str(tmp_path / "missing"))
+    with pytest.raises(bid.DataError, match="BACKLASHID_DATA=.*not a folder"):
+        bid.shared_data_folder(deep)

@@ -17,8 +17,6 @@ at standstill fitted), beside the LuGre baseline listed in the data folder's REA
 
 from __future__ import annotations
 
-import os
-import sys
 import time
 from pathlib import Path
 
@@ -38,15 +36,6 @@ WINDOWS = {"ImperialValleyDBE": (3072, 7680), "ImperialValleyMCE": (3072, 7680),
 LUGRE_NRMSE = {"ImperialValleyDBE": 0.058, "ImperialValleyMCE": 0.076, "KocaeliDBE": 0.121, "KocaeliMCE": 0.094}
 
 
-def data_folder() -> Path:
-    if "BACKLASHID_DATA" in os.environ:
-        return Path(os.environ["BACKLASHID_DATA"]) / "friction_damper_backlash"
-    for parent in Path(__file__).resolve().parents:
-        if (parent / "shared" / "data").is_dir():
-            return parent / "shared" / "data" / "friction_damper_backlash"
-    sys.exit("shared/data not found: set BACKLASHID_DATA to the folder holding friction_damper_backlash/")
-
-
 def nrmse(measured: np.ndarray, simulated: np.ndarray, window: slice) -> float:
     e = simulated[window] - measured[window]
     return float(np.sqrt(np.mean(e**2)) / np.ptp(measured[window]))
@@ -64,7 +53,7 @@ def free_runs(model: bid.CascadeModel, augmented: object, scaling: Scaling, rec:
 
 
 def main() -> None:
-    folder = data_folder()
+    folder = bid.shared_data_folder(Path(__file__).parent) / "friction_damper_backlash"
     out = Path(__file__).resolve().parents[1] / "figures"
     est = decimate(load_record(folder / ESTIMATION, "x_in", "F_kip"), DECIMATE)
     quakes = {name: decimate(load_record(folder / f"d2_eq_{name}.npz", "x_in", "F_kip"), DECIMATE) for name in WINDOWS}

@@ -18,7 +18,7 @@ from .backlash import BranchCheck, GeneralBacklash, SwitchingSignals
 from .diagnosis import DiagnosisReport, diagnose
 from .effects import EFFECTS, fit_effect
 from .errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
-from .examples import ExampleData, example1, example2, example_data
+from .examples import ExampleData, example1, example2, example_data, shared_data_folder
 from .identification import FitResult, fit_cascade, fit_sandwich
 from .linear import LinearBlock
 from .metrics import Metrics, evaluate
@@ -73,4 +73,5 @@ __all__ = [
     "model_from_json",
     "fit_wiener_hammerstein",
     "wiener_hammerstein_model",
+    "shared_data_folder",
 ]

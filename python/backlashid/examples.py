@@ -1,4 +1,5 @@
-"""The paper's Examples 1 and 2 (Section 5) and data generated from them.
+"""The paper's Examples 1 and 2 (Section 5) and data generated from them; where the measured
+benchmark records live.
 
 Data convention (NOTES.md): u uniform on (-amplitude, amplitude); every signal zero before
 t = 1; noise std = std(clean output) / SNR.
@@ -6,7 +7,9 @@ t = 1; noise std = std(clean output) / SNR.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Union
 
 import numpy as np
@@ -17,7 +20,29 @@ from .errors import DataError
 from .linear import LinearBlock
 from .models import CascadeModel, SandwichModel
 
-__all__ = ["example1", "example2", "ExampleData", "example_data"]
+__all__ = ["example1", "example2", "ExampleData", "example_data", "shared_data_folder"]
+
+DATA_VARIABLE = "BACKLASHID_DATA"
+WORKPLACE_DATA = Path("/work/shared/data")
+
+
+def shared_data_folder(start: str | Path | None = None) -> Path:
+    """The folder of measured benchmark records (friction_damper_backlash/, wiener_hammerstein_2009/,
+    ...), read in place, never copied: ``$BACKLASHID_DATA`` if set, else ``shared/data`` in
+    ``start`` (default: the working directory) or one of its parents, else the workplace's
+    /work/shared/data. Raises DataError if none exists."""
+    if DATA_VARIABLE in os.environ:
+        folder = Path(os.environ[DATA_VARIABLE])
+        if not folder.is_dir():
+            raise DataError(f"{DATA_VARIABLE}={folder} is not a folder: point it at the folder holding the benchmark records")
+        return folder
+    here = Path(start if start is not None else Path.cwd()).resolve()
+    for parent in [here, *here.parents]:
+        if (parent / "shared" / "data").is_dir():
+            return parent / "shared" / "data"
+    if WORKPLACE_DATA.is_dir():
+        return WORKPLACE_DATA
+    raise DataError(f"no shared/data folder in {here} or its parents: set {DATA_VARIABLE} to the folder holding the benchmark records")
 
 
 def example1() -> CascadeModel:
