@@ -48,7 +48,7 @@ def simulate_estimate(
 def cascade_iteration(
     a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
     u: _F, y: _F, y_switch: _F, skip: int, names: list[str],
-) -> tuple[_LS, float]: ...  # (ls, moving_fraction), regression rows streamed into a QR factor
+) -> tuple[_LS, float, float]: ...  # (ls, moving_fraction, simulation RMSE of the estimate from rest over t >= skip); rows streamed into a QR factor
 def sandwich_iteration(
     a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
     r: list[float], s: list[float], u: _F, w: _F, skip: int, names: list[str],

@@ -176,13 +176,16 @@ def _initial_theta(structure: Structure, u: NDArray[np.float64], y: NDArray[np.f
     return theta
 
 
-def _iteration(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], switching: Switching, warmup: int) -> tuple[Any, float]:
-    """One iteration in the core (streaming QR, no N x p matrix): the least-squares solution
-    and the fraction of samples on which the estimate moves the backlash."""
+def _iteration(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], switching: Switching, warmup: int) -> tuple[Any, float, float | None]:
+    """One iteration in the core (streaming QR, no N x p matrix): the least-squares solution,
+    the fraction of samples on which the estimate moves the backlash, and the free-run
+    simulation RMSE of ``theta`` itself when the core computed it on the way (cascade), else
+    None."""
     p = structure.unpack(theta)
     names = structure.ls_names
     if structure.is_sandwich:
-        return _core.sandwich_iteration(*p.chain(), p.r, p.s, u, y, warmup, names)
+        ls, moving = _core.sandwich_iteration(*p.chain(), p.r, p.s, u, y, warmup, names)
+        return ls, moving, None
     y_switch = y if switching == "measured" else simulate(structure, theta, u)
     return _core.cascade_iteration(*p.chain(), u, y, y_switch, warmup, names)
 
@@ -194,17 +197,24 @@ def _relative_change(new: NDArray[np.float64], old: NDArray[np.float64]) -> floa
 def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], start: Start, *, max_iter: int, tol: float, switching: Switching, step: float, reflect: bool, warmup: int) -> _Run:
     s = structure
     theta = _initial_theta(s, u, y, start, warmup, literal=not reflect)
-    run = _Run(history=[theta], rmse=[_rmse(s, theta, u, y, warmup)], reason="iteration limit", last_ls=None, moving=0.0)
+    # run.rmse[k] is the free-run simulation RMSE of run.history[k]. The cascade's core
+    # iteration at an iterate returns its RMSE on the way (one pass over x); the others, and
+    # the last iterate, are simulated after the loop.
+    run = _Run(history=[theta], rmse=[], reason="iteration limit", last_ls=None, moving=0.0)
     rows = len(u) - max(warmup, 1 if s.is_sandwich else 0)
     was_cycling = False
     for _ in range(2, max_iter + 1):
         try:
-            (theta_ls, rss, cov, _rcond), moving = _iteration(s, theta, u, y, switching, warmup)
+            (theta_ls, rss, cov, _rcond), moving, rmse_now = _iteration(s, theta, u, y, switching, warmup)
         except NotIdentifiableError as exc:
             run.reason, run.error = "diverged", exc
             break
         except ModelError as exc:  # the estimate overflowed in simulation
             run.reason, run.error = "diverged", exc
+            break
+        run.rmse.append(rmse_now if rmse_now is not None else _rmse(s, theta, u, y, warmup))
+        if len(run.history) > 1 and not np.isfinite(run.rmse[-1]) and np.max(np.abs(theta)) > 1e6:
+            run.reason = "diverged"
             break
         run.moving = moving
         new = s.physical_from_ls(theta_ls)
@@ -221,10 +231,6 @@ def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], s
         change = _relative_change(new, theta)
         theta = new
         run.history.append(theta)
-        run.rmse.append(_rmse(s, theta, u, y, warmup))
-        if not np.isfinite(run.rmse[-1]) and np.max(np.abs(theta)) > 1e6:
-            run.reason = "diverged"
-            break
         if change < tol:
             run.reason = "tolerance"
             break
@@ -236,6 +242,7 @@ def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], s
             run.reason = "2-cycle"
             break
         was_cycling = cycling
+    run.rmse += [_rmse(s, th, u, y, warmup) for th in run.history[len(run.rmse) :]]
     return run
 
 

@@ -285,6 +285,17 @@ pub(crate) struct PaddedStep {
     right: PaddedBranch,
 }
 
+impl PaddedStep {
+    /// `switching::switching` (eq 12-13, case order of eq 1) with the padded branches: the
+    /// same bits, a fixed number of Horner steps.
+    #[inline(always)]
+    pub(crate) fn switching(&self, x: f64, y_prev: f64) -> (bool, bool) {
+        let f1 = self.left.value(x) - y_prev <= 0.0;
+        let f2 = y_prev - self.right.value(x) <= 0.0;
+        (f1, f2 && !f1)
+    }
+}
+
 impl Step for PaddedStep {
     #[inline(always)]
     fn step(&self, x: f64, y_prev: f64) -> f64 {

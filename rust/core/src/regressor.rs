@@ -6,12 +6,14 @@
 //! then for the sandwich r_2..r_nr, s_1..s_ns; with m_L1 = 1, r_1 = 1, c_L = c_1,
 //! c_R = c_2 / m_R1 (eq 20, 32).
 
-use crate::backlash::GeneralBacklash;
+use crate::backlash::{GeneralBacklash, Step};
 use crate::error::{Error, Result};
 use crate::linear::LinearBlock;
 use crate::lstsq::{solve, LeastSquares};
 use crate::signal::{check_same_length, check_signal};
-use crate::streaming::{default_threads, fold_parallel, TriangularFactor};
+use crate::streaming::{
+    default_threads, fold_parallel, fold_parallel_split, SplitRows, TriangularFactor,
+};
 use crate::switching::switching;
 
 /// Row-major regressor, target, and the internal signals the rows were built from.
@@ -225,6 +227,73 @@ impl<'a> CascadeRows<'a> {
     }
 }
 
+impl<'a> CascadeRows<'a> {
+    /// x by eq (22) only; f1 and f2 are left empty (the caller evaluates the switching).
+    fn without_switching(
+        linear: &LinearBlock,
+        backlash: &'a GeneralBacklash,
+        u: &'a [f64],
+        y: &'a [f64],
+        y_switch: &[f64],
+    ) -> Result<Self> {
+        check_signal("u", u)?;
+        check_signal("y", y)?;
+        check_same_length(u, y, "y")?;
+        check_same_length(u, y_switch, "y_switch")?;
+        let n = degree(backlash)?;
+        let (na, nb) = (linear.na(), linear.nb());
+        Ok(Self {
+            backlash,
+            u,
+            y,
+            na,
+            nb,
+            n,
+            cols: na + nb + 2 * n + 1,
+            x: linear.simulate(u, &linear.rest_state())?, // eq (22)
+            f1: Vec::new(),
+            f2: Vec::new(),
+        })
+    }
+
+    /// phi(t) of eq (18) restricted to the columns its switching selects: the left part
+    /// [u(t-i), -x(t-j), 1, xi1^i (i>=2)] kept if f1, the right part [x, -1, xi2^i (i>=2)]
+    /// kept if f2, else an all-zero row; the target is eq (21). Both parts are written
+    /// every time (`SplitRows::keep`).
+    #[inline]
+    fn fill_parts(&self, t: usize, f1: bool, f2: bool, split: &mut SplitRows) {
+        let x = &self.x;
+        let (na, nb, n) = (self.na, self.nb, self.n);
+        let left = split.slot(0);
+        for i in 1..=na {
+            left[i - 1] = if i <= t { self.u[t - i] } else { 0.0 };
+        }
+        for j in 1..=nb {
+            left[na + j - 1] = if j <= t { -x[t - j] } else { 0.0 };
+        }
+        left[na + nb] = 1.0;
+        let xi1 = x[t] + self.backlash.c_left(); // eq (23)
+        let mut power = xi1;
+        for v in &mut left[na + nb + 1..na + nb + n] {
+            power *= xi1;
+            *v = power;
+        }
+        split.keep(0, self.y[t], f1);
+        let right = split.slot(1);
+        right[0] = x[t];
+        right[1] = -1.0;
+        let xi2 = x[t] - self.backlash.c_right(); // eq (24)
+        let mut power = xi2;
+        for v in &mut right[2..=n] {
+            power *= xi2;
+            *v = power;
+        }
+        split.keep(1, self.y[t], f2);
+        let y_prev = if t > 0 { self.y[t - 1] } else { 0.0 };
+        split.keep_zero(self.y[t] - y_prev, !f1 && !f2);
+    }
+}
+
 impl RowSource for CascadeRows<'_> {
     fn cols(&self) -> usize {
         self.cols
@@ -307,8 +376,97 @@ pub fn cascade_factor_threads(
     skip: usize,
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
-    let rows = CascadeRows::new(linear, backlash, u, y, y_switch)?;
-    Ok(factor(&rows, skip, threads))
+    let rows = CascadeRows::without_switching(linear, backlash, u, y, y_switch)?;
+    Ok(cascade_rows_factor(
+        &rows, backlash, y_switch, skip, threads,
+    ))
+}
+
+/// One iteration of the cascade algorithm in one pass over the record: the factor and moving
+/// fraction of `cascade_factor`, and the free-run simulation RMSE of the estimate itself
+/// (from rest, samples t >= `skip`; +inf if the simulation overflows), which the iterations
+/// report for every iterate and which needs only the backlash run on the same x.
+pub fn cascade_iteration(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    y_switch: &[f64],
+    skip: usize,
+) -> Result<(TriangularFactor, f64, f64)> {
+    let rows = CascadeRows::without_switching(linear, backlash, u, y, y_switch)?;
+    let rmse = match backlash.padded_step() {
+        Some(padded) => simulation_rmse(&rows.x, y, skip, padded),
+        None => simulation_rmse(&rows.x, y, skip, backlash),
+    };
+    let (factor, moving) = cascade_rows_factor(&rows, backlash, y_switch, skip, default_threads());
+    Ok((factor, moving, rmse))
+}
+
+/// RMS of y(t) - y_sim(t) over t >= skip, y_sim the backlash output for x from y(0) = 0.
+fn simulation_rmse(x: &[f64], y: &[f64], skip: usize, step: impl Step) -> f64 {
+    let (mut y_prev, mut sse) = (0.0, 0.0);
+    for (t, (&xt, &yt)) in x.iter().zip(y).enumerate() {
+        y_prev = step.step(xt, y_prev);
+        if t >= skip {
+            let e = yt - y_prev;
+            sse += e * e;
+        }
+    }
+    let rmse = (sse / x.len().saturating_sub(skip).max(1) as f64).sqrt();
+    if rmse.is_finite() {
+        rmse
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// The factor of eq (18) for `rows` from `skip` on, split by branch, and the moving fraction.
+fn cascade_rows_factor(
+    rows: &CascadeRows,
+    backlash: &GeneralBacklash,
+    y_switch: &[f64],
+    skip: usize,
+    threads: usize,
+) -> (TriangularFactor, f64) {
+    // Eq (18): a row has f1 times the left-branch columns or f2 times the right-branch ones
+    // (f1 f2 = 0), never both, so A^T A is block diagonal and each branch folds on its own.
+    // f1, f2 (eq 25-26) depend on x(t) and y_switch(t-1) only: the folding threads evaluate
+    // them for their own rows.
+    let start = skip.min(rows.len());
+    let (factor, zero_rows) = match backlash.padded_step() {
+        Some(padded) => fold_cascade_rows(rows, y_switch, start, threads, |x, y_prev| {
+            padded.switching(x, y_prev)
+        }),
+        None => fold_cascade_rows(rows, y_switch, start, threads, |x, y_prev| {
+            switching(backlash, x, y_prev)
+        }),
+    };
+    let used = rows.len() - start;
+    let moving = if used == 0 {
+        0.0
+    } else {
+        (used - zero_rows) as f64 / used as f64
+    };
+    (factor, moving)
+}
+
+/// The rows of eq (18) from `start` on, split by branch (`fold_parallel_split`), with f1, f2
+/// of eq (25)-(26) by `cases(x(t), y_switch(t-1))`.
+fn fold_cascade_rows(
+    rows: &CascadeRows,
+    y_switch: &[f64],
+    start: usize,
+    threads: usize,
+    cases: impl Fn(f64, f64) -> (bool, bool) + Sync,
+) -> (TriangularFactor, usize) {
+    let (left, right) = (rows.na + rows.nb + rows.n, rows.n + 1);
+    fold_parallel_split(rows.len() - start, &[left, right], threads, |i, split| {
+        let t = start + i;
+        let ys_prev = if t > 0 { y_switch[t - 1] } else { 0.0 };
+        let (f1, f2) = cases(rows.x[t], ys_prev);
+        rows.fill_parts(t, f1, f2, split);
+    })
 }
 
 /// The sandwich's regression at an estimate: x by eq (22), the backlash output y by eq (35)

@@ -34,13 +34,14 @@ fn power_sum(m: &[f64], xi: f64, from: usize) -> f64 {
     acc
 }
 
-/// Eq (12)-(13) with the case order of eq (1): (f1, f2) for x(t) given y(t-1).
+/// Eq (12)-(13) with the case order of eq (1): (f1, f2) for x(t) given y(t-1). L(x) and
+/// R(x), the branch sums of xi_1 = x + c_L and xi_2 = x - c_R (eq 9-10), are evaluated by
+/// Horner's rule as the simulation's step evaluates them, so f1, f2 name exactly the case
+/// the simulation takes.
 #[inline]
 pub fn switching(backlash: &GeneralBacklash, x: f64, y_prev: f64) -> (bool, bool) {
-    let xi1 = x + backlash.c_left(); // eq (9)
-    let xi2 = x - backlash.c_right(); // eq (10)
-    let f1 = power_sum(backlash.left().coefficients(), xi1, 1) - y_prev <= 0.0; // eq (12)
-    let f2 = y_prev - power_sum(backlash.right().coefficients(), xi2, 1) <= 0.0; // eq (13)
+    let f1 = backlash.left().value(x) - y_prev <= 0.0; // eq (12)
+    let f2 = y_prev - backlash.right().value(x) <= 0.0; // eq (13)
     (f1, f2 && !f1)
 }
 

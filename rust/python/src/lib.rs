@@ -425,7 +425,8 @@ fn lstsq<'py>(
 
 /// One iteration of the cascade algorithm (eq 18-28): internal variables at the current
 /// estimate, the regressor rows folded into a streaming QR factor (no N x p matrix), solve.
-/// Returns ((theta, rss, cov, rcond), moving_fraction).
+/// Returns ((theta, rss, cov, rcond), moving_fraction, simulation RMSE of the estimate itself
+/// from rest over t >= skip).
 #[pyfunction]
 #[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, u, y, y_switch, skip, names))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
@@ -442,21 +443,23 @@ fn cascade_iteration<'py>(
     y_switch: PyReadonlyArrayDyn<'py, f64>,
     skip: usize,
     names: Vec<String>,
-) -> PyResult<(LsOut<'py>, f64)> {
+) -> PyResult<(LsOut<'py>, f64, f64)> {
     let (u, y, ys) = (
         signal(py, "u", &u)?,
         signal(py, "y", &y)?,
         signal(py, "y_switch", &y_switch)?,
     );
-    let (ls, moving) = run(py, || {
+    let (ls, moving, rmse) = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
-        let (factor, moving) = core::regressor::cascade_factor(&lin, &bl, &u, &y, &ys, skip)?;
+        let (factor, moving, rmse) =
+            core::regressor::cascade_iteration(&lin, &bl, &u, &y, &ys, skip)?;
         Ok((
             core::regressor::solve_factor(&factor, &names, moving)?,
             moving,
+            rmse,
         ))
     })?;
-    Ok((ls_out(py, ls)?, moving))
+    Ok((ls_out(py, ls)?, moving, rmse))
 }
 
 /// One iteration of the sandwich algorithm (eq 33-36), streamed like `cascade_iteration`.
