@@ -130,6 +130,11 @@ def test_result_carries_history_covariance_and_serialises():
     r = fit_cascade(d.u, d.noisy)
     assert r.history.shape == (r.iterations, 11)
     assert len(r.history_rmse) == r.iterations
+    # each iterate's RMSE (from the core iteration's own pass, or simulated for the last) is
+    # the free-run simulation RMSE of that iterate's model
+    for theta, rmse in zip(r.history, r.history_rmse):
+        e = d.noisy - r.structure.model(theta).simulate(d.u)
+        assert rmse == pytest.approx(np.sqrt(np.mean(e * e)), rel=1e-12)
     assert r.reason in {"tolerance", "2-cycle", "iteration limit"}
     assert list(r.parameters) == ["a1", "a2", "b1", "b2", "c_L", "m_L2", "m_L3", "m_R1", "c_R", "m_R2", "m_R3"]
     np.testing.assert_allclose(r.covariance, r.covariance.T, rtol=1e-10, atol=1e-16)

@@ -836,6 +836,40 @@ mod tests {
     }
 
     #[test]
+    fn cascade_iteration_is_the_factor_plus_the_estimate_s_own_simulation_rmse() {
+        let (lin, bl) = example1();
+        let u = input(3000);
+        let x = lin.simulate(&u, &lin.rest_state()).unwrap();
+        let yn = noisy(&bl.simulate(&x, 0.0).unwrap(), 0.05);
+        let est =
+            GeneralBacklash::from_estimate(0.5, 0.4, vec![1.0, -0.2, 0.25], vec![1.4, 0.3, 0.1])
+                .unwrap();
+        let lin2 = LinearBlock::new(vec![0.6, 0.45], vec![-0.1, 0.3]).unwrap();
+        let model = crate::CascadeModel::new(lin2.clone(), est.clone());
+        let y_sim = model.simulate(&u, &model.rest_state()).unwrap();
+        for skip in [0, 250] {
+            let (f, moving, rmse) = cascade_iteration(&lin2, &est, &u, &yn, &yn, skip).unwrap();
+            let (want_f, want_moving) = cascade_factor(&lin2, &est, &u, &yn, &yn, skip).unwrap();
+            assert_eq!((f, moving), (want_f, want_moving));
+            let sse: f64 = (skip..u.len()).map(|t| (yn[t] - y_sim[t]).powi(2)).sum();
+            let want = (sse / (u.len() - skip) as f64).sqrt();
+            assert!((rmse - want).abs() < 1e-12 * want, "{rmse} vs {want}");
+        }
+        // the degree-4 estimate takes the unpadded path, with the same result
+        let wide = GeneralBacklash::from_estimate(
+            0.5,
+            0.4,
+            vec![1.0, -0.2, 0.25, 0.0],
+            vec![1.4, 0.3, 0.1, 0.0],
+        )
+        .unwrap();
+        let (_, moving4, rmse4) = cascade_iteration(&lin2, &wide, &u, &yn, &yn, 0).unwrap();
+        let (_, moving3, rmse3) = cascade_iteration(&lin2, &est, &u, &yn, &yn, 0).unwrap();
+        assert_eq!(moving4, moving3);
+        assert!((rmse4 - rmse3).abs() < 1e-12 * rmse3);
+    }
+
+    #[test]
     fn cascade_factor_solves_like_the_dense_regression() {
         let (lin, bl) = example1();
         let u = input(5000);
