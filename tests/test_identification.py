@@ -201,6 +201,8 @@ def test_constant_input_is_not_identifiable():
         ({"switching": "predicted"}, "switching"),
         ({"step": 0.0}, "step"),
         ({"degree": 0}, "degree"),
+        ({"max_iter": 1}, "ARX start"),
+        ({"max_iter": 1, "paper": True}, "ARX start"),
     ],
 )
 def test_bad_arguments_raise_data_errors(kwargs, match):

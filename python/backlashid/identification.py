@@ -323,8 +323,11 @@ def _fit(
         raise DataError(f"switching = {switching!r}: use 'measured' or 'simulated'")
     if not 0.0 < step <= 1.0:
         raise DataError(f"step = {step}: give a step factor in (0, 1]")
-    if max_iter < 1:
-        raise DataError(f"max_iter = {max_iter}: give at least 1")
+    if max_iter < 2:
+        raise DataError(
+            f"max_iter = {max_iter}: give at least 2 (iterate 1 is the linear ARX start; the backlash "
+            "is first estimated by iterate 2)"
+        )
     u_arr, y_arr = _check_data(u, y, structure, warmup, y_name)
     # A feedthrough block is fitted as the same block one sample later (structure.py): the
     # core's model output at t + shift is the measured output at t. The shifted record starts
@@ -384,7 +387,8 @@ def _fit(
                 ):
                     refined = trial
             theta, steps = refined.theta, refined.iterations
-    rmse = _rmse(structure, theta, u_arr, y_arr, warmup)
+    # the iterate's RMSE is already known unless the refinement moved it
+    rmse = run.rmse[k] if theta is theta_iter else _rmse(structure, theta, u_arr, y_arr, warmup)
     best_info = {
         "parameters": dict(zip(structure.names, map(float, theta))),
         "simulation_rmse": rmse,
