@@ -199,35 +199,16 @@ impl<'a> CascadeRows<'a> {
         y: &'a [f64],
         y_switch: &[f64],
     ) -> Result<Self> {
-        check_signal("u", u)?;
-        check_signal("y", y)?;
-        check_same_length(u, y, "y")?;
-        check_same_length(u, y_switch, "y_switch")?;
-        let n = degree(backlash)?;
-        let (na, nb) = (linear.na(), linear.nb());
-        let x = linear.simulate(u, &linear.rest_state())?; // eq (22)
-        let (f1, f2) = (0..u.len())
+        let mut rows = Self::without_switching(linear, backlash, u, y, y_switch)?;
+        (rows.f1, rows.f2) = (0..u.len())
             .map(|t| {
                 let ys_prev = if t > 0 { y_switch[t - 1] } else { 0.0 };
-                switching(backlash, x[t], ys_prev) // eq (25)-(26)
+                switching(backlash, rows.x[t], ys_prev) // eq (25)-(26)
             })
             .unzip();
-        Ok(Self {
-            backlash,
-            u,
-            y,
-            na,
-            nb,
-            n,
-            cols: na + nb + 2 * n + 1,
-            x,
-            f1,
-            f2,
-        })
+        Ok(rows)
     }
-}
 
-impl<'a> CascadeRows<'a> {
     /// x by eq (22) only; f1 and f2 are left empty (the caller evaluates the switching).
     fn without_switching(
         linear: &LinearBlock,

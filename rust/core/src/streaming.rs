@@ -288,34 +288,42 @@ pub fn fold_parallel(
         }
         factor
     };
-    if threads == 1 {
-        return fold_range(0, rows);
-    }
-    let bounds: Vec<(usize, usize)> = (0..threads)
-        .map(|c| (rows * c / threads, rows * (c + 1) / threads))
-        .collect();
-    let parts: Vec<TriangularFactor> = std::thread::scope(|scope| {
-        let fold_range = &fold_range;
-        let handles: Vec<_> = bounds[1..]
-            .iter()
-            .map(|&(lo, hi)| scope.spawn(move || fold_range(lo, hi)))
-            .collect();
-        let first = fold_range(bounds[0].0, bounds[0].1);
-        let mut parts = vec![first];
-        for h in handles {
-            match h.join() {
-                Ok(f) => parts.push(f),
-                Err(panic) => std::panic::resume_unwind(panic),
-            }
-        }
-        parts
-    });
-    let mut iter = parts.into_iter();
+    let mut iter = in_chunks(rows, threads, fold_range).into_iter();
     let mut out = iter.next().unwrap_or_else(|| TriangularFactor::new(p));
     for part in iter {
         let _ = out.merge(&part); // same p by construction
     }
     out
+}
+
+/// `work(lo, hi)` on `threads` contiguous chunks of 0..rows (the first on this thread, the
+/// others on scoped threads), the results in chunk order.
+fn in_chunks<T: Send>(
+    rows: usize,
+    threads: usize,
+    work: impl Fn(usize, usize) -> T + Sync,
+) -> Vec<T> {
+    if threads <= 1 {
+        return vec![work(0, rows)];
+    }
+    let bounds: Vec<(usize, usize)> = (0..threads)
+        .map(|c| (rows * c / threads, rows * (c + 1) / threads))
+        .collect();
+    std::thread::scope(|scope| {
+        let work = &work;
+        let handles: Vec<_> = bounds[1..]
+            .iter()
+            .map(|&(lo, hi)| scope.spawn(move || work(lo, hi)))
+            .collect();
+        let mut parts = vec![work(bounds[0].0, bounds[0].1)];
+        for h in handles {
+            match h.join() {
+                Ok(part) => parts.push(part),
+                Err(panic) => std::panic::resume_unwind(panic),
+            }
+        }
+        parts
+    })
 }
 
 /// The rows of one `fold_parallel_split` chunk, gathered per part and folded block by block.
@@ -407,29 +415,7 @@ pub fn fold_parallel_split(
         }
         split.finish()
     };
-    let bounds: Vec<(usize, usize)> = (0..threads)
-        .map(|c| (rows * c / threads, rows * (c + 1) / threads))
-        .collect();
-    let parts: Vec<(Vec<TriangularFactor>, usize, f64)> = if threads == 1 {
-        vec![fold_range(0, rows)]
-    } else {
-        std::thread::scope(|scope| {
-            let fold_range = &fold_range;
-            let handles: Vec<_> = bounds[1..]
-                .iter()
-                .map(|&(lo, hi)| scope.spawn(move || fold_range(lo, hi)))
-                .collect();
-            let mut parts = vec![fold_range(bounds[0].0, bounds[0].1)];
-            for h in handles {
-                match h.join() {
-                    Ok(f) => parts.push(f),
-                    Err(panic) => std::panic::resume_unwind(panic),
-                }
-            }
-            parts
-        })
-    };
-    let mut iter = parts.into_iter();
+    let mut iter = in_chunks(rows, threads, fold_range).into_iter();
     let (mut factors, mut zero_rows, mut zero_ss) = iter.next().unwrap_or_else(|| {
         (
             widths.iter().map(|&w| TriangularFactor::new(w)).collect(),
