@@ -152,18 +152,6 @@ impl TriangularFactor {
         Ok(())
     }
 
-    /// Fold k rows given column by column: `fill(column, j)` writes column j (the target
-    /// last, j = p) of the k rows. For producers that hold their rows column-major.
-    pub fn fold_columns(&mut self, k: usize, mut fill: impl FnMut(&mut [f64], usize, usize)) {
-        let mut start = 0;
-        while start < k {
-            let m = (k - start).min(BLOCK_ROWS);
-            self.fold_block(m, |col, j| fill(col, j, start));
-            start += m;
-        }
-        self.rows += k;
-    }
-
     /// Combine with the factor of other rows: the result is the factor of both row sets
     /// (the QR of [R1; R2]). Merging in a fixed order gives a fixed result.
     pub fn merge(&mut self, other: &TriangularFactor) -> Result<()> {
@@ -226,9 +214,9 @@ struct Sweep {
     buffer: faer::dyn_stack::MemBuffer,
 }
 
-/// faer's QR block size for the sweep: 1 (unblocked Householder). With p + 1 <= 30 columns
-/// the blocked (WY) form does more work than it saves: at p = 11, 1 folds 1e5 rows in 3.4 ms,
-/// 4 in 5.4 ms, 12 in 5.4 ms.
+/// faer's QR block size for the sweep: 1 (unblocked Householder). On these narrow stacks the
+/// blocked (WY) form does more work than it saves: at p = 11, block size 1 folds 1e5 rows in
+/// 3.4 ms, 4 in 5.4 ms, 12 in 5.4 ms (2026-11-22, this 2-core machine).
 const QR_BLOCK: usize = 1;
 
 impl Sweep {
