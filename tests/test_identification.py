@@ -203,6 +203,8 @@ def test_constant_input_is_not_identifiable():
         ({"degree": 0}, "degree"),
         ({"max_iter": 1}, "ARX start"),
         ({"max_iter": 1, "paper": True}, "ARX start"),
+        ({"coarse": -1}, "coarse"),
+        ({"coarse": 2.5}, "coarse"),
     ],
 )
 def test_bad_arguments_raise_data_errors(kwargs, match):
@@ -269,3 +271,60 @@ def test_high_branch_degree_keeps_a_valid_model_and_the_fit():
     se = high.standard_errors
     for name, err in high.errors(truth).items():
         assert abs(err) < 4 * se[name], (name, err, se[name])
+
+
+# -- coarse to fine and the LM stopping rule -------------------------------------------------
+
+
+def test_coarse_stage_ends_at_the_whole_record_optimum():
+    # N = 6e4 >= 10 x 5000: by default the iterations and LM candidates run on the first 5000
+    # samples after the warm-up and LM polishes on the whole record. The result must be the
+    # whole-record search's optimum: parameters within 0.05 standard errors, the same cost.
+    truth = bid.example1()
+    d = bid.example_data(truth, 60_000, snr=25, seed=3)
+    fast = fit_cascade(d.u, d.noisy, warmup=20)
+    whole = fit_cascade(d.u, d.noisy, warmup=20, coarse=0)
+    assert (fast.coarse_samples, whole.coarse_samples) == (5000, 0)
+    assert "on the first 5000 samples" in fast.summary() and fast.to_dict()["coarse_samples"] == 5000
+    se = whole.standard_errors
+    for name, value in fast.parameters.items():
+        assert abs(value - whole.parameters[name]) < 0.05 * se[name], name
+    assert fast.simulation_rmse == pytest.approx(whole.simulation_rmse, rel=1e-6)
+    assert max_error(fast, truth) < 0.01
+    # the history is the segment's: every entry is its iterate's RMSE on those samples
+    seg = slice(0, 20 + 5000)
+    for theta, rmse in zip(fast.history, fast.history_rmse):
+        sim = bid.identification.simulate(fast.structure, theta, d.u[seg])
+        assert rmse == pytest.approx(np.sqrt(np.mean((d.noisy[seg] - sim)[20:] ** 2)), rel=1e-12)
+    # an explicit segment length, and none when it is not shorter than the record
+    assert fit_cascade(d.u[:8000], d.noisy[:8000], coarse=3000).coarse_samples == 3000
+    assert fit_cascade(d.u[:8000], d.noisy[:8000], coarse=8000).coarse_samples == 0
+    assert fit_cascade(d.u[:8000], d.noisy[:8000]).coarse_samples == 0  # too short by default
+
+
+def test_a_segment_that_never_moves_the_backlash_falls_back_to_the_whole_record():
+    truth = bid.example1()
+    d = bid.example_data(truth, 60_000, snr=25, seed=1)
+    u = d.u.copy()
+    u[:5000] *= 0.01  # the first segment stays in the dead band
+    y = truth.simulate(u) + d.noise_std * np.random.default_rng(0).standard_normal(len(u))
+    fit = fit_cascade(u, y)
+    assert fit.coarse_samples == 0
+    assert max_error(fit, truth) < 0.01
+
+
+def test_lm_stops_when_a_step_would_move_less_than_se_tol_standard_errors():
+    truth = bid.example1()
+    d = bid.example_data(truth, 3000, snr=25, seed=4)
+    s = bid.identification.Structure(2, 2, 3)
+    start = fit_cascade(d.u, d.noisy, refine=False).theta
+    loose = bid.refine.refine_output_error(s, d.u, d.noisy, start)
+    tight = bid.refine.refine_output_error(s, d.u, d.noisy, start, se_tol=1e-6)
+    assert loose.converged and tight.converged and loose.iterations <= tight.iterations
+    se = np.sqrt(np.diag(tight.cost / (3000 - s.size) * tight.unscaled_covariance(s.names)))
+    assert np.all(np.abs(loose.theta - tight.theta) < 0.05 * se)
+    assert loose.cost >= tight.cost - 1e-12 * tight.cost
+    # at the loose result a Gauss-Newton step moves the parameters by < 0.01 standard errors
+    r_aug, cost = bid.refine.oe_factor(s, loose.theta, d.u, d.noisy, 0)
+    q = r_aug[: s.size, s.size]
+    assert q @ q <= 1e-4 * cost / (3000 - s.size)

@@ -22,9 +22,10 @@ from .structure import Structure
 class OutputErrorFit:
     theta: NDArray[np.float64]
     cost: float  # sum of squared simulation errors after the warm-up
-    r_aug: NDArray[np.float64]  # (p+1) x (p+1) factor of [J | r] at theta
+    r_aug: NDArray[np.float64]  # (p+1) x (p+1) factor of [J | r] at theta (or a negligible step before)
     n_residuals: int
-    iterations: int
+    iterations: int  # accepted steps
+    converged: bool  # stopped by a tolerance or at a point no damped step improves, not by max_iter
 
     def unscaled_covariance(self, names: list[str]) -> NDArray[np.float64]:
         """(J^T J)^{-1} = (R^T R)^{-1}."""
@@ -66,13 +67,24 @@ def refine_output_error(
     *,
     warmup: int = 0,
     max_iter: int = 200,
-    ftol: float = 1e-14,
+    se_tol: float = 1e-2,
     xtol: float = 1e-12,
 ) -> OutputErrorFit:
     """Minimise sum_t (y(t) - y_sim(t, theta))^2 over t >= warmup from theta0; steps that make
-    a linear block unstable or overflow the simulation are rejected (the damping grows)."""
+    a linear block unstable or overflow the simulation are rejected (the damping grows).
+
+    Stops when a step would move the parameters by less than ``se_tol`` standard errors: the
+    Gauss-Newton step delta of the linearised problem has delta^T J^T J delta = ||Q^T r||^2,
+    its predicted gain, and divided by the noise variance sigma^2 = cost / (n - p) that is
+    the squared length of delta in standard errors. The rule is the same for the predicted
+    gain before a step and the actual gain of an accepted step (a kink of the piecewise
+    smooth cost can make the two differ); ``xtol`` stops a step that is negligible in
+    absolute terms. The returned ``r_aug`` is the factor at the last point where a step was
+    still worth taking (theta itself, or a negligible step before it).
+    """
     names = structure.names
     n_par = structure.size
+    dof = max(len(y) - warmup - n_par, 1)
 
     def cost_at(theta: NDArray[np.float64]) -> float:
         if not is_stable(structure, theta):
@@ -91,25 +103,35 @@ def refine_output_error(
     r_aug, cost = oe_factor(structure, theta, u, y, warmup)
     scale = np.zeros(n_par)
     lam = 1e-3
-    it = 0
-    for it in range(1, max_iter + 1):
+    steps, converged = 0, False
+    for _ in range(max_iter):
         r_mat, qtr = r_aug[:n_par, :n_par], r_aug[:n_par, n_par]
+        negligible = se_tol**2 * cost / dof  # a gain of se_tol standard errors, squared
+        if float(qtr @ qtr) <= negligible:  # also spares climbing the damping to ~1e12
+            converged = True
+            break
         scale = np.maximum(scale, np.linalg.norm(r_mat, axis=0))  # Marquardt's D: column norms of J
         d = np.where(scale > 0, scale, 1.0)
-        accepted = False
+        accepted = small = False
         while lam < 1e12:
             a = np.vstack([r_mat, np.sqrt(lam) * np.diag(d)])
             delta = _core.lstsq(a, np.concatenate([qtr, np.zeros(n_par)]), names)[0]
             new_cost = cost_at(theta + delta)
             if new_cost < cost:
-                small_step = np.linalg.norm(delta) <= xtol * (np.linalg.norm(theta) + xtol)
-                small_gain = cost - new_cost <= ftol * cost
-                theta = theta + delta
-                r_aug, cost = oe_factor(structure, theta, u, y, warmup)
+                small = cost - new_cost <= negligible or np.linalg.norm(delta) <= xtol * (
+                    np.linalg.norm(theta) + xtol
+                )
+                theta, accepted, steps = theta + delta, True, steps + 1
+                if small:  # done: keep this point's factor rather than fold another Jacobian
+                    cost = new_cost
+                else:
+                    r_aug, cost = oe_factor(structure, theta, u, y, warmup)
                 lam = max(lam / 3.0, 1e-12)
-                accepted = True
                 break
             lam *= 4.0
-        if not accepted or small_step or small_gain:
+        if not accepted or small:
+            converged = True
             break
-    return OutputErrorFit(theta=theta, cost=cost, r_aug=r_aug, n_residuals=len(y) - warmup, iterations=it)
+    return OutputErrorFit(
+        theta=theta, cost=cost, r_aug=r_aug, n_residuals=len(y) - warmup, iterations=steps, converged=converged
+    )

@@ -12,7 +12,7 @@ use crate::linear::LinearBlock;
 use crate::lstsq::{solve, LeastSquares};
 use crate::signal::{check_same_length, check_signal};
 use crate::streaming::{
-    default_threads, fold_parallel, fold_parallel_split, SplitRows, TriangularFactor,
+    fold_parallel, fold_parallel_split, threads_for, SplitRows, TriangularFactor,
 };
 use crate::switching::switching;
 
@@ -344,7 +344,7 @@ pub fn cascade_factor(
     y_switch: &[f64],
     skip: usize,
 ) -> Result<(TriangularFactor, f64)> {
-    cascade_factor_threads(linear, backlash, u, y, y_switch, skip, default_threads())
+    cascade_factor_threads(linear, backlash, u, y, y_switch, skip, threads_for(u.len()))
 }
 
 /// `cascade_factor` on `threads` threads (the result depends on it only through rounding).
@@ -380,7 +380,8 @@ pub fn cascade_iteration(
         Some(padded) => simulation_rmse(&rows.x, y, skip, padded),
         None => simulation_rmse(&rows.x, y, skip, backlash),
     };
-    let (factor, moving) = cascade_rows_factor(&rows, backlash, y_switch, skip, default_threads());
+    let (factor, moving) =
+        cascade_rows_factor(&rows, backlash, y_switch, skip, threads_for(u.len()));
     Ok((factor, moving, rmse))
 }
 
@@ -589,7 +590,7 @@ pub fn sandwich_factor(
         u,
         w,
         skip,
-        default_threads(),
+        threads_for(u.len()),
     )
 }
 
@@ -646,7 +647,7 @@ pub fn arx_factor(
     Ok(fold_parallel(
         u.len() - start,
         rows.cols,
-        default_threads(),
+        threads_for(u.len()),
         |i, row| rows.fill(start + i, row),
     ))
 }

@@ -12,12 +12,23 @@ use crate::backlash::GeneralBacklash;
 use crate::error::{Error, Result};
 use crate::linear::LinearBlock;
 use crate::signal::{check_same_length, check_signal};
-use crate::streaming::{default_threads, fold_stream, TriangularFactor};
+use crate::streaming::{default_threads, fold_stream, fold_stream_parts, TriangularFactor};
 
-/// Threads of the default output-error factors: the recursion, plus one folding thread when
-/// the machine has a second core (the same bits either way).
-fn oe_threads() -> usize {
-    default_threads().min(2)
+/// Samples from which the default output-error factors fold on a second thread. The
+/// sequential sensitivity recursion is the larger part of the work, so the hand-over only
+/// pays on long records: cascade at p = 11 (2026-11-22, this 2-core machine), 1 thread / 2
+/// threads 0.39 / 0.58 ms at N = 1e4, 3.9 / 4.3 ms at 1e5, 40 / 32 ms at 1e6.
+const OE_SECOND_THREAD_FROM: usize = 300_000;
+
+/// Threads of the default output-error factors for `rows` samples: the recursion, plus one
+/// folding thread on long records when the machine has a second core (the same bits
+/// either way).
+fn oe_threads(rows: usize) -> usize {
+    if rows < OE_SECOND_THREAD_FROM {
+        1
+    } else {
+        default_threads().min(2)
+    }
 }
 
 /// Output and row-major Jacobian (rows = samples, cols = parameters).
@@ -74,7 +85,7 @@ pub fn cascade_sensitivity(
         jacobian: Vec::with_capacity(u.len() * cols),
         cols,
     };
-    walk_cascade(linear, backlash, u, |_, yt, row| {
+    walk_cascade(linear, backlash, u, |_, yt, _, row| {
         out.output.push(yt);
         out.jacobian.extend_from_slice(row);
         Ok(())
@@ -108,17 +119,28 @@ pub fn sandwich_sensitivity(
 
 // ---- streaming: the output-error factor of [J | r] without the N x p Jacobian ----------------
 
-/// The cascade chain run one sample at a time: x(t), y(t), dx(t) (last nb + 1 rows kept) and
-/// dy(t) (`cols` wide; the columns after the backlash model's stay zero): the recursions of the
-/// module header, used by both the dense Jacobian and the streamed factor.
+/// Which case of eq (1) a sample took.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Move {
+    Left,
+    Right,
+    Hold,
+}
+
+/// The cascade chain run one sample at a time: x(t), y(t), and dy(t) (`cols` wide; the
+/// columns after the backlash model's stay zero): the recursions of the module header, used
+/// by the dense Jacobian and the streamed factors. dx/da_i and dx/db_j are lags of u and x
+/// filtered by 1/B(q) (w_u(t) = u(t) - sum_k b_k w_u(t-k), likewise w_x): dx(t)/da_i =
+/// w_u(t-i), dx(t)/db_j = -w_x(t-j), the same operations as the recursions on dx themselves.
 struct ChainStepper<'a> {
-    linear: &'a LinearBlock,
     backlash: &'a GeneralBacklash,
+    b: &'a [f64],
     u: &'a [f64],
     x: Vec<f64>,
     lay: Layout,
-    /// dx ring: row t at (t % (nb + 1)) * nl.
-    dx: Vec<f64>,
+    /// w_u(t-1), w_u(t-2), .. and w_x(t-1), .. (max(na, nb) lags; 0 before the record).
+    wu: Vec<f64>,
+    wx: Vec<f64>,
     /// dy(t) after `step(t)` (dy(t-1) before it).
     dy: Vec<f64>,
     y_prev: f64,
@@ -141,86 +163,102 @@ impl<'a> ChainStepper<'a> {
             n,
         };
         let x = linear.simulate(u, &linear.rest_state())?;
+        let lags = lay.na.max(lay.nb);
         Ok(Self {
-            linear,
             backlash,
+            b: linear.b(),
             u,
             x,
-            dx: vec![0.0; (lay.nb + 1) * lay.linear()],
+            wu: vec![0.0; lags],
+            wx: vec![0.0; lags],
             dy: vec![0.0; cols],
             lay,
             y_prev: 0.0,
         })
     }
 
-    /// Advance to sample t (called for t = 0, 1, ... in order): returns y(t), leaves dy(t).
-    fn step(&mut self, t: usize) -> Result<f64> {
-        let lay = &self.lay;
-        let (nl, ring) = (lay.linear(), lay.nb + 1);
-        let (u, x, b) = (self.u, &self.x, self.linear.b());
-        let cur = (t % ring) * nl;
-        for k in 0..nl {
-            let mut acc = if k < lay.na {
-                let i = k + 1;
-                if i <= t {
-                    u[t - i]
-                } else {
-                    0.0
-                }
-            } else {
-                let j = k - lay.na + 1;
-                if j <= t {
-                    -x[t - j]
-                } else {
-                    0.0
-                }
-            };
-            for (jj, bj) in b.iter().enumerate() {
-                let lagj = jj + 1;
-                if lagj <= t {
-                    acc -= bj * self.dx[((t - lagj) % ring) * nl + k];
-                }
-            }
-            self.dx[cur + k] = acc;
-        }
+    /// Advance to sample t (called for t = 0, 1, ... in order): returns y(t) and its case,
+    /// leaves dy(t).
+    #[inline]
+    fn step(&mut self, t: usize) -> Result<(f64, Move)> {
+        let (na, n) = (self.lay.na, self.lay.n);
+        let nl = self.lay.linear();
         let bl = self.backlash;
-        let xt = x[t];
-        let yt = bl.step(xt, self.y_prev);
+        let xt = self.x[t];
+        let yp = self.y_prev;
+        // eq (1) in its case order, each branch evaluated once (`GeneralBacklash::step`)
+        let lv = bl.left().value(xt);
+        let (yt, mv) = if lv <= yp {
+            (lv, Move::Left)
+        } else {
+            let rv = bl.right().value(xt);
+            if rv >= yp {
+                (rv, Move::Right)
+            } else {
+                (yp, Move::Hold)
+            }
+        };
         if !yt.is_finite() {
             return Err(crate::backlash::output_overflow(t, xt));
         }
-        let dy = &mut self.dy;
-        let dx = &self.dx[cur..cur + nl];
-        if bl.left().value(xt) <= self.y_prev {
+        if mv != Move::Hold {
+            let dy = &mut self.dy;
             dy.fill(0.0);
-            let xi1 = xt + bl.c_left();
-            let slope = bl.left().slope(xt);
-            for k in 0..nl {
-                dy[k] = slope * dx[k];
+            let (branch, xi) = match mv {
+                Move::Left => (bl.left(), xt + bl.c_left()),
+                _ => (bl.right(), xt - bl.c_right()),
+            };
+            let slope = branch.slope(xt);
+            for (k, w) in self.wu[..na].iter().enumerate() {
+                dy[k] = slope * w;
             }
-            dy[lay.c_l()] = slope;
-            let mut p = xi1;
-            for i in 2..=lay.n {
-                p *= xi1;
-                dy[lay.m_l(i)] = p;
+            for (k, w) in self.wx[..nl - na].iter().enumerate() {
+                dy[na + k] = slope * -w;
             }
-        } else if bl.right().value(xt) >= self.y_prev {
-            dy.fill(0.0);
-            let xi2 = xt - bl.c_right();
-            let slope = bl.right().slope(xt);
-            for k in 0..nl {
-                dy[k] = slope * dx[k];
-            }
-            dy[lay.c_r()] = -slope;
-            dy[lay.m_r1()] = xi2;
-            let mut p = xi2;
-            for i in 2..=lay.n {
-                p *= xi2;
-                dy[lay.m_r(i)] = p;
+            let mut p = xi;
+            if mv == Move::Left {
+                dy[self.lay.c_l()] = slope;
+                for i in 2..=n {
+                    p *= xi;
+                    dy[self.lay.m_l(i)] = p;
+                }
+            } else {
+                dy[self.lay.c_r()] = -slope;
+                dy[self.lay.m_r1()] = xi;
+                for i in 2..=n {
+                    p *= xi;
+                    dy[self.lay.m_r(i)] = p;
+                }
             }
         } // else holding: dy(t) = dy(t-1), already in place (zero before the record)
+          // w_u(t), w_x(t) join the lags for sample t + 1
+        let (wu, wx) = (
+            filtered(self.u[t], self.b, &self.wu),
+            filtered(xt, self.b, &self.wx),
+        );
+        push_lag(&mut self.wu, wu);
+        push_lag(&mut self.wx, wx);
         self.y_prev = yt;
-        Ok(yt)
+        Ok((yt, mv))
+    }
+}
+
+/// s(t) - sum_k b_k w(t-k), with `lags` = [w(t-1), w(t-2), ..].
+#[inline(always)]
+fn filtered(s: f64, b: &[f64], lags: &[f64]) -> f64 {
+    let mut acc = s;
+    for (bk, w) in b.iter().zip(lags) {
+        acc -= bk * w;
+    }
+    acc
+}
+
+/// Shift the lags by one sample, `newest` first.
+#[inline(always)]
+fn push_lag(lags: &mut [f64], newest: f64) {
+    if let Some(last) = lags.len().checked_sub(1) {
+        lags.copy_within(0..last, 1);
+        lags[0] = newest;
     }
 }
 
@@ -248,6 +286,12 @@ fn check_pair(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
 /// [J | r] over the samples t >= `warmup`, J = d y_sim / d theta (the columns of
 /// `cascade_sensitivity`), r = y - y_sim, and the cost sum r^2. The sensitivity recursions
 /// run sample by sample keeping only the rows they need; memory does not grow with N x p.
+///
+/// Two properties of the rows make the fold cheap. A row on L is zero in R's columns and a
+/// row on R in L's, so each branch's rows fold into a factor over the linear columns and
+/// that branch's own (`fold_stream_parts`), and `TriangularFactor::embed_sum` adds the two.
+/// While the backlash holds, dy(t) = dy(t-1): a run of equal rows folds as one
+/// (`RowSink::repeat`). The result is the factor of the full rows to rounding.
 pub fn cascade_oe_factor(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
@@ -255,7 +299,7 @@ pub fn cascade_oe_factor(
     y: &[f64],
     warmup: usize,
 ) -> Result<(TriangularFactor, f64)> {
-    cascade_oe_factor_threads(linear, backlash, u, y, warmup, oe_threads())
+    cascade_oe_factor_threads(linear, backlash, u, y, warmup, oe_threads(u.len()))
 }
 
 /// `cascade_oe_factor` with the folding on a second thread when `threads` >= 2 (the same
@@ -269,30 +313,57 @@ pub fn cascade_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, y, "y")?;
-    finish(fold_stream(
-        cascade_cols(linear, backlash),
-        threads,
-        |sink| {
-            walk_cascade(linear, backlash, u, |t, yt, row| match t >= warmup {
-                true => sink.push(row, y[t] - yt),
-                false => Ok(()),
-            })
-        },
-    ))
+    let cols = cascade_cols(linear, backlash);
+    let nl = linear.na() + linear.nb();
+    // L's rows: a, b, c_L, m_L2..m_Ln; R's rows: a, b, m_R1, c_R, m_R2..m_Rn
+    let split = nl + backlash.left().coefficients().len();
+    let left: Vec<usize> = (0..split).collect();
+    let right: Vec<usize> = (0..nl).chain(split..cols).collect();
+    let streamed = fold_stream_parts(&[left.len(), right.len()], threads, |sink| {
+        let mut on_right = false; // the branch of dy (a zero row before any move: either)
+        walk_cascade(linear, backlash, u, |t, yt, mv, dy| {
+            match mv {
+                Move::Left => on_right = false,
+                Move::Right => on_right = true,
+                Move::Hold => {}
+            }
+            if t < warmup {
+                return Ok(());
+            }
+            let r = y[t] - yt;
+            if mv == Move::Hold && sink.repeat(r) {
+                return Ok(());
+            }
+            match on_right {
+                false => sink.push_part(0, &[&dy[..split]], r),
+                true => sink.push_part(1, &[&dy[..nl], &dy[split..]], r),
+            }
+        })
+    })?;
+    let factor = TriangularFactor::embed_sum(
+        cols,
+        &[
+            (&streamed.factors[0], &left),
+            (&streamed.factors[1], &right),
+        ],
+        streamed.rows,
+        streamed.dispersion,
+    );
+    finish(factor.map(|f| (f, streamed.sum_squares)))
 }
 
-/// The cascade's output y(t) and Jacobian row dy(t), handed to `visit(t, y(t), dy(t))` for
-/// t = 0, 1, ... (the one place the cascade's sensitivity recursions run).
+/// The cascade's output y(t), its case and Jacobian row dy(t), handed to `visit(t, y(t),
+/// case, dy(t))` for t = 0, 1, ... (the one place the cascade's sensitivity recursions run).
 fn walk_cascade(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
     u: &[f64],
-    mut visit: impl FnMut(usize, f64, &[f64]) -> Result<()>,
+    mut visit: impl FnMut(usize, f64, Move, &[f64]) -> Result<()>,
 ) -> Result<()> {
     let mut chain = ChainStepper::new(linear, backlash, u, cascade_cols(linear, backlash))?;
     for t in 0..u.len() {
-        let yt = chain.step(t)?;
-        visit(t, yt, &chain.dy)?;
+        let (yt, mv) = chain.step(t)?;
+        visit(t, yt, mv, &chain.dy)?;
     }
     Ok(())
 }
@@ -316,7 +387,7 @@ pub fn sandwich_oe_factor(
         u,
         w,
         warmup,
-        oe_threads(),
+        oe_threads(u.len()),
     )
 }
 
@@ -370,7 +441,7 @@ fn walk_sandwich(
     let mut w_ring = vec![0.0; rw];
     let mut dw_ring = vec![0.0; rw * cols];
     for t in 0..u.len() {
-        let yt = chain.step(t)?;
+        let (yt, _) = chain.step(t)?;
         let cy = t % ry;
         y_ring[cy] = yt;
         dy_ring[cy * cols..(cy + 1) * cols].copy_from_slice(&chain.dy);

@@ -17,10 +17,20 @@ use crate::lstsq::{solve_triangular, LeastSquares};
 pub const BLOCK_ROWS: usize = 1024;
 
 /// Blocks per hand-over from a `fold_stream` producer to its folding thread.
-const HANDOVER_BLOCKS: usize = 16;
+const HANDOVER_BLOCKS: usize = 2;
 
 /// Upper bound of `default_threads`.
 pub const MAX_THREADS: usize = 8;
+
+/// Rows per thread from which a parallel fold pays: below it, spawning a thread and merging
+/// its factor cost more than the thread saves. The cascade regression (p = 12, 2026-11-22,
+/// this 2-core machine) on 1 / 2 threads: 129 / 168 us at 5000 rows, 254 / 220 us at 1e4.
+pub const ROWS_PER_THREAD: usize = 8192;
+
+/// `default_threads()`, at most one per `ROWS_PER_THREAD` rows of a regression.
+pub fn threads_for(rows: usize) -> usize {
+    default_threads().min((rows / ROWS_PER_THREAD).max(1))
+}
 
 /// The threads a streaming regression uses: the machine's available parallelism, 1 to
 /// `MAX_THREADS`. Results depend on it only through rounding (`fold_parallel`).
@@ -106,6 +116,46 @@ impl TriangularFactor {
         out.r[n * n - 1] = rho2.sqrt();
         out.rows += zero_rows;
         out
+    }
+
+    /// The factor over p columns of the rows of several factors whose columns overlap:
+    /// column k of `parts[i].0` is column `parts[i].1[k]` here (the target stays the target).
+    /// Folding each part's R_aug rows, so that R_aug^T R_aug is the sum of the parts' Gram
+    /// matrices; `extra_sum_squares` joins the residual corner (targets whose rows are
+    /// accounted for elsewhere, e.g. `StreamedParts::dispersion`); `rows` is the row count
+    /// the parts stand for.
+    pub fn embed_sum(
+        p: usize,
+        parts: &[(&TriangularFactor, &[usize])],
+        rows: usize,
+        extra_sum_squares: f64,
+    ) -> Result<Self> {
+        let n = p + 1;
+        let mut out = Self::new(p);
+        for (part, map) in parts {
+            let m = part.p + 1;
+            if map.len() != part.p || map.iter().any(|&c| c >= p) {
+                return Err(Error::Data(format!(
+                    "streaming least squares: a column map {map:?} for a factor of {} columns \
+                     into {p} (internal shape mismatch)",
+                    part.p
+                )));
+            }
+            out.fold_block(m, |col, j| {
+                let source = if j == p {
+                    Some(part.p)
+                } else {
+                    map.iter().position(|&c| c == j)
+                };
+                for (i, c) in col.iter_mut().enumerate() {
+                    *c = source.map_or(0.0, |k| part.r[i * m + k]);
+                }
+            });
+        }
+        let corner = &mut out.r[n * n - 1];
+        *corner = (*corner * *corner + extra_sum_squares).sqrt();
+        out.rows = rows;
+        Ok(out)
     }
 
     /// Number of regressors p (R_aug is (p+1) x (p+1)).
@@ -424,69 +474,157 @@ pub fn fold_parallel_split(
     )
 }
 
-/// Where `fold_stream`'s producer pushes rows: full blocks are folded here (one thread) or
-/// handed to a folding thread (two), always in the order produced.
+/// Where a `fold_stream` producer pushes rows: each row belongs to one part (a factor over
+/// that part's columns); full batches are folded here (one thread) or handed to a folding
+/// thread (two), always in the order produced. A run of identical rows (`repeat`) is folded
+/// as one: k rows [a | b_1], .., [a | b_k] have the Gram matrix of the single row
+/// [sqrt(k) a | sqrt(k) mean(b)] plus sum (b_i - mean(b))^2 in the target's corner alone.
 pub struct RowSink {
-    p: usize,
-    /// Rows gathered before a fold (local) or a hand-over to the folding thread.
+    widths: Vec<usize>,
+    /// Rows gathered per part before a fold (local) or a hand-over to the folding thread.
     batch: usize,
-    a: Vec<f64>,
-    b: Vec<f64>,
+    a: Vec<Vec<f64>>,
+    b: Vec<Vec<f64>>,
+    /// The last pushed row, still open to `repeat`.
+    run: Option<Run>,
+    rows: usize,
     sum_squares: f64,
+    /// Sum over closed runs of sum (b_i - mean(b))^2.
+    dispersion: f64,
     target: SinkTarget,
 }
 
+/// A row pushed k times: its part, k, its first target b_1, and the sums of d_i = b_i - b_1
+/// and d_i^2 (the shifted-data form: no division per row, and deviations from a target of
+/// the same run keep the cancellation in sum (b_i - mean)^2 = sum d_i^2 - (sum d_i)^2 / k
+/// small).
+struct Run {
+    part: usize,
+    count: usize,
+    first: f64,
+    sum_d: f64,
+    sum_d2: f64,
+}
+
 enum SinkTarget {
-    Local(TriangularFactor),
+    Local(Vec<TriangularFactor>),
     Channel {
-        full: std::sync::mpsc::SyncSender<(Vec<f64>, Vec<f64>)>,
+        full: std::sync::mpsc::SyncSender<(usize, Vec<f64>, Vec<f64>)>,
         empty: std::sync::mpsc::Receiver<(Vec<f64>, Vec<f64>)>,
     },
 }
 
+/// What `fold_stream_parts` folded: one factor per part, the number of rows pushed (runs
+/// counted in full), the sum of their squared targets, and the within-run dispersion of the
+/// targets that the merged runs leave out of the factors.
+pub struct StreamedParts {
+    pub factors: Vec<TriangularFactor>,
+    pub rows: usize,
+    pub sum_squares: f64,
+    pub dispersion: f64,
+}
+
 impl RowSink {
-    /// Append one row (p values) with its target.
+    /// Append one row of part 0 (`widths[0]` values) with its target.
     #[inline]
     pub fn push(&mut self, row: &[f64], target: f64) -> Result<()> {
-        if row.len() != self.p {
+        self.push_part(0, &[row], target)
+    }
+
+    /// Append one row of `part`, its values given in pieces (concatenated in order, together
+    /// `widths[part]` values), with its target.
+    #[inline]
+    pub fn push_part(&mut self, part: usize, pieces: &[&[f64]], target: f64) -> Result<()> {
+        let width: usize = pieces.iter().map(|p| p.len()).sum();
+        if self.widths.get(part) != Some(&width) {
             return Err(Error::Data(format!(
-                "streaming least squares: a row of {} values for {} columns (internal shape \
-                 mismatch)",
-                row.len(),
-                self.p
+                "streaming least squares: a row of {width} values for part {part} of column \
+                 widths {:?} (internal shape mismatch)",
+                self.widths
             )));
         }
-        self.a.extend_from_slice(row);
-        self.b.push(target);
+        self.close_run()?;
+        for piece in pieces {
+            self.a[part].extend_from_slice(piece);
+        }
+        self.b[part].push(target);
+        self.run = Some(Run {
+            part,
+            count: 1,
+            first: target,
+            sum_d: 0.0,
+            sum_d2: 0.0,
+        });
+        self.rows += 1;
         self.sum_squares += target * target;
-        if self.b.len() >= self.batch {
-            self.flush()?;
+        Ok(())
+    }
+
+    /// The last pushed row once more, with this target; false (nothing added) when no row
+    /// was pushed yet.
+    #[inline]
+    pub fn repeat(&mut self, target: f64) -> bool {
+        let Some(run) = self.run.as_mut() else {
+            return false;
+        };
+        run.count += 1;
+        let d = target - run.first;
+        run.sum_d += d;
+        run.sum_d2 += d * d;
+        self.rows += 1;
+        self.sum_squares += target * target;
+        true
+    }
+
+    /// Put the open run's merged row in place and hand over a full batch.
+    fn close_run(&mut self) -> Result<()> {
+        let Some(run) = self.run.take() else {
+            return Ok(());
+        };
+        let (part, w) = (run.part, self.widths[run.part]);
+        if run.count > 1 {
+            let k = run.count as f64;
+            let mean_d = run.sum_d / k;
+            let scale = k.sqrt();
+            let a = &mut self.a[part];
+            let at = a.len() - w;
+            for v in &mut a[at..] {
+                *v *= scale;
+            }
+            if let Some(b) = self.b[part].last_mut() {
+                *b = (run.first + mean_d) * scale;
+            }
+            self.dispersion += (run.sum_d2 - run.sum_d * mean_d).max(0.0);
+        }
+        if self.b[part].len() >= self.batch {
+            self.flush(part)?;
         }
         Ok(())
     }
 
-    fn flush(&mut self) -> Result<()> {
-        if self.b.is_empty() {
+    fn flush(&mut self, part: usize) -> Result<()> {
+        if self.b[part].is_empty() {
             return Ok(());
         }
         match &mut self.target {
-            SinkTarget::Local(factor) => {
-                factor.fold(&self.a, &self.b)?;
-                self.a.clear();
-                self.b.clear();
+            SinkTarget::Local(factors) => {
+                factors[part].fold(&self.a[part], &self.b[part])?;
+                self.a[part].clear();
+                self.b[part].clear();
             }
             SinkTarget::Channel { full, empty } => {
                 let (mut a, mut b) = empty.try_recv().unwrap_or_else(|_| {
+                    let most = self.widths.iter().max().copied().unwrap_or(0);
                     (
-                        Vec::with_capacity(self.batch * self.p),
+                        Vec::with_capacity(self.batch * most),
                         Vec::with_capacity(self.batch),
                     )
                 });
                 a.clear();
                 b.clear();
-                std::mem::swap(&mut a, &mut self.a);
-                std::mem::swap(&mut b, &mut self.b);
-                if full.send((a, b)).is_err() {
+                std::mem::swap(&mut a, &mut self.a[part]);
+                std::mem::swap(&mut b, &mut self.b[part]);
+                if full.send((part, a, b)).is_err() {
                     return Err(Error::Data(
                         "streaming least squares: the folding thread stopped (internal error)"
                             .into(),
@@ -496,47 +634,86 @@ impl RowSink {
         }
         Ok(())
     }
+
+    fn finish(&mut self) -> Result<()> {
+        self.close_run()?;
+        (0..self.widths.len()).try_for_each(|k| self.flush(k))
+    }
 }
 
-/// Fold the rows that `produce` pushes, in order, into a factor of p columns; returns it with
-/// the sum of the squared targets. With `threads` >= 2 the folding runs on a second thread
-/// while `produce` computes the next rows (a sequential recursion, e.g. sensitivities); the
-/// result is the same bits either way.
+/// Fold the rows that `produce` pushes (one part of p columns, no repeats) into a factor;
+/// returns it with the sum of the squared targets. See `fold_stream_parts`.
 pub fn fold_stream(
     p: usize,
     threads: usize,
     produce: impl FnOnce(&mut RowSink) -> Result<()>,
 ) -> Result<(TriangularFactor, f64)> {
-    let sink = |target, batch| RowSink {
-        p,
+    let mut out = fold_stream_parts(&[p], threads, produce)?;
+    let factor = out
+        .factors
+        .pop()
+        .unwrap_or_else(|| TriangularFactor::new(p));
+    Ok((factor, out.sum_squares))
+}
+
+/// Fold the rows that `produce` pushes, in order, into one factor per part (`widths[k]`
+/// columns each). With `threads` >= 2 the folding runs on a second thread while `produce`
+/// computes the next rows (a sequential recursion, e.g. sensitivities); the result is the
+/// same bits either way.
+pub fn fold_stream_parts(
+    widths: &[usize],
+    threads: usize,
+    produce: impl FnOnce(&mut RowSink) -> Result<()>,
+) -> Result<StreamedParts> {
+    let new_factors = || {
+        widths
+            .iter()
+            .map(|&w| TriangularFactor::new(w))
+            .collect::<Vec<_>>()
+    };
+    let sink = |target, batch: usize| RowSink {
+        widths: widths.to_vec(),
         batch,
-        a: Vec::with_capacity(batch * p),
-        b: Vec::with_capacity(batch),
+        a: widths
+            .iter()
+            .map(|&w| Vec::with_capacity(batch * w))
+            .collect(),
+        b: widths.iter().map(|_| Vec::with_capacity(batch)).collect(),
+        run: None,
+        rows: 0,
         sum_squares: 0.0,
+        dispersion: 0.0,
         target,
     };
+    let done = |s: RowSink, factors| StreamedParts {
+        factors,
+        rows: s.rows,
+        sum_squares: s.sum_squares,
+        dispersion: s.dispersion,
+    };
     if threads <= 1 {
-        let mut s = sink(SinkTarget::Local(TriangularFactor::new(p)), BLOCK_ROWS);
+        let mut s = sink(SinkTarget::Local(new_factors()), BLOCK_ROWS);
         produce(&mut s)?;
-        s.flush()?;
-        return match s.target {
-            SinkTarget::Local(f) => Ok((f, s.sum_squares)),
+        s.finish()?;
+        let factors = match std::mem::replace(&mut s.target, SinkTarget::Local(Vec::new())) {
+            SinkTarget::Local(f) => f,
             SinkTarget::Channel { .. } => unreachable!("a local sink stays local"),
         };
+        return Ok(done(s, factors));
     }
     std::thread::scope(|scope| {
-        let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<(Vec<f64>, Vec<f64>)>(2);
+        let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<(usize, Vec<f64>, Vec<f64>)>(2);
         let (empty_tx, empty_rx) = std::sync::mpsc::channel();
         let folder = scope.spawn(move || {
-            let mut factor = TriangularFactor::new(p);
+            let mut factors = new_factors();
             let mut status = Ok(());
-            for (a, b) in full_rx {
+            for (part, a, b) in full_rx {
                 if status.is_ok() {
-                    status = factor.fold(&a, &b);
+                    status = factors[part].fold(&a, &b);
                 }
                 let _ = empty_tx.send((a, b)); // the producer may be gone
             }
-            status.map(|_| factor)
+            status.map(|_| factors)
         });
         // hand over several blocks at once: fewer wake-ups of the folding thread
         let mut s = sink(
@@ -546,15 +723,15 @@ pub fn fold_stream(
             },
             HANDOVER_BLOCKS * BLOCK_ROWS,
         );
-        let produced = produce(&mut s).and_then(|_| s.flush());
-        let sum_squares = s.sum_squares;
-        drop(s); // closes the channel: the folder finishes
+        let produced = produce(&mut s).and_then(|_| s.finish());
+        // closes the channel: the folder finishes
+        s.target = SinkTarget::Local(Vec::new());
         let folded = match folder.join() {
             Ok(f) => f,
             Err(panic) => std::panic::resume_unwind(panic),
         };
         produced?;
-        Ok((folded?, sum_squares))
+        Ok(done(s, folded?))
     })
 }
 
@@ -866,6 +1043,100 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    #[test]
+    fn parts_with_repeated_rows_give_the_factor_of_all_rows() {
+        // Rows over 7 columns in two overlapping parts (0..5 and 0..3 + 5..7), each pushed
+        // once and then repeated 0..4 times with new targets, against the plain fold of
+        // every row written out in full.
+        let (rows, p) = (6000, 7);
+        let (a, b) = problem(rows, p, 17);
+        let left: Vec<usize> = (0..5).collect();
+        let right: Vec<usize> = (0..3).chain(5..7).collect();
+        let mut g = Lcg(29);
+        let plan: Vec<(usize, usize)> = (0..rows)
+            .map(|t| (t % 2 + (t % 7 == 3) as usize) % 2)
+            .map(|part| (part, ((g.next() + 1.0) * 2.5) as usize)) // (part, repeats 0..4)
+            .collect();
+        let mut full_a = Vec::new();
+        let mut full_b = Vec::new();
+        for (t, &(part, reps)) in plan.iter().enumerate() {
+            let cols = if part == 0 { &left } else { &right };
+            let mut row = vec![0.0; p];
+            for &c in cols {
+                row[c] = a[t * p + c];
+            }
+            for k in 0..=reps {
+                full_a.extend_from_slice(&row);
+                full_b.push(b[t] + 0.01 * k as f64 * g.next() + if k > 0 { 1e3 } else { 0.0 });
+            }
+        }
+        let mut want = TriangularFactor::new(p);
+        want.fold(&full_a, &full_b).unwrap();
+        let produce = |sink: &mut RowSink| {
+            let mut at = 0;
+            for (t, &(part, reps)) in plan.iter().enumerate() {
+                let cols = if part == 0 { &left } else { &right };
+                let row: Vec<f64> = cols.iter().map(|&c| a[t * p + c]).collect();
+                sink.push_part(part, &[&row[..2], &row[2..]], full_b[at])?;
+                for k in 1..=reps {
+                    assert!(sink.repeat(full_b[at + k]));
+                }
+                at += reps + 1;
+            }
+            Ok(())
+        };
+        let one = fold_stream_parts(&[5, 5], 1, produce).unwrap();
+        let two = fold_stream_parts(&[5, 5], 2, produce).unwrap();
+        assert_eq!((&one.factors, one.rows), (&two.factors, two.rows));
+        assert_eq!(
+            (one.sum_squares, one.dispersion),
+            (two.sum_squares, two.dispersion)
+        );
+        assert_eq!(one.rows, full_b.len());
+        let ss: f64 = full_b.iter().map(|v| v * v).sum();
+        assert!(rel(one.sum_squares, ss) < 1e-13);
+        let got = TriangularFactor::embed_sum(
+            p,
+            &[(&one.factors[0], &left), (&one.factors[1], &right)],
+            one.rows,
+            one.dispersion,
+        )
+        .unwrap();
+        assert_eq!(got.rows(), want.rows());
+        // the same Gram matrix, hence the same solution and residual (the repeated rows'
+        // targets are 1e3 off, so the dispersion carries most of the residual)
+        let n = p + 1;
+        let (r, w) = (got.r_aug(), want.r_aug());
+        for i in 0..n {
+            for j in i..n {
+                let g1: f64 = (0..n).map(|k| r[k * n + i] * r[k * n + j]).sum();
+                let g2: f64 = (0..n).map(|k| w[k * n + i] * w[k * n + j]).sum();
+                let size = (w[i * n + i] * w[j * n + j]).abs().max(1.0);
+                assert!((g1 - g2).abs() < 1e-10 * size, "{i} {j}: {g1} {g2}");
+            }
+        }
+        assert_same(
+            &got.solve(&names(p)).unwrap(),
+            &want.solve(&names(p)).unwrap(),
+            1e-9,
+        );
+        // nothing to repeat before the first row; a row of the wrong width is an error
+        let none = fold_stream_parts(&[5, 5], 1, |sink| {
+            assert!(!sink.repeat(1.0));
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!((none.rows, none.sum_squares), (0, 0.0));
+        for threads in [1, 2] {
+            let bad =
+                fold_stream_parts(&[5, 5], threads, |sink| sink.push_part(1, &[&a[..4]], 1.0));
+            assert!(matches!(bad, Err(Error::Data(_))));
+        }
+        let map = [0usize, 1, 9, 3, 4];
+        let bad_map = TriangularFactor::embed_sum(p, &[(&one.factors[0], &map)], 1, 0.0);
+        assert!(matches!(bad_map, Err(Error::Data(_))));
     }
 
     #[test]
