@@ -466,8 +466,14 @@ def _fit(
     run, k, refined = found
     theta_iter = run.history[k]
     theta, steps = (refined.theta, refined.iterations) if refined is not None else (theta_iter, 0)
-    # the iterate's RMSE is already known unless the refinement moved it (or it is a segment's)
-    rmse = run.rmse[k] if theta is theta_iter and not segment else _rmse(structure, theta, u_arr, y_arr, warmup)
+    # the simulation RMSE is known: the refinement's cost, or the iterate's own (unless that
+    # was a segment's)
+    if refined is not None:
+        rmse = float(np.sqrt(refined.cost / refined.n_residuals))
+    elif not segment:
+        rmse = run.rmse[k]
+    else:
+        rmse = _rmse(structure, theta, u_arr, y_arr, warmup)
     best_info = {
         "parameters": dict(zip(structure.names, map(float, theta))),
         "simulation_rmse": rmse,

@@ -34,8 +34,9 @@ class OutputErrorFit:
 
 
 def spectral_radius(den: NDArray[np.float64]) -> float:
-    """Largest root modulus of z^n + d_1 z^(n-1) + ... (0 for an empty denominator)."""
-    return float(np.abs(np.roots(np.concatenate([[1.0], den]))).max()) if len(den) else 0.0
+    """Largest root modulus of z^n + d_1 z^(n-1) + ... (0 for an empty denominator, inf for a
+    non-finite one); the core's companion-matrix roots, as ``LinearBlock.spectral_radius``."""
+    return _core.spectral_radius([float(v) for v in den])
 
 
 def is_stable(structure: Structure, theta: NDArray[np.float64]) -> bool:
@@ -98,9 +99,13 @@ def refine_output_error(
         return c if np.isfinite(c) else np.inf
 
     theta = np.array(theta0, dtype=np.float64)
-    if not np.isfinite(cost_at(theta)):
-        raise BacklashIdError("output-error refinement: the start is unstable or diverges")
-    r_aug, cost = oe_factor(structure, theta, u, y, warmup)
+    unusable = BacklashIdError("output-error refinement: the start is unstable or diverges")
+    if not is_stable(structure, theta):
+        raise unusable
+    try:  # the factor's pass simulates the start: an overflow is a ModelError
+        r_aug, cost = oe_factor(structure, theta, u, y, warmup)
+    except BacklashIdError:
+        raise unusable from None
     scale = np.zeros(n_par)
     lam = 1e-3
     steps, converged = 0, False

@@ -164,12 +164,10 @@ impl GeneralBacklash {
     pub fn simulate(&self, x: &[f64], y0: f64) -> Result<Vec<f64>> {
         check_signal("x", x)?;
         check_memory(y0)?;
-        let mut y = Vec::with_capacity(x.len());
-        let mut y_prev = y0;
-        for &xt in x {
-            y_prev = self.step(xt, y_prev);
-            y.push(y_prev);
-        }
+        let y = match self.padded_step() {
+            Some(padded) => run_steps(x, y0, padded),
+            None => run_steps(x, y0, self),
+        };
         check_output_overflow(x, &y)?;
         Ok(y)
     }
@@ -222,6 +220,17 @@ impl GeneralBacklash {
             ),
         }
     }
+}
+
+/// y(t) = step(x(t), y(t-1)) along x from y(0) = `y0`.
+fn run_steps(x: &[f64], y0: f64, step: impl Step) -> Vec<f64> {
+    let mut y_prev = y0;
+    x.iter()
+        .map(|&xt| {
+            y_prev = step.step(xt, y_prev);
+            y_prev
+        })
+        .collect()
 }
 
 /// Eq (1)'s case order given L(x) and R(x), written as two selects (no branch to mispredict).

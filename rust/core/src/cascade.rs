@@ -153,11 +153,24 @@ pub(crate) fn switching_flags(
     y: &[f64],
     y0: f64,
 ) -> (Vec<bool>, Vec<bool>) {
+    // the padded branches (the same bits, a fixed number of Horner steps) where they apply
+    match backlash.padded_step() {
+        Some(padded) => flags_along(x, y, y0, |xt, yp| padded.switching(xt, yp)),
+        None => flags_along(x, y, y0, |xt, yp| switching(backlash, xt, yp)),
+    }
+}
+
+fn flags_along(
+    x: &[f64],
+    y: &[f64],
+    y0: f64,
+    switching: impl Fn(f64, f64) -> (bool, bool),
+) -> (Vec<bool>, Vec<bool>) {
     let mut y_prev = y0;
     x.iter()
         .zip(y)
         .map(|(&xt, &yt)| {
-            let f = switching(backlash, xt, y_prev);
+            let f = switching(xt, y_prev);
             y_prev = yt;
             f
         })

@@ -5,7 +5,7 @@
 //! feedthrough r_0) is the same block.
 
 use crate::error::{Error, Result};
-use crate::polynomial::{modulus, monic_roots, Root};
+use crate::polynomial::{monic_roots, Root};
 use crate::signal::check_coefficients;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -75,7 +75,7 @@ impl LinearBlock {
 
     /// Largest pole modulus (0 for an FIR block).
     pub fn spectral_radius(&self) -> f64 {
-        self.poles().into_iter().map(modulus).fold(0.0, f64::max)
+        crate::polynomial::spectral_radius(&self.b)
     }
 
     /// All poles strictly inside the unit circle.

@@ -84,6 +84,15 @@ pub fn modulus(z: Root) -> f64 {
     z.0.hypot(z.1)
 }
 
+/// Largest root modulus of z^n + c[0] z^(n-1) + ... + c[n-1]: 0 for n = 0, infinite when a
+/// coefficient is not finite (no root to speak of; "unstable" to every caller).
+pub fn spectral_radius(c: &[f64]) -> f64 {
+    if c.iter().any(|v| !v.is_finite()) {
+        return f64::INFINITY;
+    }
+    monic_roots(c).into_iter().map(modulus).fold(0.0, f64::max)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -17,8 +17,8 @@ use crate::streaming::{default_threads, fold_stream, fold_stream_parts, Triangul
 /// Samples from which the default output-error factors fold on a second thread. The
 /// sequential sensitivity recursion is the larger part of the work, so the hand-over only
 /// pays on long records: cascade at p = 11 (2026-11-22, this 2-core machine), 1 thread / 2
-/// threads 0.39 / 0.58 ms at N = 1e4, 3.9 / 4.3 ms at 1e5, 40 / 32 ms at 1e6.
-const OE_SECOND_THREAD_FROM: usize = 300_000;
+/// threads 0.78 / 0.81 ms at N = 2e4, 1.95 / 1.81 ms at 5e4, 7.8 / 7.0 ms at 2e5.
+const OE_SECOND_THREAD_FROM: usize = 50_000;
 
 /// Threads of the default output-error factors for `rows` samples: the recursion, plus one
 /// folding thread on long records when the machine has a second core (the same bits
@@ -203,7 +203,15 @@ impl<'a> ChainStepper<'a> {
         }
         if mv != Move::Hold {
             let dy = &mut self.dy;
-            dy.fill(0.0);
+            // zero the other branch's columns (the linear ones and this branch's are written
+            // below; columns after the backlash model's are never written)
+            let other = match mv {
+                Move::Left => self.lay.m_r1()..self.lay.m_r1() + n + 1,
+                _ => self.lay.c_l()..self.lay.m_r1(),
+            };
+            for v in &mut dy[other] {
+                *v = 0.0;
+            }
             let (branch, xi) = match mv {
                 Move::Left => (bl.left(), xt + bl.c_left()),
                 _ => (bl.right(), xt - bl.c_right()),
@@ -253,12 +261,15 @@ fn filtered(s: f64, b: &[f64], lags: &[f64]) -> f64 {
     acc
 }
 
-/// Shift the lags by one sample, `newest` first.
+/// Shift the lags by one sample, `newest` first (a plain loop: a few values, where
+/// `copy_within` would call memmove).
 #[inline(always)]
 fn push_lag(lags: &mut [f64], newest: f64) {
-    if let Some(last) = lags.len().checked_sub(1) {
-        lags.copy_within(0..last, 1);
-        lags[0] = newest;
+    for i in (1..lags.len()).rev() {
+        lags[i] = lags[i - 1];
+    }
+    if let Some(first) = lags.first_mut() {
+        *first = newest;
     }
 }
 

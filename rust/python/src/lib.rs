@@ -583,6 +583,12 @@ fn sandwich_oe_factor<'py>(
 }
 
 /// Free-run output of an estimate (cascade when r is empty, else sandwich), from rest.
+/// Largest root modulus of z^n + den[0] z^(n-1) + ... (0 for none, inf if not finite).
+#[pyfunction]
+fn spectral_radius(den: Vec<f64>) -> f64 {
+    core::polynomial::spectral_radius(&den)
+}
+
 #[pyfunction]
 #[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, r, s, u))]
 #[allow(clippy::too_many_arguments)]
@@ -624,6 +630,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(cascade_iteration, m)?)?;
     m.add_function(wrap_pyfunction!(sandwich_iteration, m)?)?;
     m.add_function(wrap_pyfunction!(cascade_oe_factor, m)?)?;
+    m.add_function(wrap_pyfunction!(spectral_radius, m)?)?;
     m.add_function(wrap_pyfunction!(sandwich_oe_factor, m)?)?;
     m.add_function(wrap_pyfunction!(augmented::simulate_augmented, m)?)?;
     Ok(())
