@@ -99,6 +99,26 @@ def test_simulate_a_plain_model_json_from_mat(tmp_path, example):
     np.testing.assert_allclose(table["y_sim"], model.simulate(example.u[:200]), rtol=1e-9, atol=1e-12)
 
 
+def test_fit_coarse_option_sets_the_coarse_stage(tmp_path):
+    d = bx.example_data(bx.example1(), 6000, snr=25, seed=2)
+    data = tmp_path / "rec.npz"
+    np.savez(data, u=d.u, y=d.noisy)
+    fits = {}
+    for coarse in ("2000", "0"):
+        out = tmp_path / f"m{coarse}.json"
+        r = run("fit", data, "-i", "u", "-o", "y", "--coarse", coarse, "--json", out)
+        assert r.exit_code == 0, r.output
+        fits[coarse] = json.loads(out.read_text())
+    assert fits["2000"]["fit"]["coarse_samples"] == 2000 and "on the first 2000 samples" in run(
+        "fit", data, "-i", "u", "-o", "y", "--coarse", "2000").output
+    assert fits["0"]["fit"]["coarse_samples"] == 0
+    se = fits["0"]["standard_errors"]
+    for name, value in fits["2000"]["parameters"].items():  # the same optimum
+        assert abs(value - fits["0"]["parameters"][name]) < 0.05 * se[name], name
+    r = run("fit", data, "-i", "u", "-o", "y", "--coarse", "-5")
+    assert r.exit_code != 0 and "--coarse" in r.output
+
+
 def test_fit_sandwich_from_joined_files(tmp_path):
     d = bx.example_data(bx.example2(), 2000, snr=100, seed=1)
     np.savez(tmp_path / "a.npz", u=d.u[:1000], w=d.noisy[:1000])

@@ -116,15 +116,16 @@ def _select(data: Path | None, input_: str, output: str, split: float | None, es
 
 
 def _fit_model(kind: str, u: np.ndarray, y: np.ndarray, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int,
-               max_iter: int, feedthrough: bool) -> Any:
+               max_iter: int, feedthrough: bool, coarse: int | None = None) -> Any:
     from .identification import fit_cascade, fit_sandwich
     from .wiener_hammerstein import fit_wiener_hammerstein
 
     if kind == "cascade":
-        return fit_cascade(u, y, na=na, nb=nb, degree=degree, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough)
+        return fit_cascade(u, y, na=na, nb=nb, degree=degree, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough,
+                           coarse=coarse)
     if kind == "sandwich":
         return fit_sandwich(u, y, na=na, nb=nb, nr=nr, ns=ns, degree=degree, warmup=warmup, max_iter=max_iter,
-                            feedthrough=feedthrough, output_feedthrough=feedthrough)
+                            feedthrough=feedthrough, output_feedthrough=feedthrough, coarse=coarse)
     return fit_wiener_hammerstein(u, y, degree=degree, orders=(nb, ns), warmup=warmup, feedthrough=feedthrough)
 
 
@@ -150,6 +151,8 @@ def _model_options(command: F) -> F:
         click.option("--degree", default=3, show_default=True, help="Polynomial degree of the backlash branches."),
         click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="Initial samples left out of the fit criterion (unknown initial state)."),
         click.option("--max-iter", default=50, show_default=True, type=click.IntRange(min=2), help="Iterations of the paper's algorithm before the refinement (cascade, sandwich)."),
+        click.option("--coarse", type=click.IntRange(min=0), help="Samples of the coarse stage: iterations on the first ones, "
+                     "refinement on the whole record (cascade, sandwich) [default: max(5000, 200 p) on records 10 times as long; 0: none]."),
     ]
     for option in reversed(options):
         command = option(command)
@@ -167,7 +170,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
         input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
         kind: str, feedthrough: bool, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
-        skip: int | None, json_path: Path | None, plots_dir: Path | None) -> None:
+        coarse: int | None, skip: int | None, json_path: Path | None, plots_dir: Path | None) -> None:
     """Identify a cascade or sandwich model from logged input/output data.
 
     \b
@@ -184,7 +187,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         scaling = _scaling(sel.estimation, scale, dict(input_offset=input_offset, input_scale=input_scale, output_offset=output_offset, output_scale=output_scale))
         u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
         stage(f"fitting the {kind}")
-        result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough)
+        result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse)
         stage("computing metrics")
         skip = warmup if skip is None else skip
         metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, skip=max(skip, warmup))}
