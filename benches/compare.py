@@ -11,7 +11,9 @@ Data: Example 1 (backlashid.example1()), example_data(model, N, snr=25, seed=0).
             finite-difference Jacobian, y_sim = lfilter + Python backlash loop), started from
             the paper algorithm's ARX start (ARX a, b; m_R1 = 1, c_L = c_R = 0.001).
             Also fit_cascade(u, y, restarts=0): the default minus its 4 perturbed LM restarts,
-            closer to the single scipy run (--no-restart-row leaves it out).
+            closer to the single scipy run (--no-restart-row leaves it out), and where the
+            default ran its coarse stage (N >= 5e4), fit_cascade(u, y, coarse=0): the whole
+            record throughout.
 3. simulate: CascadeModel.simulate against lfilter + Python backlash loop.
 
 Every (comparison, implementation, N) runs in a fresh spawned process, so the peak resident
@@ -100,11 +102,17 @@ def phase(kind: str, n: int, opts: dict[str, Any]) -> dict[str, Any]:
     elif kind == "default-lib":
         sec, res, reps = _timed(lambda: bid.fit_cascade(u, y), repeats)
         theta = res.theta
-        info["note"] = f"{res.iterations} iterates + {res.refinement_steps} LM steps"
+        on = f" on the first {res.coarse_samples} samples" if res.coarse_samples else ""
+        info["note"] = f"{res.iterations} iterates{on} + {res.refinement_steps} LM steps"
+    elif kind == "default-lib-c0":
+        sec, res, reps = _timed(lambda: bid.fit_cascade(u, y, coarse=0), repeats)
+        theta = res.theta
+        info["note"] = f"{res.iterations} iterates + {res.refinement_steps} LM steps (coarse=0)"
     elif kind == "default-lib-r0":
         sec, res, reps = _timed(lambda: bid.fit_cascade(u, y, restarts=0), repeats)
         theta = res.theta
-        info["note"] = f"{res.iterations} iterates + {res.refinement_steps} LM steps (restarts=0)"
+        on = f" on the first {res.coarse_samples} samples" if res.coarse_samples else ""
+        info["note"] = f"{res.iterations} iterates{on} + {res.refinement_steps} LM steps (restarts=0)"
     elif kind == "oe-scipy":
         theta0 = ref.arx_start(u, y, 2, 2, 3, (1.0, 0.001, 0.001))
         run = lambda: ref.fit_output_error(  # noqa: E731
@@ -230,6 +238,9 @@ def main() -> None:
         lib0 = in_fresh_process("default-lib-r0", n, base) if args.restart_row else None
         if lib0 is not None:
             notes.append(f"default restarts=0/library N={n}: {lib0['note']}")
+        whole = in_fresh_process("default-lib-c0", n, base) if "first" in lib["note"] else None
+        if whole is not None:
+            notes.append(f"default coarse=0/library N={n}: {whole['note']}")
         for method in args.oe_methods:
             opts = {**base, "method": method, "max_nfev": args.oe_max_nfev, "timeout": args.oe_timeout}
             ref = in_fresh_process("oe-scipy", n, opts)
@@ -238,6 +249,9 @@ def main() -> None:
             if lib0 is not None:
                 label = f"restarts=0 vs scipy OE ({method})"
                 print(row(label, n, lib0, ref, f"{lib0['max_err']:.2e}", acc_ref))
+            if whole is not None:
+                label = f"coarse=0 vs scipy OE ({method})"
+                print(row(label, n, whole, ref, f"{whole['max_err']:.2e}", acc_ref))
             notes.append(f"scipy OE ({method}) N={n}: {ref['note']}")
         sys.stdout.flush()
 

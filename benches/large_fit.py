@@ -2,7 +2,8 @@
 
     python benches/large_fit.py 1e7 1e8
 
-Example 1 driven by uniform |u| < 1, output SNR 25. Each size runs in a fresh process so that
+Example 1 driven by uniform |u| < 1, output SNR 25. "coarse": the samples the iterations ran
+on (0 = the whole record); LM: the refinement's steps on the whole record. Each size runs in a fresh process so that
 its peak resident memory (ru_maxrss) is its own; "beyond inputs" subtracts the peak before the
 fit, which already holds u, y and the simulation that made y.
 """
@@ -29,14 +30,16 @@ result = bid.fit_cascade(u, y)
 seconds = time.perf_counter() - t0
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 err = max(abs(v) for v in result.errors(model).values())
-print(f"{n:>12.0e} {seconds:>9.1f} {result.iterations:>6} {result.refinement_steps:>5} {err:>10.2e} "
-      f"{peak:>9.0f} {peak - before:>9.0f}")
+print(f"{n:>12.0e} {seconds:>9.2f} {result.iterations:>6} {result.coarse_samples:>7} {result.refinement_steps:>5} "
+      f"{err:>10.2e} {peak:>9.0f} {peak - before:>9.0f}")
 """
 
 
 def main() -> None:
     sizes = sys.argv[1:] or ["1e6", "1e7"]
-    print(f"{'N':>12} {'fit [s]':>9} {'iters':>6} {'LM':>5} {'max err':>10} {'peak MB':>9} {'+fit MB':>9}")
+    print(
+        f"{'N':>12} {'fit [s]':>9} {'iters':>6} {'coarse':>7} {'LM':>5} {'max err':>10} {'peak MB':>9} {'+fit MB':>9}"
+    )
     for n in sizes:
         subprocess.run([sys.executable, "-c", CHILD, n], check=True)
 
