@@ -566,9 +566,9 @@ def fit_cascade(
     run on records of up to 20 000 samples (after the warm-up) and none on longer ones,
     where the cost surface is smooth enough that they change nothing.
 
-    ``coarse`` (samples): on long records the iterations and the LM candidates run on the
-    first ``coarse`` samples after the warm-up only, and LM then refines the best of them on
-    the whole record (the same optimum, several times faster). By default (None) the segment
+    ``coarse`` (samples): on long records the iterations and the LM candidates (and any
+    restarts) run on the first ``coarse`` samples after the warm-up only, and LM then refines
+    the best of them on the whole record (the same optimum, several times faster). By default (None) the segment
     is max(5000, 200 p) samples for p parameters, used on records at least 10 times as long;
     0 fits on the whole record throughout. ``FitResult.coarse_samples`` says which ran; the
     history is then the segment's.

@@ -238,8 +238,10 @@ impl<'a> ChainStepper<'a> {
                     dy[self.lay.m_r(i)] = p;
                 }
             }
-        } // else holding: dy(t) = dy(t-1), already in place (zero before the record)
-          // w_u(t), w_x(t) join the lags for sample t + 1
+        }
+        // else holding: dy(t) = dy(t-1), already in place (zero before the record)
+
+        // w_u(t), w_x(t) join the lags for sample t + 1
         let (wu, wx) = (
             filtered(self.u[t], self.b, &self.wu),
             filtered(xt, self.b, &self.wx),
