@@ -34,8 +34,9 @@ RESTARTS = 4
 RESTARTS_UP_TO = 20_000
 # Coarse to fine (``coarse``): the iterations and LM candidates on a segment of
 # max(COARSE_MIN, COARSE_PER_PARAMETER p) samples, on records COARSE_RECORDS times as long.
-# On Example 1 at N = 1e5 (4 seeds) a 5000-sample segment ends at the whole-record optimum
-# within 6e-6 in every parameter (relative cost 6e-10), in a quarter of the time.
+# Over 20 seeds each of Examples 1 and 2 at N = 5e4 and 1e5 it ends within 0.02 standard
+# errors of the whole-record search's optimum in 1/5 to 1/3 of the time
+# (benches/coarse_to_fine.py; docs/performance.md).
 COARSE_MIN = 5_000
 COARSE_PER_PARAMETER = 200
 COARSE_RECORDS = 10
