@@ -97,6 +97,18 @@ def test_unexplained_names_the_best_deterministic_candidate_not_the_noise_model(
     assert "colored_noise predicts the residual one step ahead but is not named: the residual depends on the input" in verdict
 
 
+def test_unexplained_says_why_a_candidate_closing_half_the_gap_is_not_named(report):
+    # branch_degree closes 91 % but the diagnoser kept it from being named (here: the output
+    # modulation of the nominal residual remains in its own): the verdict must not claim that
+    # no candidate closes half the gap
+    why = {"branch_degree": "its residual is still modulated by the output (p 4.3e-48)"}
+    unexplained = dataclasses.replace(report, best_effect="unexplained", details={"closing_not_named": why})
+    verdict = unexplained.summary().splitlines()[1]
+    assert verdict.startswith("Verdict: unexplained: a significant gap that no deterministic candidate explains")
+    assert "closes by half" not in verdict
+    assert "the best, branch_degree, closes 91 %, but its residual is still modulated by the output" in verdict
+
+
 def test_to_dict_is_json_safe_and_small(report):
     d = report.to_dict()
     text = json.dumps(d, allow_nan=False)  # NaN became null, numpy types became Python ones

@@ -373,15 +373,25 @@ def diagnose(
     gap_significant = bool(significant) or p_black_box < level
     deterministic = sorted((s for e, s in scored.items() if e in significant and e != "colored_noise"), key=lambda s: s.criterion)
     best = "none"
+    not_named: dict[str, str] = {}  # why a significant candidate closing half the gap is not named
     if gap_significant and gap > MATERIAL_GAP * floor:
         best = "unexplained"
         closing = [s for s in deterministic if gap_closed[s.effect] >= CLOSE_ENOUGH]
         if closing and p_modulation < level:
             # the nominal residual is a slowly modulated copy of the output: the effect named
             # must leave no such modulation behind (a drifting gain is no width drift)
-            closing = [s for s in closing if _modulation_p(s.residual, ynom_v[warmup:], phi) >= level]
+            kept = []
+            for s in closing:
+                p_left = _modulation_p(s.residual, ynom_v[warmup:], phi)
+                if p_left >= level:
+                    kept.append(s)
+                else:
+                    not_named[s.effect] = f"its residual is still modulated by the output (p {p_left:.2g})"
+            closing = kept
         if closing and closing[0] is deterministic[0]:
             best = closing[0].effect
+        elif closing:
+            not_named[closing[0].effect] = f"{deterministic[0].effect} has the lower BIC"
         elif (
             "colored_noise" in significant
             and not any(gap_closed[s.effect] >= MATERIAL for s in deterministic)
@@ -394,6 +404,11 @@ def diagnose(
             # noise (its innovations are as unpredictable as white noise), so against a known
             # white-noise floor it can close well under half of a genuine colored-noise gap
             best = "colored_noise"
+
+    if best == "unexplained":
+        for e, sc in scored.items():
+            if e != "colored_noise" and e not in significant and gap_closed[e] >= CLOSE_ENOUGH:
+                not_named[e] = f"its improvement is not significant (p {sc.p_value:.2g} >= {level:.2g})"
 
     ruled_out = []  # why colored_noise was not named, for the report's verdict
     if best != "colored_noise" and "colored_noise" in scored:
@@ -448,6 +463,7 @@ def diagnose(
             else "from rest"
         ),
         colored_noise_ruled_out=ruled_out,
+        closing_not_named=not_named,
     )
     x_v = model.linear.simulate(u_v)
     tests = residual_tests(residual_full[warmup:], u_v[warmup:], x_v[warmup:])

@@ -169,9 +169,13 @@ class DiagnosisReport:
             # that it cannot be: name the best effect that changes the simulation instead
             top = next((c for c in self.ranking if c.effect != "colored_noise"), None)
             tail = f"; the best, {top.effect}, closes {_pct(top.gap_closed).strip()}" if top else ""
+            why = (self.details.get("closing_not_named") or {}).get(top.effect) if top else None
+            if why:  # it closes half the gap, yet a rule keeps it from being named
+                tail += f", but {why}"
             if self.ranking and self.ranking[0].effect == "colored_noise":
                 tail += "; colored_noise predicts the residual one step ahead but is not named" + self._not_noise()
-            return f"unexplained: a significant gap that no deterministic candidate closes by half{tail}"
+            first = "no deterministic candidate explains" if why else "no deterministic candidate closes by half"
+            return f"unexplained: a significant gap that {first}{tail}"
         if best is None:
             return f"{self.best_effect}"
         sig = "its signature is gone" if best.signature_removed else "its signature remains"
