@@ -107,6 +107,14 @@ def test_unexplained_says_why_a_candidate_closing_half_the_gap_is_not_named(repo
     assert verdict.startswith("Verdict: unexplained: a significant gap that no deterministic candidate explains")
     assert "closes by half" not in verdict
     assert "the best, branch_degree, closes 91 %, but its residual is still modulated by the output" in verdict
+    # one held back that is not the best by BIC is named too, and the best then reads plainly
+    second = report.ranking[1]
+    held = {second.effect: "branch_degree has the lower BIC"}
+    other = dataclasses.replace(report, best_effect="unexplained", details={"closing_not_named": held})
+    verdict = other.summary().splitlines()[1]
+    assert "no deterministic candidate explains" in verdict and "closes by half" not in verdict
+    assert "the best, branch_degree, closes 91 %;" in verdict
+    assert f"{second.effect} closes" in verdict and "but branch_degree has the lower BIC" in verdict
 
 
 def test_to_dict_is_json_safe_and_small(report):

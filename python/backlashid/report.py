@@ -169,12 +169,17 @@ class DiagnosisReport:
             # that it cannot be: name the best effect that changes the simulation instead
             top = next((c for c in self.ranking if c.effect != "colored_noise"), None)
             tail = f"; the best, {top.effect}, closes {_pct(top.gap_closed).strip()}" if top else ""
-            why = (self.details.get("closing_not_named") or {}).get(top.effect) if top else None
-            if why:  # it closes half the gap, yet a rule keeps it from being named
-                tail += f", but {why}"
+            # candidates that close half the gap, yet a rule keeps from being named, and why
+            held = self.details.get("closing_not_named") or {}
+            if top and top.effect in held:
+                tail += f", but {held[top.effect]}"
+            for c in self.ranking:
+                if c.effect in held and c is not top:
+                    tail += f"; {c.effect} closes {_pct(c.gap_closed).strip()}, but {held[c.effect]}"
+                    break
             if self.ranking and self.ranking[0].effect == "colored_noise":
                 tail += "; colored_noise predicts the residual one step ahead but is not named" + self._not_noise()
-            first = "no deterministic candidate explains" if why else "no deterministic candidate closes by half"
+            first = "no deterministic candidate explains" if held else "no deterministic candidate closes by half"
             return f"unexplained: a significant gap that {first}{tail}"
         if best is None:
             return f"{self.best_effect}"
