@@ -467,14 +467,9 @@ def _fit(
     run, k, refined = found
     theta_iter = run.history[k]
     theta, steps = (refined.theta, refined.iterations) if refined is not None else (theta_iter, 0)
-    # the simulation RMSE is known: the refinement's cost, or the iterate's own (unless that
-    # was a segment's)
-    if refined is not None:
-        rmse = float(np.sqrt(refined.cost / refined.n_residuals))
-    elif not segment:
-        rmse = run.rmse[k]
-    else:
-        rmse = _rmse(structure, theta, u_arr, y_arr, warmup)
+    # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
+    # stage always ends in a whole-record refinement, so the iterate is the whole record's)
+    rmse = float(np.sqrt(refined.cost / refined.n_residuals)) if refined is not None else run.rmse[k]
     best_info = {
         "parameters": dict(zip(structure.names, map(float, theta))),
         "simulation_rmse": rmse,
