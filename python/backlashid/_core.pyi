@@ -67,6 +67,10 @@ def sandwich_oe_factor(
     a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
     r: list[float], s: list[float], u: _F, w: _F, warmup: int,
 ) -> tuple[NDArray[np.float64], float]: ...
+def oe_gradient(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
+    r: list[float], s: list[float], u: _F, y: _F, warmup: int,
+) -> tuple[_F, float, int, int]: ...  # (J^T r, cost, rows, moving rows) over t >= warmup; cascade when r is empty; one pass, no factor
 
 # Augmented cascade of the diagnosis (rust/core/src/augmented.rs): the nominal cascade plus the
 # catalogue's effects, each exactly nominal at zero size. Time of u[0] in the continuous record

@@ -8,6 +8,7 @@ pub mod augmented;
 pub mod backlash;
 pub mod cascade;
 pub mod error;
+pub mod gradient;
 pub mod linear;
 pub mod lstsq;
 pub mod polynomial;

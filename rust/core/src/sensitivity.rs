@@ -68,8 +68,17 @@ impl Layout {
 }
 
 /// Jacobian columns of the cascade: a, b, c_L, m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn.
-fn cascade_cols(linear: &LinearBlock, backlash: &GeneralBacklash) -> usize {
+pub(crate) fn cascade_cols(linear: &LinearBlock, backlash: &GeneralBacklash) -> usize {
     linear.na() + linear.nb() + 2 * backlash.left().coefficients().len() + 1
+}
+
+/// Jacobian columns of the sandwich: the cascade's, then r_2..r_nr, s_1..s_ns.
+pub(crate) fn sandwich_cols(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+) -> usize {
+    cascade_cols(input_linear, backlash) + output_linear.na().saturating_sub(1) + output_linear.nb()
 }
 
 /// The cascade output y and d y / d theta (dense: N x p; the fits use `cascade_oe_factor`).
@@ -101,15 +110,13 @@ pub fn sandwich_sensitivity(
     u: &[f64],
 ) -> Result<Sensitivity> {
     check_signal("u", u)?;
-    let cols = cascade_cols(input_linear, backlash)
-        + output_linear.na().saturating_sub(1)
-        + output_linear.nb();
+    let cols = sandwich_cols(input_linear, backlash, output_linear);
     let mut out = Sensitivity {
         output: Vec::with_capacity(u.len()),
         jacobian: Vec::with_capacity(u.len() * cols),
         cols,
     };
-    walk_sandwich(input_linear, backlash, output_linear, u, |_, wt, row| {
+    walk_sandwich(input_linear, backlash, output_linear, u, |_, wt, _, row| {
         out.output.push(wt);
         out.jacobian.extend_from_slice(row);
         Ok(())
@@ -121,7 +128,7 @@ pub fn sandwich_sensitivity(
 
 /// Which case of eq (1) a sample took.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Move {
+pub(crate) enum Move {
     Left,
     Right,
     Hold,
@@ -279,17 +286,21 @@ fn push_lag(lags: &mut [f64], newest: f64) {
 fn finish(folded: Result<(TriangularFactor, f64)>) -> Result<(TriangularFactor, f64)> {
     let (factor, cost) = folded?;
     if !cost.is_finite() || factor.r_aug().iter().any(|v| !v.is_finite()) {
-        return Err(Error::Model(
-            "output-error Jacobian overflowed: the sensitivities of the simulated output \
-             are not finite (an unstable or badly scaled estimate); scale the signals down \
-             or start from a stable estimate"
-                .into(),
-        ));
+        return Err(overflowed());
     }
     Ok((factor, cost))
 }
 
-fn check_pair(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
+pub(crate) fn overflowed() -> Error {
+    Error::Model(
+        "output-error Jacobian overflowed: the sensitivities of the simulated output are not \
+         finite (an unstable or badly scaled estimate); scale the signals down or start from \
+         a stable estimate"
+            .into(),
+    )
+}
+
+pub(crate) fn check_pair(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
     check_signal("u", u)?;
     check_signal(y_name, y)?;
     check_same_length(u, y, y_name)
@@ -416,16 +427,14 @@ pub fn sandwich_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, w, "w")?;
-    let cols = cascade_cols(input_linear, backlash)
-        + output_linear.na().saturating_sub(1)
-        + output_linear.nb();
+    let cols = sandwich_cols(input_linear, backlash, output_linear);
     finish(fold_stream(cols, threads, |sink| {
         walk_sandwich(
             input_linear,
             backlash,
             output_linear,
             u,
-            |t, wt, row| match t >= warmup {
+            |t, wt, _, row| match t >= warmup {
                 true => sink.push(row, w[t] - wt),
                 false => Ok(()),
             },
@@ -433,14 +442,14 @@ pub fn sandwich_oe_factor_threads(
     }))
 }
 
-/// The sandwich's output w(t) and Jacobian row dw(t), handed to `visit(t, w(t), dw(t))` for
-/// t = 0, 1, ...; y, dy, w, dw are kept in rings of nr + 1 and ns + 1 samples.
-fn walk_sandwich(
+/// The sandwich's output w(t), the backlash's case and the Jacobian row dw(t), handed to
+/// `visit(t, w(t), case, dw(t))` for t = 0, 1, ...; y, dy, w, dw are kept in rings of nr + 1 and ns + 1 samples.
+pub(crate) fn walk_sandwich(
     input_linear: &LinearBlock,
     backlash: &GeneralBacklash,
     output_linear: &LinearBlock,
     u: &[f64],
-    mut visit: impl FnMut(usize, f64, &[f64]) -> Result<()>,
+    mut visit: impl FnMut(usize, f64, Move, &[f64]) -> Result<()>,
 ) -> Result<()> {
     let (r, s) = (output_linear.a(), output_linear.b());
     let (nr, ns) = (r.len(), s.len());
@@ -454,7 +463,7 @@ fn walk_sandwich(
     let mut w_ring = vec![0.0; rw];
     let mut dw_ring = vec![0.0; rw * cols];
     for t in 0..u.len() {
-        let (yt, _) = chain.step(t)?;
+        let (yt, mv) = chain.step(t)?;
         let cy = t % ry;
         y_ring[cy] = yt;
         dy_ring[cy * cols..(cy + 1) * cols].copy_from_slice(&chain.dy);
@@ -499,23 +508,23 @@ fn walk_sandwich(
             return Err(crate::linear::overflow(output_linear, "w", t));
         }
         w_ring[cw] = wt;
-        visit(t, wt, dw)?;
+        visit(t, wt, mv, dw)?;
     }
     Ok(())
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn input(n: usize) -> Vec<f64> {
+    pub(crate) fn input(n: usize) -> Vec<f64> {
         (0..n)
             .map(|k| ((k as f64) * 0.61).sin() * 0.9 + ((k as f64) * 0.17).cos() * 0.3)
             .collect()
     }
 
     /// Parameter vector in the column order, and a model from it.
-    fn sandwich_from(theta: &[f64]) -> (LinearBlock, GeneralBacklash, LinearBlock) {
+    pub(crate) fn sandwich_from(theta: &[f64]) -> (LinearBlock, GeneralBacklash, LinearBlock) {
         let lin = LinearBlock::new(theta[0..2].to_vec(), theta[2..4].to_vec()).unwrap();
         let bl = GeneralBacklash::from_estimate(
             theta[4],
@@ -574,7 +583,7 @@ mod tests {
         assert_eq!(sens.cols, 11);
     }
 
-    fn noisy(v: &[f64], seed: u64) -> Vec<f64> {
+    pub(crate) fn noisy(v: &[f64], seed: u64) -> Vec<f64> {
         let mut g = seed;
         v.iter()
             .map(|a| {

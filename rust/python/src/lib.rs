@@ -582,6 +582,38 @@ fn sandwich_oe_factor<'py>(
     factor_out(py, out)
 }
 
+/// The output-error gradient of an estimate (cascade when r is empty, else sandwich), one
+/// pass without the factor: (J^T r, cost = sum r^2, rows, moving rows) over t >= warmup.
+#[pyfunction]
+#[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, r, s, u, y, warmup))]
+#[allow(clippy::too_many_arguments)]
+fn oe_gradient<'py>(
+    py: Python<'py>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c_left: f64,
+    c_right: f64,
+    m_left: Vec<f64>,
+    m_right: Vec<f64>,
+    r: Vec<f64>,
+    s: Vec<f64>,
+    u: PyReadonlyArrayDyn<'py, f64>,
+    y: PyReadonlyArrayDyn<'py, f64>,
+    warmup: usize,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, f64, usize, usize)> {
+    let (u, y) = (signal(py, "u", &u)?, signal(py, "y", &y)?);
+    let g = run(py, || {
+        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
+        if r.is_empty() {
+            core::gradient::cascade_oe_gradient(&lin, &bl, &u, &y, warmup)
+        } else {
+            let out = core::LinearBlock::new(r, s)?;
+            core::gradient::sandwich_oe_gradient(&lin, &bl, &out, &u, &y, warmup)
+        }
+    })?;
+    Ok((vec_f64(py, g.gradient), g.cost, g.rows, g.moving))
+}
+
 /// Free-run output of an estimate (cascade when r is empty, else sandwich), from rest.
 /// Largest root modulus of z^n + den[0] z^(n-1) + ... (0 for none, inf if not finite).
 #[pyfunction]
@@ -632,6 +664,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(cascade_oe_factor, m)?)?;
     m.add_function(wrap_pyfunction!(spectral_radius, m)?)?;
     m.add_function(wrap_pyfunction!(sandwich_oe_factor, m)?)?;
+    m.add_function(wrap_pyfunction!(oe_gradient, m)?)?;
     m.add_function(wrap_pyfunction!(augmented::simulate_augmented, m)?)?;
     Ok(())
 }

@@ -1,0 +1,340 @@
+//! The output-error gradient g = J^T r (J = d y_sim / d theta, r = y - y_sim) and the cost
+//! sum r^2 at an estimate, without the Jacobian or its factor. LM uses it to test and take
+//! steps against the factor of a Jacobian folded at a nearby point (`refine.py`).
+//!
+//! The cascade's gradient runs in reverse (the adjoint of the recursions in `sensitivity`):
+//!   lambda(t) = r(t) + [t+1 holds] lambda(t+1): the residuals that see dy(t), since a held
+//!     sample repeats the row dy of the last move;
+//!   on L at t: mu(t) = lambda(t) L'(xi1), g[c_L] += mu(t), g[m_Li] += lambda(t) xi1^i;
+//!   on R at t: mu(t) = lambda(t) R'(xi2), g[c_R] -= mu(t), g[m_Ri] += lambda(t) xi2^i;
+//!   nu = mu filtered backwards by 1/B (nu(t) = mu(t) - sum_k b_k nu(t+k)), the transpose of
+//!     the causal 1/B that makes dx(t)/da_i = w_u(t-i), dx(t)/db_j = -w_x(t-j);
+//!   g[a_i] = sum_t nu(t) u(t-i),   g[b_j] = -sum_t nu(t) x(t-j).
+//! The forward pass is the model's own simulation; one backward pass does the rest, with
+//! the case flags f1, f2 recomputed as the simulation's, in straight-line code (both
+//! branches' terms, weighted by f1 and f2). The sandwich's output
+//! filter mixes the rows of every lag, so its gradient sums the forward rows of
+//! `sensitivity::walk_sandwich` instead.
+
+use crate::backlash::GeneralBacklash;
+use crate::error::{Error, Result};
+use crate::linear::LinearBlock;
+use crate::sensitivity::{
+    cascade_cols, check_pair, overflowed, sandwich_cols, walk_sandwich, Move,
+};
+use crate::switching::switching;
+
+/// g = J^T r over the samples t >= warmup, the cost sum r^2, the number of those samples
+/// (`rows`), and how many of them move the backlash (not holding).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OeGradient {
+    pub gradient: Vec<f64>,
+    pub cost: f64,
+    pub rows: usize,
+    pub moving: usize,
+}
+
+impl OeGradient {
+    fn new(cols: usize) -> Self {
+        Self {
+            gradient: vec![0.0; cols],
+            cost: 0.0,
+            rows: 0,
+            moving: 0,
+        }
+    }
+
+    /// Refused when the gradient or the cost overflowed (as the output-error factors).
+    fn finished(self) -> Result<Self> {
+        if !self.cost.is_finite() || self.gradient.iter().any(|v| !v.is_finite()) {
+            return Err(overflowed());
+        }
+        Ok(self)
+    }
+}
+
+/// `OeGradient` of the cascade, by the reverse recursion of the module header.
+pub fn cascade_oe_gradient(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+) -> Result<OeGradient> {
+    check_pair(u, y, "y")?;
+    if backlash.right().coefficients().len() != backlash.left().coefficients().len() {
+        return Err(Error::Model("both branches need the same degree n".into()));
+    }
+    // forward: the model's own simulation; backward: its case flags f1 (on L), f2 (on R)
+    // recomputed sample by sample as `CascadeModel::simulate_internals` has them
+    let x = linear.simulate(u, &linear.rest_state())?;
+    let y_sim = backlash.simulate(&x, 0.0)?;
+    let reverse = Reverse {
+        linear,
+        backlash,
+        u,
+        y,
+        x: &x,
+        y_sim: &y_sim,
+        warmup,
+    };
+    let out = match backlash.padded_step() {
+        Some(padded) => reverse.run(|xt, yp| padded.switching(xt, yp)),
+        None => reverse.run(|xt, yp| switching(backlash, xt, yp)),
+    };
+    out.finished()
+}
+
+/// The backward pass of `cascade_oe_gradient` over a simulated record.
+struct Reverse<'a> {
+    linear: &'a LinearBlock,
+    backlash: &'a GeneralBacklash,
+    u: &'a [f64],
+    y: &'a [f64],
+    x: &'a [f64],
+    y_sim: &'a [f64],
+    warmup: usize,
+}
+
+impl Reverse<'_> {
+    fn run(&self, flags: impl Fn(f64, f64) -> (bool, bool)) -> OeGradient {
+        let (u, y, x, y_sim) = (self.u, self.y, self.x, self.y_sim);
+        let (a_len, b) = (self.linear.na(), self.linear.b());
+        let bl = self.backlash;
+        let (m_left, m_right) = (bl.left().coefficients(), bl.right().coefficients());
+        let n = m_left.len();
+        // columns: a, b, c_L, m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn
+        let (c_l, m_r1) = (a_len + b.len(), a_len + b.len() + n);
+        let (c_left, c_right) = (bl.c_left(), bl.c_right());
+        let mut out = OeGradient::new(cascade_cols(self.linear, bl));
+        let g = &mut out.gradient;
+        let (mut cost, mut rows, mut moving) = (0.0, 0, 0);
+        let mut lambda = 0.0; // lambda(t + 1)
+        let mut next_holds = 0.0; // 1 when t + 1 holds (0 past the record's end)
+        let mut nu_lags = vec![0.0; b.len()]; // nu(t + 1), nu(t + 2), ..
+        for t in (0..u.len()).rev() {
+            let y_prev = if t > 0 { y_sim[t - 1] } else { 0.0 };
+            let (f1, f2) = flags(x[t], y_prev);
+            let r = if t >= self.warmup {
+                y[t] - y_sim[t]
+            } else {
+                0.0
+            };
+            // both branches' terms, weighted by 0 or 1: straight-line code, no case to mispredict
+            let (wl, wr) = (f64::from(u8::from(f1)), f64::from(u8::from(f2)));
+            lambda = r + next_holds * lambda;
+            let (lam_l, lam_r) = (wl * lambda, wr * lambda);
+            let (xi_l, xi_r) = (x[t] + c_left, x[t] - c_right);
+            // L'(xi) = sum_i i m_i xi^(i-1) beside the powers xi^i (p_l, p_r)
+            let (mut p_l, mut p_r, mut slope_l, mut slope_r) = (1.0, 1.0, 0.0, 0.0);
+            for i in 1..=n {
+                let k = i as f64;
+                slope_l += k * m_left[i - 1] * p_l;
+                slope_r += k * m_right[i - 1] * p_r;
+                p_l *= xi_l;
+                p_r *= xi_r;
+                if i >= 2 {
+                    g[c_l + i - 1] += lam_l * p_l;
+                    g[m_r1 + i] += lam_r * p_r;
+                }
+            }
+            let (mu_l, mu_r) = (lam_l * slope_l, lam_r * slope_r);
+            g[c_l] += mu_l;
+            g[m_r1] += lam_r * xi_r;
+            g[m_r1 + 1] -= mu_r;
+            next_holds = 1.0 - wl - wr;
+            // nu(t) = mu(t) - sum_k b_k nu(t + k): the transpose of the causal 1/B
+            let mut nu = mu_l + mu_r;
+            for (bk, v) in b.iter().zip(&nu_lags) {
+                nu -= bk * v;
+            }
+            if !nu_lags.is_empty() {
+                nu_lags.rotate_right(1);
+                nu_lags[0] = nu;
+            }
+            for i in 1..=a_len.min(t) {
+                g[i - 1] += nu * u[t - i];
+            }
+            for j in 1..=b.len().min(t) {
+                g[a_len + j - 1] -= nu * x[t - j];
+            }
+            if t >= self.warmup {
+                cost += r * r;
+                rows += 1;
+                moving += usize::from(f1 || f2);
+            }
+        }
+        (out.cost, out.rows, out.moving) = (cost, rows, moving);
+        out
+    }
+}
+
+/// `OeGradient` of the sandwich: the forward rows dw(t) times the residuals.
+pub fn sandwich_oe_gradient(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+) -> Result<OeGradient> {
+    check_pair(u, w, "w")?;
+    let mut out = OeGradient::new(sandwich_cols(input_linear, backlash, output_linear));
+    walk_sandwich(
+        input_linear,
+        backlash,
+        output_linear,
+        u,
+        |t, wt, mv, row| {
+            if t >= warmup {
+                let r = w[t] - wt;
+                for (gi, v) in out.gradient.iter_mut().zip(row) {
+                    *gi += r * v;
+                }
+                out.cost += r * r;
+                out.rows += 1;
+                out.moving += usize::from(mv != Move::Hold);
+            }
+            Ok(())
+        },
+    )?;
+    out.finished()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sensitivity::tests::{input, noisy, sandwich_from};
+    use crate::sensitivity::{cascade_sensitivity, sandwich_sensitivity, Sensitivity};
+    use crate::CascadeModel;
+
+    /// J^T r, the cost and the moving samples, from the dense sensitivity written out.
+    fn check_gradient(
+        g: &OeGradient,
+        sens: &Sensitivity,
+        measured: &[f64],
+        warmup: usize,
+        moves: &[bool],
+    ) {
+        let p = sens.cols;
+        let ts = warmup.min(measured.len())..measured.len();
+        let r = |t: usize| measured[t] - sens.output[t];
+        assert_eq!(g.gradient.len(), p);
+        for j in 0..p {
+            let want: f64 = ts.clone().map(|t| sens.jacobian[t * p + j] * r(t)).sum();
+            let size: f64 = ts
+                .clone()
+                .map(|t| (sens.jacobian[t * p + j] * r(t)).abs())
+                .sum();
+            assert!(
+                (g.gradient[j] - want).abs() <= 1e-12 * size.max(1e-300),
+                "column {j}: {} against {want}",
+                g.gradient[j]
+            );
+        }
+        let cost: f64 = ts.clone().map(|t| r(t).powi(2)).sum();
+        assert!((g.cost - cost).abs() <= 1e-12 * cost, "{} {cost}", g.cost);
+        assert_eq!(g.rows, ts.len());
+        assert_eq!(g.moving, ts.filter(|&t| moves[t]).count());
+    }
+
+    fn moves(model: &CascadeModel, u: &[f64]) -> Vec<bool> {
+        let sim = model.simulate_internals(u, &model.rest_state()).unwrap();
+        sim.f1.iter().zip(&sim.f2).map(|(a, b)| *a || *b).collect()
+    }
+
+    #[test]
+    fn cascade_gradient_is_the_dense_jacobian_times_the_residual() {
+        let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
+        let bl = GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap();
+        let u = input(3000);
+        let m = CascadeModel::new(lin.clone(), bl.clone());
+        let y = noisy(&m.simulate(&u, &m.rest_state()).unwrap(), 3);
+        // orders other than Example 1's too: FIR, longer denominators, degree 1 and 4
+        let estimates = [
+            (
+                vec![0.65, 0.55],
+                vec![-0.15, 0.3],
+                vec![1.0, -0.25, 0.28],
+                vec![1.45, 0.35, 0.25],
+            ),
+            (vec![0.6], vec![], vec![1.0], vec![1.3]),
+            (
+                vec![0.5, 0.3, 0.1],
+                vec![-0.4, 0.2, 0.05],
+                vec![1.0, 0.1, 0.2, 0.05],
+                vec![1.2, 0.3, 0.1, 0.02],
+            ),
+        ];
+        for (a, b, ml, mr) in estimates {
+            let est_lin = LinearBlock::new(a, b).unwrap();
+            let est = GeneralBacklash::from_estimate(0.55, 0.45, ml, mr).unwrap();
+            let sens = cascade_sensitivity(&est_lin, &est, &u).unwrap();
+            let mv = moves(&CascadeModel::new(est_lin.clone(), est.clone()), &u);
+            assert!(
+                mv.iter().any(|m| !m) && mv.iter().any(|m| *m),
+                "holds and moves both"
+            );
+            for warmup in [0, 1, 600, 2999, 3000, 5000] {
+                let g = cascade_oe_gradient(&est_lin, &est, &u, &y, warmup).unwrap();
+                check_gradient(&g, &sens, &y, warmup, &mv);
+            }
+        }
+    }
+
+    #[test]
+    fn sandwich_gradient_is_the_dense_jacobian_times_the_residual() {
+        let u = input(3000);
+        let theta = [
+            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.5, 0.2, 0.6, 0.15, -0.2, 0.35,
+        ];
+        let (l2, b2, o2) = sandwich_from(&theta);
+        let w = noisy(&sandwich_sensitivity(&l2, &b2, &o2, &u).unwrap().output, 5);
+        let mut est = theta;
+        for (k, v) in est.iter_mut().enumerate() {
+            *v *= 1.0 + 0.03 * ((k % 3) as f64 - 1.0);
+        }
+        let (l3, b3, o3) = sandwich_from(&est);
+        let sens = sandwich_sensitivity(&l3, &b3, &o3, &u).unwrap();
+        let mv = moves(&CascadeModel::new(l3.clone(), b3.clone()), &u);
+        for warmup in [0, 2, 700] {
+            let g = sandwich_oe_gradient(&l3, &b3, &o3, &u, &w, warmup).unwrap();
+            check_gradient(&g, &sens, &w, warmup, &mv);
+        }
+    }
+
+    #[test]
+    fn gradients_report_overflow_and_bad_data() {
+        let lin = LinearBlock::new(vec![1.0], vec![]).unwrap();
+        let cubic =
+            GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0, 0.0, 1.0], vec![1.0, 0.0, 1.0])
+                .unwrap();
+        let mut u = input(100);
+        u[50] = 1e150;
+        let y = input(100);
+        assert!(matches!(
+            cascade_oe_gradient(&lin, &cubic, &u, &y, 0),
+            Err(Error::Model(_))
+        ));
+        let u = input(100);
+        assert!(matches!(
+            cascade_oe_gradient(&lin, &cubic, &u, &y[..99], 0),
+            Err(Error::Data(_))
+        ));
+        let mut bad = y.clone();
+        bad[7] = f64::NAN;
+        assert!(matches!(
+            cascade_oe_gradient(&lin, &cubic, &u, &bad, 0),
+            Err(Error::Data(_))
+        ));
+        let uneven = GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0], vec![1.0, 0.2]).unwrap();
+        assert!(matches!(
+            cascade_oe_gradient(&lin, &uneven, &u, &y, 0),
+            Err(Error::Model(_))
+        ));
+        assert!(matches!(
+            sandwich_oe_gradient(&lin, &uneven, &lin, &u, &y, 0),
+            Err(Error::Model(_))
+        ));
+    }
+}
