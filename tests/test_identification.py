@@ -328,3 +328,38 @@ def test_lm_stops_when_a_step_would_move_less_than_se_tol_standard_errors():
     r_aug, cost = bid.refine.oe_factor(s, loose.theta, d.u, d.noisy, 0)
     q = r_aug[: s.size, s.size]
     assert q @ q <= 1e-4 * cost / (3000 - s.size)
+
+
+def test_the_gradient_pass_is_the_folded_jacobian_times_the_residual():
+    # two independent forms of J^T r: the core's reverse (adjoint) pass for the cascade and
+    # the forward rows for the sandwich, against R^T Q^T r of the streamed QR factor
+    for model, structure, seed in (
+        (bid.example1(), bid.identification.Structure(2, 2, 3), 5),
+        (bid.example2(), bid.identification.Structure(2, 2, 3, 2, 2), 6),
+    ):
+        d = bid.example_data(model, 4000, snr=25, seed=seed)
+        theta = structure.pack(model) * (1.0 + 0.02 * np.cos(np.arange(structure.size)))
+        for warmup in (0, 150):
+            r_aug, cost = bid.refine.oe_factor(structure, theta, d.u, d.noisy, warmup)
+            g, g_cost = bid.refine.oe_gradient(structure, theta, d.u, d.noisy, warmup)
+            p = structure.size
+            want = r_aug[:p, :p].T @ r_aug[:p, p]
+            assert np.allclose(g, want, rtol=1e-9, atol=1e-9 * np.max(np.abs(want)))
+            assert g_cost == pytest.approx(cost, rel=1e-12)
+
+
+def test_lm_ends_with_the_factor_of_a_point_within_one_standard_error():
+    # the last step is often tested by a gradient pass against the factor folded one step
+    # (at most one standard error) before: the covariance must be the final point's
+    truth = bid.example1()
+    d = bid.example_data(truth, 20_000, snr=25, seed=7)
+    s = bid.identification.Structure(2, 2, 3)
+    start = fit_cascade(d.u, d.noisy, refine=False).theta
+    fit = bid.refine.refine_output_error(s, d.u, d.noisy, start)
+    r_aug, cost = bid.refine.oe_factor(s, fit.theta, d.u, d.noisy, 0)
+    here = np.linalg.inv(r_aug[: s.size, : s.size].T @ r_aug[: s.size, : s.size])
+    kept = fit.unscaled_covariance(s.names)
+    assert np.allclose(np.sqrt(np.diag(kept)), np.sqrt(np.diag(here)), rtol=0.01)
+    assert fit.cost == pytest.approx(cost, rel=1e-12)
+    q = r_aug[: s.size, s.size]
+    assert q @ q <= 1e-4 * cost / (len(d.u) - s.size)

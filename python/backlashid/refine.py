@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import solve_triangular
 
 from . import _core
 from .errors import BacklashIdError
@@ -60,6 +61,15 @@ def oe_factor(
     return _core.cascade_oe_factor(*p.chain(), u, y, warmup)
 
 
+def oe_gradient(
+    structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int
+) -> tuple[NDArray[np.float64], float]:
+    """g = J^T (y - y_sim) over t >= warmup and the cost sum (y - y_sim)^2: one pass, no fold."""
+    p = structure.unpack(theta)
+    g, cost, _rows, _moving = _core.oe_gradient(*p.chain(), p.r, p.s, u, y, warmup)
+    return g, cost
+
+
 def refine_output_error(
     structure: Structure,
     u: NDArray[np.float64],
@@ -80,23 +90,33 @@ def refine_output_error(
     the squared length of delta in standard errors. The rule is the same for the predicted
     gain before a step and the actual gain of an accepted step (a kink of the piecewise
     smooth cost can make the two differ); ``xtol`` stops a step that is negligible in
-    absolute terms. The returned ``r_aug`` is the factor at the last point where a step was
-    still worth taking (theta itself, or a negligible step before it).
+    absolute terms.
+
+    A step of at most one standard error (||R delta|| <= sigma, R folded where it started)
+    ends at a point where the Jacobian is that of the start to O(1/sqrt(N)): the end is
+    evaluated by one gradient pass (g = J^T r and the cost, no fold, about 0.6 of a fold)
+    and the rule tested with that R, Q^T r = R^-T g. Only if a step is still worth taking is
+    a factor folded there. The returned ``r_aug`` is [R | Q^T r] at theta with R folded at
+    theta or at most one standard error before it (or at the point before a negligible step).
     """
     names = structure.names
     n_par = structure.size
     dof = max(len(y) - warmup - n_par, 1)
 
-    def cost_at(theta: NDArray[np.float64]) -> float:
+    def cost_at(theta: NDArray[np.float64], gradient: bool) -> tuple[float, NDArray[np.float64] | None]:
+        """The cost at theta (inf if unusable), and g = J^T r there if ``gradient``."""
         if not is_stable(structure, theta):
-            return np.inf
+            return np.inf, None
         try:
-            r = y[warmup:] - simulate(structure, theta, u)[warmup:]
+            if gradient:
+                g, c = oe_gradient(structure, theta, u, y, warmup)
+            else:
+                g, r = None, y[warmup:] - simulate(structure, theta, u)[warmup:]
+                with np.errstate(over="ignore", invalid="ignore"):
+                    c = float(r @ r)
         except BacklashIdError:
-            return np.inf
-        with np.errstate(over="ignore", invalid="ignore"):
-            c = float(r @ r)
-        return c if np.isfinite(c) else np.inf
+            return np.inf, None
+        return (c, g) if np.isfinite(c) else (np.inf, None)
 
     theta = np.array(theta0, dtype=np.float64)
     unusable = BacklashIdError("output-error refinement: the start is unstable or diverges")
@@ -121,14 +141,22 @@ def refine_output_error(
         while lam < 1e12:
             a = np.vstack([r_mat, np.sqrt(lam) * np.diag(d)])
             delta = _core.lstsq(a, np.concatenate([qtr, np.zeros(n_par)]), names)[0]
-            new_cost = cost_at(theta + delta)
+            r_delta = r_mat @ delta
+            near = float(r_delta @ r_delta) <= cost / dof  # within one standard error
+            new_cost, g = cost_at(theta + delta, near)
             if new_cost < cost:
                 small = cost - new_cost <= negligible or np.linalg.norm(delta) <= xtol * (
                     np.linalg.norm(theta) + xtol
                 )
                 theta, accepted, steps = theta + delta, True, steps + 1
+                q_near = _kept_factor_qtr(r_mat, g) if near and not small else None
                 if small:  # done: keep this point's factor rather than fold another Jacobian
                     cost = new_cost
+                elif q_near is not None and float(q_near @ q_near) <= se_tol**2 * new_cost / dof:
+                    # done: the rule holds with the factor folded one standard error away
+                    cost, small = new_cost, True
+                    r_aug = np.vstack([np.column_stack([r_mat, q_near]), np.zeros(n_par + 1)])
+                    r_aug[n_par, n_par] = np.sqrt(max(cost - float(q_near @ q_near), 0.0))
                 else:
                     r_aug, cost = oe_factor(structure, theta, u, y, warmup)
                 lam = max(lam / 3.0, 1e-12)
@@ -140,3 +168,12 @@ def refine_output_error(
     return OutputErrorFit(
         theta=theta, cost=cost, r_aug=r_aug, n_residuals=len(y) - warmup, iterations=steps, converged=converged
     )
+
+
+def _kept_factor_qtr(r_mat: NDArray[np.float64], g: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+    """Q^T r at a point from its gradient g = J^T r and a factor R folded nearby: R^T q = g
+    (None without a gradient or for a singular R)."""
+    if g is None or not np.all(np.abs(np.diag(r_mat)) > 0):
+        return None
+    q = solve_triangular(r_mat, g, trans="T", check_finite=False)
+    return q if np.all(np.isfinite(q)) else None
