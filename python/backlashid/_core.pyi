@@ -70,7 +70,7 @@ def sandwich_oe_factor(
 def oe_gradient(
     a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
     r: list[float], s: list[float], u: _F, y: _F, warmup: int,
-) -> tuple[_F, float, int, int]: ...  # (J^T r, cost, rows, moving rows) over t >= warmup; cascade when r is empty; one pass, no factor
+) -> tuple[_F, float]: ...  # (J^T r, cost) over t >= warmup; cascade when r is empty; one pass, no factor
 
 # Augmented cascade of the diagnosis (rust/core/src/augmented.rs): the nominal cascade plus the
 # catalogue's effects, each exactly nominal at zero size. Time of u[0] in the continuous record

@@ -66,8 +66,7 @@ def oe_gradient(
 ) -> tuple[NDArray[np.float64], float]:
     """g = J^T (y - y_sim) over t >= warmup and the cost sum (y - y_sim)^2: one pass, no fold."""
     p = structure.unpack(theta)
-    g, cost, _rows, _moving = _core.oe_gradient(*p.chain(), p.r, p.s, u, y, warmup)
-    return g, cost
+    return _core.oe_gradient(*p.chain(), p.r, p.s, u, y, warmup)
 
 
 def refine_output_error(

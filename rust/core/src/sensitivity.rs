@@ -116,7 +116,7 @@ pub fn sandwich_sensitivity(
         jacobian: Vec::with_capacity(u.len() * cols),
         cols,
     };
-    walk_sandwich(input_linear, backlash, output_linear, u, |_, wt, _, row| {
+    walk_sandwich(input_linear, backlash, output_linear, u, |_, wt, row| {
         out.output.push(wt);
         out.jacobian.extend_from_slice(row);
         Ok(())
@@ -128,7 +128,7 @@ pub fn sandwich_sensitivity(
 
 /// Which case of eq (1) a sample took.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Move {
+enum Move {
     Left,
     Right,
     Hold,
@@ -434,7 +434,7 @@ pub fn sandwich_oe_factor_threads(
             backlash,
             output_linear,
             u,
-            |t, wt, _, row| match t >= warmup {
+            |t, wt, row| match t >= warmup {
                 true => sink.push(row, w[t] - wt),
                 false => Ok(()),
             },
@@ -442,14 +442,14 @@ pub fn sandwich_oe_factor_threads(
     }))
 }
 
-/// The sandwich's output w(t), the backlash's case and the Jacobian row dw(t), handed to
-/// `visit(t, w(t), case, dw(t))` for t = 0, 1, ...; y, dy, w, dw are kept in rings of nr + 1 and ns + 1 samples.
+/// The sandwich's output w(t) and Jacobian row dw(t), handed to `visit(t, w(t), dw(t))` for
+/// t = 0, 1, ...; y, dy, w, dw are kept in rings of nr + 1 and ns + 1 samples.
 pub(crate) fn walk_sandwich(
     input_linear: &LinearBlock,
     backlash: &GeneralBacklash,
     output_linear: &LinearBlock,
     u: &[f64],
-    mut visit: impl FnMut(usize, f64, Move, &[f64]) -> Result<()>,
+    mut visit: impl FnMut(usize, f64, &[f64]) -> Result<()>,
 ) -> Result<()> {
     let (r, s) = (output_linear.a(), output_linear.b());
     let (nr, ns) = (r.len(), s.len());
@@ -463,7 +463,7 @@ pub(crate) fn walk_sandwich(
     let mut w_ring = vec![0.0; rw];
     let mut dw_ring = vec![0.0; rw * cols];
     for t in 0..u.len() {
-        let (yt, mv) = chain.step(t)?;
+        let (yt, _) = chain.step(t)?;
         let cy = t % ry;
         y_ring[cy] = yt;
         dy_ring[cy * cols..(cy + 1) * cols].copy_from_slice(&chain.dy);
@@ -508,7 +508,7 @@ pub(crate) fn walk_sandwich(
             return Err(crate::linear::overflow(output_linear, "w", t));
         }
         w_ring[cw] = wt;
-        visit(t, wt, mv, dw)?;
+        visit(t, wt, dw)?;
     }
     Ok(())
 }

@@ -583,7 +583,7 @@ fn sandwich_oe_factor<'py>(
 }
 
 /// The output-error gradient of an estimate (cascade when r is empty, else sandwich), one
-/// pass without the factor: (J^T r, cost = sum r^2, rows, moving rows) over t >= warmup.
+/// pass without the factor: (J^T r, cost = sum r^2) over t >= warmup.
 #[pyfunction]
 #[pyo3(signature = (a, b, c_left, c_right, m_left, m_right, r, s, u, y, warmup))]
 #[allow(clippy::too_many_arguments)]
@@ -600,7 +600,7 @@ fn oe_gradient<'py>(
     u: PyReadonlyArrayDyn<'py, f64>,
     y: PyReadonlyArrayDyn<'py, f64>,
     warmup: usize,
-) -> PyResult<(Bound<'py, PyArray1<f64>>, f64, usize, usize)> {
+) -> PyResult<(Bound<'py, PyArray1<f64>>, f64)> {
     let (u, y) = (signal(py, "u", &u)?, signal(py, "y", &y)?);
     let g = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
@@ -611,7 +611,7 @@ fn oe_gradient<'py>(
             core::gradient::sandwich_oe_gradient(&lin, &bl, &out, &u, &y, warmup)
         }
     })?;
-    Ok((vec_f64(py, g.gradient), g.cost, g.rows, g.moving))
+    Ok((vec_f64(py, g.gradient), g.cost))
 }
 
 /// Free-run output of an estimate (cascade when r is empty, else sandwich), from rest.
