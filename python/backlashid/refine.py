@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import solve_triangular
+from scipy import linalg
 
 from . import _core
 from .errors import BacklashIdError
@@ -174,5 +174,5 @@ def _kept_factor_qtr(r_mat: NDArray[np.float64], g: NDArray[np.float64] | None) 
     (None without a gradient or for a singular R)."""
     if g is None or not np.all(np.abs(np.diag(r_mat)) > 0):
         return None
-    q = solve_triangular(r_mat, g, trans="T", check_finite=False)
+    q = linalg.solve_triangular(r_mat, g, trans="T", check_finite=False)
     return q if np.all(np.isfinite(q)) else None
