@@ -1,6 +1,6 @@
 //! The output-error gradient g = J^T r (J = d y_sim / d theta, r = y - y_sim) and the cost
-//! sum r^2 at an estimate, without the Jacobian or its factor. LM uses it to test and take
-//! steps against the factor of a Jacobian folded at a nearby point (`refine.py`).
+//! sum r^2 at an estimate, without the Jacobian or its factor. LM uses it to test the end of
+//! a short step against the factor of the Jacobian folded where the step began (`refine.py`).
 //!
 //! The cascade's gradient runs in reverse (the adjoint of the recursions in `sensitivity`):
 //!   lambda(t) = r(t) + [t+1 holds] lambda(t+1): the residuals that see dy(t), since a held
@@ -17,9 +17,11 @@
 //! `sensitivity::walk_sandwich` instead.
 
 use crate::backlash::GeneralBacklash;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::linear::LinearBlock;
-use crate::sensitivity::{cascade_cols, check_pair, overflowed, sandwich_cols, walk_sandwich};
+use crate::sensitivity::{
+    branch_degree, cascade_cols, check_pair, overflowed, sandwich_cols, walk_sandwich,
+};
 use crate::switching::switching;
 
 /// g = J^T r over the samples t >= warmup and the cost sum r^2.
@@ -55,9 +57,7 @@ pub fn cascade_oe_gradient(
     warmup: usize,
 ) -> Result<OeGradient> {
     check_pair(u, y, "y")?;
-    if backlash.right().coefficients().len() != backlash.left().coefficients().len() {
-        return Err(Error::Model("both branches need the same degree n".into()));
-    }
+    branch_degree(backlash)?;
     // forward: the model's own simulation; backward: its case flags f1 (on L), f2 (on R)
     // recomputed sample by sample as `CascadeModel::simulate_internals` has them
     let x = linear.simulate(u, &linear.rest_state())?;
@@ -185,6 +185,7 @@ pub fn sandwich_oe_gradient(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::Error;
     use crate::sensitivity::tests::{input, noisy, sandwich_from};
     use crate::sensitivity::{cascade_sensitivity, sandwich_sensitivity, Sensitivity};
     use crate::CascadeModel;

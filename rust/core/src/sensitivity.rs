@@ -160,10 +160,7 @@ impl<'a> ChainStepper<'a> {
         u: &'a [f64],
         cols: usize,
     ) -> Result<Self> {
-        let n = backlash.left().coefficients().len();
-        if backlash.right().coefficients().len() != n {
-            return Err(Error::Model("both branches need the same degree n".into()));
-        }
+        let n = branch_degree(backlash)?;
         let lay = Layout {
             na: linear.na(),
             nb: linear.nb(),
@@ -298,6 +295,15 @@ pub(crate) fn overflowed() -> Error {
          a stable estimate"
             .into(),
     )
+}
+
+/// The degree n of both branches: the Jacobian columns assume L and R have the same.
+pub(crate) fn branch_degree(backlash: &GeneralBacklash) -> Result<usize> {
+    let n = backlash.left().coefficients().len();
+    if backlash.right().coefficients().len() != n {
+        return Err(Error::Model("both branches need the same degree n".into()));
+    }
+    Ok(n)
 }
 
 pub(crate) fn check_pair(u: &[f64], y: &[f64], y_name: &str) -> Result<()> {
