@@ -74,6 +74,9 @@ def test_cascade_internals_are_consistent(model, u):
     np.testing.assert_allclose(sim.output[hold], y_prev[hold], **TOL)
     assert sim.moving_fraction == pytest.approx(np.mean(sim.f1 | sim.f2))
     assert sim.final_state.y_prev == sim.output[-1]
+    # the core's count of the same flags, without storing them
+    k = len(u) // 3
+    assert model.moving_fraction(u, warmup=k) == np.mean((sim.f1 | sim.f2)[k:])
 
 
 @given(model=sandwiches(), u=inputs())
@@ -91,6 +94,23 @@ def test_sandwich_internals_are_consistent(model, u):
     hold = ~sim.f1 & ~sim.f2
     np.testing.assert_allclose(sim.y[hold], np.r_[0.0, sim.y[:-1]][hold], **TOL)
     assert sim.final_state.y_past[0] == sim.y[-1]
+    k = len(u) // 3
+    assert model.moving_fraction(u, warmup=k) == np.mean((sim.f1 | sim.f2)[k:])
+
+
+def test_moving_fraction_continues_a_record_and_rejects_a_bad_warmup():
+    for model in (bx.example1(), bx.example2()):
+        u = np.sin(0.05 * np.arange(900)) * 2.0
+        first = model.simulate(u[:400], internals=True)
+        rest = model.simulate(u[400:], initial_state=first.final_state, internals=True)
+        got = model.moving_fraction(u[400:], initial_state=first.final_state, warmup=100)
+        assert got == np.mean((rest.f1 | rest.f2)[100:])
+        assert 0.0 < got < 1.0
+        for bad in (-1, 900 - 400, 2.5, True):
+            with pytest.raises(bx.DataError, match="warmup"):
+                model.moving_fraction(u[400:], warmup=bad)
+        with pytest.raises(bx.DataError):
+            model.moving_fraction(np.r_[0.1, np.nan])
 
 
 # ------------------------------------------------------------------ continuation

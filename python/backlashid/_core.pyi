@@ -26,6 +26,7 @@ class CascadeModel:
     def simulate_internals(
         self, u: _F, u_past: list[float], x_past: list[float], y_prev: float
     ) -> tuple[_F, _F, _B, _B, tuple[list[float], list[float], float]]: ...
+    def moving_count(self, u: _F, u_past: list[float], x_past: list[float], y_prev: float, skip: int) -> int: ...
 
 class SandwichModel:
     def __init__(self, input_linear: LinearBlock, backlash: GeneralBacklash, output_linear: LinearBlock) -> None: ...
@@ -35,6 +36,9 @@ class SandwichModel:
     def simulate_internals(
         self, u: _F, u_past: list[float], x_past: list[float], y_past: list[float], w_past: list[float]
     ) -> tuple[_F, _F, _F, _B, _B, tuple[list[float], list[float], list[float], list[float]]]: ...
+    def moving_count(
+        self, u: _F, u_past: list[float], x_past: list[float], y_past: list[float], w_past: list[float], skip: int
+    ) -> int: ...
 
 # -- identification (one call per iteration; Python drives the iterations) -------------------
 _LS = tuple[_F, float, NDArray[np.float64], float]  # theta, rss, (A^T A)^-1, rcond

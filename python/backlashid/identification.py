@@ -319,10 +319,9 @@ def _moving(
     """The fraction of samples after the warm-up on which the model of ``theta`` moves the
     backlash (f1 or f2); 0 for an estimate that is no valid model."""
     try:
-        sim = (model or structure.model(theta)).simulate(u, internals=True)
+        return (model or structure.model(theta)).moving_fraction(u, warmup=warmup)
     except ModelError:
         return 0.0
-    return float(np.mean((sim.f1 | sim.f2)[warmup:]))
 
 
 def _coarse_samples(structure: Structure, rows: int, coarse: int | None) -> int:

@@ -174,6 +174,15 @@ class CascadeModel(_ModelIO):
         )
         return CascadeSimulation(y, x, f1, f2, CascadeState(u_past, x_past, y_prev))
 
+    def moving_fraction(self, u: ArrayLike, *, initial_state: CascadeState | None = None, warmup: int = 0) -> float:
+        """The fraction of samples after ``warmup`` on which the backlash moves (f1 or f2 of
+        eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
+        s = initial_state if initial_state is not None else self.rest_state()
+        _check_state(s, CascadeState)
+        u = as_signal(u, "u")
+        skip = _check_warmup(warmup, len(u))
+        return self._native.moving_count(u, list(s.u_past), list(s.x_past), s.y_prev, skip) / (len(u) - skip)
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "model": "cascade",
@@ -254,6 +263,16 @@ class SandwichModel(_ModelIO):
         x, y, w, f1, f2, final = self._native.simulate_internals(u, *args)
         return SandwichSimulation(w, x, y, f1, f2, SandwichState(*final))
 
+    def moving_fraction(self, u: ArrayLike, *, initial_state: SandwichState | None = None, warmup: int = 0) -> float:
+        """The fraction of samples after ``warmup`` on which the backlash moves (f1 or f2 of
+        eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
+        s = initial_state if initial_state is not None else self.rest_state()
+        _check_state(s, SandwichState)
+        u = as_signal(u, "u")
+        skip = _check_warmup(warmup, len(u))
+        args = (list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past))
+        return self._native.moving_count(u, *args, skip) / (len(u) - skip)
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "model": "sandwich",
@@ -285,6 +304,13 @@ Model = Union[CascadeModel, SandwichModel]
 def _check_state(state: Any, cls: type) -> None:
     if not isinstance(state, cls):
         raise DataError(f"initial_state must be a {cls.__name__}, got {type(state).__name__}")
+
+
+def _check_warmup(warmup: Any, n: int) -> int:
+    """``warmup`` as a sample count that leaves at least one of the n samples."""
+    if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or not 0 <= warmup < n:
+        raise DataError(f"warmup = {warmup!r}: give a whole number of samples, 0 <= warmup < {n} (the record length)")
+    return int(warmup)
 
 
 def model_from_dict(data: dict[str, Any]) -> Model:

@@ -247,12 +247,20 @@ fn select(l: f64, r: f64, y_prev: f64) -> f64 {
 /// One step of eq (1) in a hot loop: the model itself, or its `PaddedStep`.
 pub(crate) trait Step: Copy {
     fn step(&self, x: f64, y_prev: f64) -> f64;
+    /// f1(t) or f2(t) of eq (12)-(13): the step takes a branch (`switching::switching`).
+    fn moves(&self, x: f64, y_prev: f64) -> bool;
 }
 
 impl Step for &GeneralBacklash {
     #[inline(always)]
     fn step(&self, x: f64, y_prev: f64) -> f64 {
         GeneralBacklash::step(self, x, y_prev)
+    }
+
+    #[inline(always)]
+    fn moves(&self, x: f64, y_prev: f64) -> bool {
+        let (f1, f2) = crate::switching::switching(self, x, y_prev);
+        f1 | f2
     }
 }
 
@@ -309,6 +317,12 @@ impl Step for PaddedStep {
     #[inline(always)]
     fn step(&self, x: f64, y_prev: f64) -> f64 {
         select(self.left.value(x), self.right.value(x), y_prev)
+    }
+
+    #[inline(always)]
+    fn moves(&self, x: f64, y_prev: f64) -> bool {
+        let (f1, f2) = self.switching(x, y_prev);
+        f1 | f2
     }
 }
 

@@ -99,6 +99,70 @@ impl CascadeModel {
     }
 }
 
+impl CascadeModel {
+    /// How many samples t >= `skip` move the backlash (f1 or f2 of eq 12-13) on the run
+    /// from `state`: the flags of `simulate_internals`, counted in the loop of `simulate`.
+    pub fn moving_count(&self, u: &[f64], state: &CascadeState, skip: usize) -> Result<usize> {
+        let ready = self
+            .linear
+            .check_state(&state.linear, "state.linear")
+            .and_then(|()| check_memory(state.y_prev));
+        if u.is_empty() || ready.is_err() {
+            check_signal("u", u)?;
+            ready?;
+        }
+        let count = CascadeCount {
+            backlash: &self.backlash,
+            u,
+            y0: state.y_prev,
+            skip,
+        };
+        match self.linear.with_recursion(&state.linear, count) {
+            (moving, true) if u.last().is_some_and(|v| v.is_finite()) => Ok(moving),
+            // the simulation names what failed
+            _ => self.simulate(u, state).and_then(|_| unreachable_error()),
+        }
+    }
+}
+
+/// The loop of `CascadeModel::moving_count`: the count, and whether every x and y was finite.
+struct CascadeCount<'a> {
+    backlash: &'a GeneralBacklash,
+    u: &'a [f64],
+    y0: f64,
+    skip: usize,
+}
+
+impl RecursionUser for CascadeCount<'_> {
+    type Output = (usize, bool);
+
+    fn run<R: Recursion>(self, linear: R) -> Self::Output {
+        match self.backlash.padded_step() {
+            Some(step) => self.count_with(linear, step),
+            None => self.count_with(linear, self.backlash),
+        }
+    }
+}
+
+impl CascadeCount<'_> {
+    fn count_with<R: Recursion, S: Step>(&self, mut linear: R, backlash: S) -> (usize, bool) {
+        let (mut finite, mut y_prev, mut moving) = (true, self.y0, 0);
+        let (warmup, counted) = self.u.split_at(self.skip.min(self.u.len()));
+        for &ut in warmup {
+            let xt = linear.next(ut);
+            y_prev = backlash.step(xt, y_prev);
+            finite &= xt.is_finite() & y_prev.is_finite();
+        }
+        for &ut in counted {
+            let xt = linear.next(ut);
+            moving += backlash.moves(xt, y_prev) as usize;
+            y_prev = backlash.step(xt, y_prev);
+            finite &= xt.is_finite() & y_prev.is_finite();
+        }
+        (moving, finite)
+    }
+}
+
 /// The loop of `CascadeModel::simulate`: y, and whether every x and y was finite.
 struct CascadeRun<'a> {
     backlash: &'a GeneralBacklash,
@@ -160,6 +224,41 @@ pub(crate) fn switching_flags(
     }
 }
 
+/// The number of t >= skip with f1(t) or f2(t) along a simulated record (`switching_flags`
+/// counted).
+pub(crate) fn moving_count(
+    backlash: &GeneralBacklash,
+    x: &[f64],
+    y: &[f64],
+    y0: f64,
+    skip: usize,
+) -> usize {
+    let start = skip.min(x.len());
+    let y0 = if start == 0 { y0 } else { y[start - 1] };
+    let (x, y) = (&x[start..], &y[start..]);
+    match backlash.padded_step() {
+        Some(padded) => count_along(x, y, y0, |xt, yp| padded.switching(xt, yp)),
+        None => count_along(x, y, y0, |xt, yp| switching(backlash, xt, yp)),
+    }
+}
+
+fn count_along(
+    x: &[f64],
+    y: &[f64],
+    y0: f64,
+    switching: impl Fn(f64, f64) -> (bool, bool),
+) -> usize {
+    let mut y_prev = y0;
+    x.iter()
+        .zip(y)
+        .map(|(&xt, &yt)| {
+            let (f1, f2) = switching(xt, y_prev);
+            y_prev = yt;
+            (f1 | f2) as usize
+        })
+        .sum()
+}
+
 fn flags_along(
     x: &[f64],
     y: &[f64],
@@ -195,6 +294,41 @@ mod tests {
         let x = m.linear.simulate(&u, &m.linear.rest_state()).unwrap();
         let y = m.backlash.simulate(&x, 0.0).unwrap();
         assert_eq!(m.simulate(&u, &m.rest_state()).unwrap(), y);
+    }
+
+    #[test]
+    fn moving_count_counts_the_flags_after_skip() {
+        // branches of degree 3 (the padded step) and 5 (the general one)
+        let quintic = CascadeModel::new(
+            example1().linear,
+            GeneralBacklash::new(
+                0.6,
+                0.5,
+                vec![1.0, 0.0, 0.2, 0.0, 0.01],
+                vec![1.5, 0.1, 0.2],
+            )
+            .unwrap(),
+        );
+        for m in [example1(), quintic] {
+            let u: Vec<f64> = (0..700).map(|k| ((k as f64) * 0.05).sin() * 2.0).collect();
+            let state = CascadeState {
+                y_prev: 0.3,
+                ..m.rest_state()
+            };
+            let s = m.simulate_internals(&u, &state).unwrap();
+            let moving: Vec<bool> = s.f1.iter().zip(&s.f2).map(|(a, b)| a | b).collect();
+            assert!(moving.iter().any(|&v| v) && moving.iter().any(|&v| !v));
+            for skip in [0, 1, 77, 699, 700, 5000] {
+                let want = moving.iter().skip(skip).filter(|&&v| v).count();
+                assert_eq!(
+                    m.moving_count(&u, &state, skip).unwrap(),
+                    want,
+                    "skip {skip}"
+                );
+            }
+            assert!(m.moving_count(&[0.1, f64::NAN], &state, 0).is_err());
+            assert!(m.moving_count(&[], &state, 0).is_err());
+        }
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! output block (29): w(t) = sum_{i=1}^{nr} r_i y(t-i) - sum_{j=1}^{ns} s_j w(t-j).
 
 use crate::backlash::{GeneralBacklash, Step};
-use crate::cascade::{switching_flags, unreachable_error};
+use crate::cascade::{moving_count, switching_flags, unreachable_error};
 use crate::error::{Error, Result};
 use crate::linear::{
     blame_feeding_block, check_no_overflow, Boxed, LinearBlock, LinearState, Outputs, Recursion,
@@ -149,6 +149,21 @@ impl SandwichModel {
     }
 }
 
+impl SandwichModel {
+    /// How many samples t >= `skip` move the backlash (f1 or f2 of eq 12-13) on the run
+    /// from `state`: the flags of `simulate_internals`, counted without storing them.
+    pub fn moving_count(&self, u: &[f64], state: &SandwichState, skip: usize) -> Result<usize> {
+        let (x, y, _w) = self.run(u, state)?;
+        Ok(moving_count(
+            &self.backlash,
+            &x,
+            &y,
+            state.output.u_past[0],
+            skip,
+        ))
+    }
+}
+
 /// The input block and the backlash of a sandwich, run a block of samples per call.
 trait XyBlock {
     /// x and y for the inputs `u`, into `x` and `y` (as many as all three have).
@@ -233,5 +248,18 @@ mod tests {
         let first = m.simulate_internals(&u[..77], &m.rest_state()).unwrap();
         let rest = m.simulate(&u[77..], &first.final_state).unwrap();
         assert_eq!(&whole[77..], &rest[..]);
+    }
+
+    #[test]
+    fn moving_count_counts_the_flags_after_skip() {
+        let m = example2();
+        let u: Vec<f64> = (0..600).map(|k| ((k as f64) * 0.04).sin() * 1.5).collect();
+        let s = m.simulate_internals(&u, &m.rest_state()).unwrap();
+        let moving: Vec<bool> = s.f1.iter().zip(&s.f2).map(|(a, b)| a | b).collect();
+        assert!(moving.iter().any(|&v| v) && moving.iter().any(|&v| !v));
+        for skip in [0, 10, 333, 600] {
+            let want = moving.iter().skip(skip).filter(|&&v| v).count();
+            assert_eq!(m.moving_count(&u, &m.rest_state(), skip).unwrap(), want);
+        }
     }
 }

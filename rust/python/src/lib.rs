@@ -288,6 +288,24 @@ impl PyCascadeModel {
             (fs.linear.u_past, fs.linear.x_past, fs.y_prev),
         ))
     }
+
+    /// Samples t >= skip on which the backlash moves (f1 or f2), counted without the flags.
+    fn moving_count<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        u_past: Vec<f64>,
+        x_past: Vec<f64>,
+        y_prev: f64,
+        skip: usize,
+    ) -> PyResult<usize> {
+        let u = signal(py, "u", &u)?;
+        let state = core::CascadeState {
+            linear: core::LinearState { u_past, x_past },
+            y_prev,
+        };
+        run(py, || self.0.moving_count(&u, &state, skip))
+    }
 }
 
 #[pyclass(frozen, module = "backlashid._core", name = "SandwichModel")]
@@ -357,6 +375,23 @@ impl PySandwichModel {
                 fs.output.x_past,
             ),
         ))
+    }
+
+    /// Samples t >= skip on which the backlash moves (f1 or f2), counted without the flags.
+    #[allow(clippy::too_many_arguments)]
+    fn moving_count<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        u_past: Vec<f64>,
+        x_past: Vec<f64>,
+        y_past: Vec<f64>,
+        w_past: Vec<f64>,
+        skip: usize,
+    ) -> PyResult<usize> {
+        let u = signal(py, "u", &u)?;
+        let state = sandwich_state(u_past, x_past, y_past, w_past);
+        run(py, || self.0.moving_count(&u, &state, skip))
     }
 }
 
