@@ -23,6 +23,39 @@ pub const BLOCK_ROWS: usize = 1024;
 /// 66 ms.
 const HANDOVER_BLOCKS: usize = 4;
 
+/// Hand-over buffers (rows, targets) kept between `fold_stream_parts` calls on this thread, at
+/// most `SPARE_BUFFERS` (about 2 MB): fresh ones of this size come from the OS page by page.
+/// The cascade output-error factor at N = 1e5 on 2 threads (2026-11-22, this machine): 286
+/// page faults and 41 ns per sample with fresh buffers, none and 33 ns with spares.
+const SPARE_BUFFERS: usize = 8;
+
+thread_local! {
+    static SPARE: std::cell::RefCell<Vec<(Vec<f64>, Vec<f64>)>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A hand-over buffer pair from this thread's spares, or new ones.
+fn spare_buffers(rows: usize, values: usize) -> (Vec<f64>, Vec<f64>) {
+    let (mut a, mut b) = SPARE
+        .with(|s| s.borrow_mut().pop())
+        .unwrap_or_else(|| (Vec::with_capacity(values), Vec::with_capacity(rows)));
+    a.clear();
+    b.clear();
+    a.reserve(values);
+    b.reserve(rows);
+    (a, b)
+}
+
+/// Keep a buffer pair for the next call on this thread.
+fn keep_spare(buffers: (Vec<f64>, Vec<f64>)) {
+    SPARE.with(|s| {
+        let mut s = s.borrow_mut();
+        if s.len() < SPARE_BUFFERS {
+            s.push(buffers);
+        }
+    });
+}
+
 /// Upper bound of `default_threads`.
 pub const MAX_THREADS: usize = 8;
 
@@ -617,15 +650,15 @@ impl RowSink {
                 self.b[part].clear();
             }
             SinkTarget::Channel { full, empty } => {
-                let (mut a, mut b) = empty.try_recv().unwrap_or_else(|_| {
-                    let most = self.widths.iter().max().copied().unwrap_or(0);
-                    (
-                        Vec::with_capacity(self.batch * most),
-                        Vec::with_capacity(self.batch),
-                    )
-                });
-                a.clear();
-                b.clear();
+                let most = self.widths.iter().max().copied().unwrap_or(0);
+                let (mut a, mut b) = match empty.try_recv() {
+                    Ok((mut a, mut b)) => {
+                        a.clear();
+                        b.clear();
+                        (a, b)
+                    }
+                    Err(_) => spare_buffers(self.batch, self.batch * most),
+                };
                 std::mem::swap(&mut a, &mut self.a[part]);
                 std::mem::swap(&mut b, &mut self.b[part]);
                 if full.send((part, a, b)).is_err() {
@@ -675,19 +708,22 @@ pub fn fold_stream_parts(
             .map(|&w| TriangularFactor::new(w))
             .collect::<Vec<_>>()
     };
-    let sink = |target, batch: usize| RowSink {
-        widths: widths.to_vec(),
-        batch,
-        a: widths
+    let sink = |target, batch: usize| {
+        let (a, b) = widths
             .iter()
-            .map(|&w| Vec::with_capacity(batch * w))
-            .collect(),
-        b: widths.iter().map(|_| Vec::with_capacity(batch)).collect(),
-        run: None,
-        rows: 0,
-        sum_squares: 0.0,
-        dispersion: 0.0,
-        target,
+            .map(|&w| spare_buffers(batch, batch * w))
+            .unzip();
+        RowSink {
+            widths: widths.to_vec(),
+            batch,
+            a,
+            b,
+            run: None,
+            rows: 0,
+            sum_squares: 0.0,
+            dispersion: 0.0,
+            target,
+        }
     };
     let done = |s: RowSink, factors| StreamedParts {
         factors,
@@ -703,6 +739,9 @@ pub fn fold_stream_parts(
             SinkTarget::Local(f) => f,
             SinkTarget::Channel { .. } => unreachable!("a local sink stays local"),
         };
+        for (a, b) in s.a.drain(..).zip(s.b.drain(..)) {
+            keep_spare((a, b));
+        }
         return Ok(done(s, factors));
     }
     std::thread::scope(|scope| {
@@ -728,12 +767,23 @@ pub fn fold_stream_parts(
             HANDOVER_BLOCKS * BLOCK_ROWS,
         );
         let produced = produce(&mut s).and_then(|_| s.finish());
-        // closes the channel: the folder finishes
-        s.target = SinkTarget::Local(Vec::new());
+        let SinkTarget::Channel { full, empty } =
+            std::mem::replace(&mut s.target, SinkTarget::Local(Vec::new()))
+        else {
+            unreachable!("the sink was made with a channel")
+        };
+        drop(full); // closes the channel: the folder finishes
         let folded = match folder.join() {
             Ok(f) => f,
             Err(panic) => std::panic::resume_unwind(panic),
         };
+        // every buffer is back: the folder returned each one it took
+        for buffers in empty.try_iter() {
+            keep_spare(buffers);
+        }
+        for (a, b) in s.a.drain(..).zip(s.b.drain(..)) {
+            keep_spare((a, b));
+        }
         produced?;
         Ok(done(s, folded?))
     })
@@ -1172,6 +1222,14 @@ mod tests {
             assert_eq!(failed, Err(Error::Model("stop".into())));
             let bad = fold_stream(p, threads, |sink| sink.push(&a[..p - 1], 1.0));
             assert!(matches!(bad, Err(Error::Data(_))));
+        }
+        // the hand-over buffers those calls left filled are this thread's spares now: reused,
+        // they change nothing
+        for threads in [2, 1, 2] {
+            assert_eq!(
+                fold_stream(p, threads, produce).unwrap(),
+                (one.clone(), ss1)
+            );
         }
     }
 }
