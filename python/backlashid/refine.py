@@ -136,17 +136,22 @@ def refine_output_error(
             break
         scale = np.maximum(scale, np.linalg.norm(r_mat, axis=0))  # Marquardt's D: column norms of J
         d = np.where(scale > 0, scale, 1.0)
-        accepted = small = False
+        accepted = small = rejected = False
         while lam < 1e12:
             a = np.vstack([r_mat, np.sqrt(lam) * np.diag(d)])
             delta = _core.lstsq(a, np.concatenate([qtr, np.zeros(n_par)]), names)[0]
             r_delta = r_mat @ delta
             near = float(r_delta @ r_delta) <= cost / dof  # within one standard error
-            new_cost, g = cost_at(theta + delta, near)
+            # a near trial is evaluated with its gradient, as it is usually accepted; after a
+            # rejection (at a kink they come in runs while the damping climbs) by a simulation
+            # only (about 1/5 of a gradient pass), the gradient then following acceptance
+            new_cost, g = cost_at(theta + delta, near and not rejected)
             if new_cost < cost:
                 small = cost - new_cost <= negligible or np.linalg.norm(delta) <= xtol * (
                     np.linalg.norm(theta) + xtol
                 )
+                if near and not small and g is None:
+                    new_cost, g = cost_at(theta + delta, True)
                 theta, accepted, steps = theta + delta, True, steps + 1
                 q_near = _kept_factor_qtr(r_mat, g) if near and not small else None
                 if small:  # done: keep this point's factor rather than fold another Jacobian
@@ -160,6 +165,7 @@ def refine_output_error(
                     r_aug, cost = oe_factor(structure, theta, u, y, warmup)
                 lam = max(lam / 3.0, 1e-12)
                 break
+            rejected = True
             lam *= 4.0
         if not accepted or small:
             converged = True
