@@ -111,6 +111,8 @@ def test_moving_fraction_continues_a_record_and_rejects_a_bad_warmup():
                 model.moving_fraction(u[400:], warmup=bad)
         with pytest.raises(bx.DataError):
             model.moving_fraction(np.r_[0.1, np.nan])
+        with pytest.raises(bx.DataError, match="empty"):
+            model.moving_fraction(np.array([]))
 
 
 # ------------------------------------------------------------------ continuation

@@ -179,9 +179,7 @@ class CascadeModel(_ModelIO):
         eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
         s = initial_state if initial_state is not None else self.rest_state()
         _check_state(s, CascadeState)
-        u = as_signal(u, "u")
-        skip = _check_warmup(warmup, len(u))
-        return self._native.moving_count(u, list(s.u_past), list(s.x_past), s.y_prev, skip) / (len(u) - skip)
+        return _moving_fraction(self._native, u, (list(s.u_past), list(s.x_past), s.y_prev), warmup)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -268,10 +266,8 @@ class SandwichModel(_ModelIO):
         eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
         s = initial_state if initial_state is not None else self.rest_state()
         _check_state(s, SandwichState)
-        u = as_signal(u, "u")
-        skip = _check_warmup(warmup, len(u))
-        args = (list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past))
-        return self._native.moving_count(u, *args, skip) / (len(u) - skip)
+        state = (list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past))
+        return _moving_fraction(self._native, u, state, warmup)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -306,11 +302,15 @@ def _check_state(state: Any, cls: type) -> None:
         raise DataError(f"initial_state must be a {cls.__name__}, got {type(state).__name__}")
 
 
-def _check_warmup(warmup: Any, n: int) -> int:
-    """``warmup`` as a sample count that leaves at least one of the n samples."""
+def _moving_fraction(native: Any, u: ArrayLike, state: tuple[Any, ...], warmup: Any) -> float:
+    """The core's count of moving samples after ``warmup`` (checked), as a fraction."""
+    u = as_signal(u, "u")
+    n = len(u)
+    if n == 0:
+        raise DataError("u is empty: give at least one sample")
     if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or not 0 <= warmup < n:
         raise DataError(f"warmup = {warmup!r}: give a whole number of samples, 0 <= warmup < {n} (the record length)")
-    return int(warmup)
+    return native.moving_count(u, *state, int(warmup)) / (n - int(warmup))
 
 
 def model_from_dict(data: dict[str, Any]) -> Model:

@@ -49,14 +49,7 @@ impl CascadeModel {
     /// x all through and a finite last u thus mean a finite u. On any failure the linear
     /// block is rerun alone, which names the first culprit exactly as separate checks would.
     pub fn simulate(&self, u: &[f64], state: &CascadeState) -> Result<Vec<f64>> {
-        let ready = self
-            .linear
-            .check_state(&state.linear, "state.linear")
-            .and_then(|()| check_memory(state.y_prev));
-        if u.is_empty() || ready.is_err() {
-            check_signal("u", u)?;
-            ready?;
-        }
+        self.check_start(u, state)?;
         let run = CascadeRun {
             backlash: &self.backlash,
             u,
@@ -100,9 +93,9 @@ impl CascadeModel {
 }
 
 impl CascadeModel {
-    /// How many samples t >= `skip` move the backlash (f1 or f2 of eq 12-13) on the run
-    /// from `state`: the flags of `simulate_internals`, counted in the loop of `simulate`.
-    pub fn moving_count(&self, u: &[f64], state: &CascadeState, skip: usize) -> Result<usize> {
+    /// The checks before the loops of `simulate` and `moving_count`: the state, and u only
+    /// if empty or the state is bad (the loops check u as they run).
+    fn check_start(&self, u: &[f64], state: &CascadeState) -> Result<()> {
         let ready = self
             .linear
             .check_state(&state.linear, "state.linear")
@@ -111,6 +104,13 @@ impl CascadeModel {
             check_signal("u", u)?;
             ready?;
         }
+        Ok(())
+    }
+
+    /// How many samples t >= `skip` move the backlash (f1 or f2 of eq 12-13) on the run
+    /// from `state`: the flags of `simulate_internals`, counted in the loop of `simulate`.
+    pub fn moving_count(&self, u: &[f64], state: &CascadeState, skip: usize) -> Result<usize> {
+        self.check_start(u, state)?;
         let count = CascadeCount {
             backlash: &self.backlash,
             u,
