@@ -90,9 +90,7 @@ impl CascadeModel {
             final_state,
         })
     }
-}
 
-impl CascadeModel {
     /// The checks before the loops of `simulate` and `moving_count`: the state, and u only
     /// if empty or the state is bad (the loops check u as they run).
     fn check_start(&self, u: &[f64], state: &CascadeState) -> Result<()> {
@@ -219,8 +217,8 @@ pub(crate) fn switching_flags(
 ) -> (Vec<bool>, Vec<bool>) {
     // the padded branches (the same bits, a fixed number of Horner steps) where they apply
     match backlash.padded_step() {
-        Some(padded) => flags_along(x, y, y0, |xt, yp| padded.switching(xt, yp)),
-        None => flags_along(x, y, y0, |xt, yp| switching(backlash, xt, yp)),
+        Some(padded) => flags_along(x, y, y0, move |xt, yp| padded.switching(xt, yp)).unzip(),
+        None => flags_along(x, y, y0, |xt, yp| switching(backlash, xt, yp)).unzip(),
     }
 }
 
@@ -236,44 +234,30 @@ pub(crate) fn moving_count(
     let start = skip.min(x.len());
     let y0 = if start == 0 { y0 } else { y[start - 1] };
     let (x, y) = (&x[start..], &y[start..]);
+    let moves = |(f1, f2): &(bool, bool)| f1 | f2;
     match backlash.padded_step() {
-        Some(padded) => count_along(x, y, y0, |xt, yp| padded.switching(xt, yp)),
-        None => count_along(x, y, y0, |xt, yp| switching(backlash, xt, yp)),
+        Some(padded) => flags_along(x, y, y0, move |xt, yp| padded.switching(xt, yp))
+            .filter(moves)
+            .count(),
+        None => flags_along(x, y, y0, |xt, yp| switching(backlash, xt, yp))
+            .filter(moves)
+            .count(),
     }
 }
 
-fn count_along(
-    x: &[f64],
-    y: &[f64],
+/// (f1(t), f2(t)) for t = 0, 1, .. from x(t) and y(t-1).
+fn flags_along<'a>(
+    x: &'a [f64],
+    y: &'a [f64],
     y0: f64,
-    switching: impl Fn(f64, f64) -> (bool, bool),
-) -> usize {
+    switching: impl Fn(f64, f64) -> (bool, bool) + 'a,
+) -> impl Iterator<Item = (bool, bool)> + 'a {
     let mut y_prev = y0;
-    x.iter()
-        .zip(y)
-        .map(|(&xt, &yt)| {
-            let (f1, f2) = switching(xt, y_prev);
-            y_prev = yt;
-            (f1 | f2) as usize
-        })
-        .sum()
-}
-
-fn flags_along(
-    x: &[f64],
-    y: &[f64],
-    y0: f64,
-    switching: impl Fn(f64, f64) -> (bool, bool),
-) -> (Vec<bool>, Vec<bool>) {
-    let mut y_prev = y0;
-    x.iter()
-        .zip(y)
-        .map(|(&xt, &yt)| {
-            let f = switching(xt, y_prev);
-            y_prev = yt;
-            f
-        })
-        .unzip()
+    x.iter().zip(y).map(move |(&xt, &yt)| {
+        let f = switching(xt, y_prev);
+        y_prev = yt;
+        f
+    })
 }
 
 #[cfg(test)]

@@ -147,9 +147,7 @@ impl SandwichModel {
             final_state,
         })
     }
-}
 
-impl SandwichModel {
     /// How many samples t >= `skip` move the backlash (f1 or f2 of eq 12-13) on the run
     /// from `state`: the flags of `simulate_internals`, counted without storing them.
     pub fn moving_count(&self, u: &[f64], state: &SandwichState, skip: usize) -> Result<usize> {
