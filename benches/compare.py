@@ -61,7 +61,7 @@ def _data(n: int) -> tuple[Any, Any, np.ndarray]:
 
     model = bid.example1()
     data = bid.example_data(model, n, snr=SNR, seed=SEED)
-    truth = bid.identification.Structure(2, 2, 3).pack(model)
+    truth = bid.identify.Structure(2, 2, 3).pack(model)
     return model, data, truth
 
 
@@ -89,7 +89,7 @@ def phase(kind: str, n: int, opts: dict[str, Any]) -> dict[str, Any]:
     import numpy_reference as ref
 
     if kind in ("paper-np-vec", "oe-scipy", "sim-np"):
-        import scipy.optimize  # noqa: F401  (import cost outside the timing)
+        import scipy.optimize
         import scipy.signal  # noqa: F401
     base = _rss_mb()
     repeats = opts["repeats"]
@@ -199,8 +199,9 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=15)
     args = ap.parse_args()
 
-    import backlashid
     import scipy
+
+    import backlashid
 
     print(
         f"backlashid {backlashid.__version__} ({os.path.dirname(backlashid.__file__)}), numpy {np.__version__}, scipy {scipy.__version__}, "

@@ -38,7 +38,7 @@ def run(example: str, snr: float | None, paper: bool, seeds: int, n: int) -> dic
             if not isinstance(best, dict):
                 failures += 1
                 continue
-            truth = bid.identification.Structure(*_orders(model)).pack(model)
+            truth = bid.identify.Structure(*_orders(model)).pack(model)
             values = np.array(list(best["parameters"].values()))
             err = dict(zip(best["parameters"], values - truth))
         except bid.BacklashIdError:

@@ -1,6 +1,6 @@
 """Withheld-effect benchmark of issue 4: can ``diagnose`` name the effect a nominal cascade leaves out?
 
-For every case of ``backlashid.withheld`` (a random nominal cascade with one withheld effect at
+For every case of ``backlashid.benchmarks`` (a random nominal cascade with one withheld effect at
 ENR 3 or 1, no effect, or an effect outside the catalogue; 4000 + 4000 samples), fit the nominal
 structure on the estimation record, diagnose it with the validation record, and print:
 the confusion table per level (true effect x reported best_effect), rank-1 and top-3 accuracy,
@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 import backlashid as bid
-from backlashid.withheld import ALL_EFFECTS, CATALOGUE, OUT_OF_CATALOGUE, CaseSpec, case_specs, make_case
+from backlashid.benchmarks import ALL_EFFECTS, CATALOGUE, OUT_OF_CATALOGUE, CaseSpec, case_specs, make_case
 
 SHORT = {
     "dead_time": "dt", "saturation": "sat", "friction": "fri", "width_drift": "wd", "output_offset": "off",
@@ -64,7 +64,7 @@ def run_case(spec: CaseSpec, warmup: int, fit_only: bool, known_noise: bool) -> 
             validation=(case.u_val, case.y_val),
             noise_std=case.noise_std if known_noise else None,
         )
-    except Exception as exc:  # noqa: BLE001 - a crash of the diagnoser is a benchmark result
+    except Exception as exc:
         out.update(reported="diagnose_error", error=f"{type(exc).__name__}: {exc}", diagnose_seconds=time.perf_counter() - t1)
         return out
     out["diagnose_seconds"] = time.perf_counter() - t1

@@ -13,7 +13,7 @@ from pathlib import Path
 if os.environ.get("BACKLASHID_DOCS_SOURCE"):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
 
-import backlashid  # noqa: E402
+import backlashid
 
 project = "backlashid"
 author = "backlashid developers"
@@ -45,7 +45,7 @@ def _rst_problems(text: str) -> str:
     return stream.getvalue()
 
 
-def _plain_text_docstrings(app, what, name, obj, options, lines):  # noqa: ARG001
+def _plain_text_docstrings(app, what, name, obj, options, lines):
     """The docstrings are written as plain text with the paper's notation: |u| is an absolute
     value, not an RST substitution. A docstring that is still not valid reStructuredText (a
     list that ends without a blank line, say) is shown as it is written, in a literal block."""
@@ -67,13 +67,11 @@ html_title = f"backlashid {release}"
 
 # -- API reference: one section per public module, so a new module is documented without editing --
 def _write_api_modules() -> None:
-    import importlib
     import pkgutil
 
     names = sorted(m.name for m in pkgutil.iter_modules(backlashid.__path__) if not m.name.startswith("_") and m.name != "cli")
     lines = []
     for name in names:
-        module = importlib.import_module(f"backlashid.{name}")
         lines += [f"## `backlashid.{name}`", "", "```{eval-rst}", f".. automodule:: backlashid.{name}", "```", ""]
     out = Path(__file__).parent / "_generated"
     out.mkdir(exist_ok=True)

@@ -10,7 +10,6 @@ import pytest
 
 import backlashid as bx
 from backlashid.errors import BacklashIdError, DataError, ModelError
-
 from conftest import run_isolated
 
 

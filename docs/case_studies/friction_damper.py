@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 import backlashid as bid
+from backlashid.app import decimate, load_record
 from backlashid.diagnosis import estimated_start, held_state
-from backlashid.io import decimate, load_record
-from backlashid.scaling import Scaling
+from backlashid.identify import Scaling
 
 DECIMATE = 8  # 1024 Hz -> 128 Hz: the motion is slow, the identification needs samples that change
 WARMUP = 20

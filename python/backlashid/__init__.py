@@ -3,6 +3,16 @@
 Models of Vörös, "Modeling and identification of nonlinear cascade and sandwich systems with
 general backlash": :class:`GeneralBacklash` (eq 1-15), :class:`LinearBlock` (eq 16 / 29),
 :class:`CascadeModel` (Fig. 2) and :class:`SandwichModel` (Fig. 3), simulated in Rust.
+
+The layers, each a subpackage whose ``__init__`` is its public contract:
+
+- :mod:`backlashid.models`: the models and their dict / JSON form;
+- :mod:`backlashid.identify`: fits, refinement, metrics, scaling;
+- :mod:`backlashid.diagnosis`: the sim-to-real gap diagnosis, its analyses and effect catalogue;
+- :mod:`backlashid.benchmarks`: the paper's examples and the withheld-effect cases;
+- :mod:`backlashid.app`: record files, figures, fleets on Dask and the command line.
+
+The main names of every layer are re-exported here (``import backlashid as bid``).
 """
 
 from __future__ import annotations
@@ -14,26 +24,35 @@ try:
 except PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
 
-from .backlash import BranchCheck, GeneralBacklash, SwitchingSignals
-from .diagnosis import DiagnosisReport, diagnose
-from .effects import EFFECTS, fit_effect
+from .app import diagnose_many, fit_many
+from .benchmarks import ExampleData, example1, example2, example_data, shared_data_folder
+from .diagnosis import EFFECTS, DiagnosisReport, diagnose, fit_effect
 from .errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
-from .examples import ExampleData, example1, example2, example_data, shared_data_folder
-from .identification import FitResult, fit_cascade, fit_sandwich
-from .linear import LinearBlock
-from .metrics import Metrics, evaluate
+from .identify import (
+    FitResult,
+    LinearBaseline,
+    Metrics,
+    WienerHammersteinFit,
+    evaluate,
+    fit_cascade,
+    fit_sandwich,
+    fit_wiener_hammerstein,
+    wiener_hammerstein_model,
+)
 from .models import (
+    BranchCheck,
     CascadeModel,
     CascadeSimulation,
     CascadeState,
+    GeneralBacklash,
+    LinearBlock,
     SandwichModel,
     SandwichSimulation,
     SandwichState,
+    SwitchingSignals,
     model_from_dict,
     model_from_json,
 )
-from .parallel import diagnose_many, fit_many
-from .wiener_hammerstein import LinearBaseline, WienerHammersteinFit, fit_wiener_hammerstein, wiener_hammerstein_model
 
 __all__ = [
     "BacklashIdError",

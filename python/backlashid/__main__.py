@@ -1,3 +1,3 @@
-from .cli import main
+from .app._cli import main
 
 main()

@@ -1,0 +1,461 @@
+"""The ``backlashid`` command line: fit, simulate and diagnose models from logged data, and
+reproduce the paper.
+
+Every expected failure (a missing file or column, non-numeric data, a model that cannot be
+identified) ends the command with one line ``Error: ...`` and exit code 1, not a traceback.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Callable, TypeVar
+
+import click
+import numpy as np
+
+from .. import __version__
+from ..errors import BacklashIdError, DataError
+from ..models import SandwichModel
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+METRIC_LABELS = {
+    "simulation_rmse": "free-run simulation RMSE: the model driven by the input alone (measured output units)",
+    "simulation_nrmse": "free-run simulation RMSE / std of the measured output",
+    "simulation_fit_percent": "free-run simulation fit % = 100 (1 - NRMSE)",
+    "prediction_rmse": "one-step prediction RMSE: the measured output fed back where the model has it (measured output units)",
+    "samples": "samples evaluated",
+    "skip": "initial samples left out (transient)",
+}
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="backlashid")
+def main() -> None:
+    """Identify and simulate systems with general backlash (Voros' cascade and sandwich models)."""
+
+
+def _clean_errors(command: F) -> F:
+    """Expected failures become one line on stderr and exit code 1 (click.ClickException)."""
+
+    @functools.wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except BacklashIdError as exc:
+            raise click.ClickException(str(exc)) from None
+        except OSError as exc:  # writing outputs: a missing folder, no permission, a full disk
+            raise click.ClickException(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+@contextmanager
+def _progress(stages: list[str]) -> Iterator[Callable[[str], None]]:
+    """A progress bar on stderr over the named stages of a command (plain lines when stderr is
+    not a terminal); call the yielded function with the stage that starts."""
+    err = sys.stderr
+    if not err.isatty():
+        yield lambda stage: click.echo(f"backlashid: {stage} ...", err=True)
+        return
+    with click.progressbar(length=len(stages), label="backlashid", file=err, item_show_func=lambda s: s or "", show_eta=False) as bar:
+        started = [False]
+
+        def start(stage: str) -> None:
+            bar.update(1 if started[0] else 0, stage)
+            started[0] = True
+
+        yield start
+        bar.update(1, "done")
+
+
+def _data_options(command: F) -> F:
+    """Options that choose the records and their units (shared by fit and diagnose)."""
+    options = [
+        click.argument("data", required=False, type=click.Path(dir_okay=False, path_type=Path)),
+        click.option("--input", "-i", "input_", required=True, help="Input signal: CSV column, NPZ array or MAT variable (NAME, NAME[K] or a column number)."),
+        click.option("--output", "-o", "output", required=True, help="Output signal, selected like --input."),
+        click.option("--split", type=float, help="Estimation fraction of DATA; the rest validates (e.g. 0.5)."),
+        click.option("--estimation", help="Estimation samples a:b of DATA (0-based, b excluded), or of each --estimation-file."),
+        click.option("--validation", help="Validation samples c:d of DATA (or of the joined --validation-file records)."),
+        click.option("--estimation-file", "estimation_files", multiple=True, type=click.Path(dir_okay=False, path_type=Path), help="Estimation record file; repeat to join several one after the other."),
+        click.option("--validation-file", "validation_files", multiple=True, type=click.Path(dir_okay=False, path_type=Path), help="Validation record file; repeat to join several."),
+        click.option("--decimate", "decimate_by", default=1, show_default=True, type=click.IntRange(min=1), help="Keep every N-th sample after an anti-alias filter (ranges count samples before it)."),
+        click.option("--scale", type=click.Choice(["none", "auto"]), default="none", show_default=True, help="auto: zero mean, unit std of input and output on the estimation record."),
+        click.option("--input-offset", type=float, help="Subtracted from the input (overrides --scale auto)."),
+        click.option("--input-scale", type=float, help="The input is divided by it after the offset."),
+        click.option("--output-offset", type=float, help="Subtracted from the output."),
+        click.option("--output-scale", type=float, help="The output is divided by it after the offset."),
+    ]
+    for option in reversed(options):
+        command = option(command)
+    return command
+
+
+def _scaling(est: Any, scale: str, overrides: dict[str, float | None]) -> Any:
+    from ..identify import Scaling
+
+    base = Scaling.auto(est.u, est.y) if scale == "auto" else Scaling()
+    given = {k: v for k, v in overrides.items() if v is not None}
+    return Scaling(**{**base.to_dict(), **given})
+
+
+def _select(data: Path | None, input_: str, output: str, split: float | None, estimation: str | None, validation: str | None,
+            estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int) -> Any:
+    from ._io import select_records
+
+    return select_records(
+        data, input_, output, estimation_files=estimation_files, validation_files=validation_files,
+        split=split, estimation=estimation, validation=validation, decimate_by=decimate_by,
+    )
+
+
+def _fit_model(kind: str, u: np.ndarray, y: np.ndarray, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int,
+               max_iter: int, feedthrough: bool, coarse: int | None = None) -> Any:
+    from ..identify import fit_cascade, fit_sandwich, fit_wiener_hammerstein
+
+    if kind == "cascade":
+        return fit_cascade(u, y, na=na, nb=nb, degree=degree, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough,
+                           coarse=coarse)
+    if kind == "sandwich":
+        return fit_sandwich(u, y, na=na, nb=nb, nr=nr, ns=ns, degree=degree, warmup=warmup, max_iter=max_iter,
+                            feedthrough=feedthrough, output_feedthrough=feedthrough, coarse=coarse)
+    return fit_wiener_hammerstein(u, y, degree=degree, orders=(nb, ns), warmup=warmup, feedthrough=feedthrough)
+
+
+def _metrics_dict(metrics: Any) -> dict[str, Any]:
+    return asdict(metrics)
+
+
+def _write_json(path: Path, payload: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
+def _model_options(command: F) -> F:
+    options = [
+        click.option("--model", "kind", type=click.Choice(["cascade", "sandwich", "wiener-hammerstein"]), default="cascade", show_default=True,
+                     help="cascade: linear -> backlash; sandwich: linear -> backlash -> linear; wiener-hammerstein: a sandwich "
+                          "whose middle block is a static polynomial of --degree (zero-width, tied branches), G1 and G2 of orders --nb and --ns."),
+        click.option("--feedthrough", is_flag=True, help="Give the linear blocks a direct (lag-0) term a_0 u(t) (and r_0 w(t))."),
+        click.option("--na", default=2, show_default=True, help="Input linear block: number of a (input) coefficients."),
+        click.option("--nb", default=2, show_default=True, help="Input linear block: number of b (feedback) coefficients."),
+        click.option("--nr", default=2, show_default=True, help="Sandwich output block: number of r coefficients (r1 = 1)."),
+        click.option("--ns", default=2, show_default=True, help="Sandwich output block: number of s coefficients."),
+        click.option("--degree", default=3, show_default=True, help="Polynomial degree of the backlash branches."),
+        click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="Initial samples left out of the fit criterion (unknown initial state)."),
+        click.option("--max-iter", default=50, show_default=True, type=click.IntRange(min=2), help="Iterations of the paper's algorithm before the refinement (cascade, sandwich)."),
+        click.option("--coarse", type=click.IntRange(min=0), help="Samples of the coarse stage: iterations on the first ones, "
+                     "refinement on the whole record (cascade, sandwich) [default: max(5000, 200 p) on records 10 times as long; 0: none]."),
+    ]
+    for option in reversed(options):
+        command = option(command)
+    return command
+
+
+@main.command()
+@_data_options
+@_model_options
+@click.option("--skip", type=click.IntRange(min=0), help="Initial samples left out of the fit metrics of each record [default: --warmup].")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write model, parameters, standard errors and metrics here.")
+@click.option("--plots", "plots_dir", type=click.Path(file_okay=False, path_type=Path), help="Folder for the figures (PNG; needs matplotlib).")
+@_clean_errors
+def fit(data: Path | None, input_: str, output: str, split: float | None, estimation: str | None, validation: str | None,
+        estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
+        input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
+        kind: str, feedthrough: bool, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
+        coarse: int | None, skip: int | None, json_path: Path | None, plots_dir: Path | None) -> None:
+    """Identify a cascade or sandwich model from logged input/output data.
+
+    \b
+    Examples:
+      backlashid fit log.csv -i u -o y --split 0.6 --warmup 50 --json model.json --plots figs
+      backlashid fit --estimation-file a.npz --estimation-file b.npz --validation-file c.npz -i x -o F --scale auto
+    """
+    from ..identify import evaluate_scaled
+
+    stages = ["loading data", f"fitting the {kind}", "computing metrics"] + (["writing figures"] if plots_dir else [])
+    with _progress(stages) as stage:
+        stage("loading data")
+        sel = _select(data, input_, output, split, estimation, validation, estimation_files, validation_files, decimate_by)
+        scaling = _scaling(sel.estimation, scale, dict(input_offset=input_offset, input_scale=input_scale, output_offset=output_offset, output_scale=output_scale))
+        u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
+        stage(f"fitting the {kind}")
+        result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse)
+        stage("computing metrics")
+        skip = warmup if skip is None else skip
+        metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, skip=max(skip, warmup))}
+        if sel.validation is not None:
+            metrics["validation"] = evaluate_scaled(result.model, scaling, sel.validation.u, sel.validation.y, skip=skip)
+        figures: list[Path] = []
+        if plots_dir:
+            stage("writing figures")
+            figures = _fit_figures(plots_dir, result, scaling, sel, skip)
+    click.echo(f"data: {sel.description['estimation']} ({len(sel.estimation)} samples) for estimation"
+               + (f", {sel.description['validation']} ({len(sel.validation)} samples) for validation" if sel.validation is not None else ", no validation record"))
+    if not scaling.is_identity:
+        click.echo("model units: " + ", ".join(f"{k} {v:.6g}" for k, v in scaling.to_dict().items()))
+    click.echo(result.summary())
+    for name, m in metrics.items():
+        click.echo(f"{name}: {m}")
+    if json_path:
+        payload = {
+            "backlashid_version": __version__,
+            "model": result.model.to_dict(),
+            "scaling": scaling.to_dict(),
+            "parameters": result.parameters,
+            "standard_errors": getattr(result, "standard_errors", None),  # none for wiener-hammerstein
+            "metrics": {name: _metrics_dict(m) for name, m in metrics.items()},
+            "metric_labels": METRIC_LABELS,
+            "data": {**sel.description, "skip": skip},
+            "fit": result.to_dict(),
+        }
+        _write_json(json_path, payload)
+        click.echo(f"wrote {json_path}")
+    for p in figures:
+        click.echo(f"wrote {p}")
+
+
+def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, skip: int) -> list[Path]:
+    from .._optional import pyplot
+    from ..identify import simulate_scaled
+    from ._plotting import plot_characteristic, plot_residuals, plot_simulation, plot_trajectories
+
+    plt = pyplot()
+    out.mkdir(parents=True, exist_ok=True)
+    units = "" if scaling.is_identity else " (model units)"
+    u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
+    sim = result.model.simulate(u_m, internals=True)
+    is_sandwich = isinstance(result.model, SandwichModel)
+    ax = plot_characteristic(result.model.backlash, sim.x, sim.y if is_sandwich else y_m,
+                             title="Estimated branches over the estimation data" + units)
+    if not is_sandwich:
+        ax.collections[0].set_label("(simulated x(t), measured y(t))")
+        ax.legend(loc="upper left")
+    paths = [_save(plt, ax.figure, out / "characteristic.png")]
+    if hasattr(result, "history"):  # the iterative algorithms (not the Wiener-Hammerstein fit)
+        names = result.names
+        groups = {
+            "linear block (a, b)": [n for n in names if n[0] in "ab"],
+            "backlash (c, m)": [n for n in names if n[0] in "cm"],
+            "output block (r, s)": [n for n in names if n[0] in "rs"],
+        }
+        groups = {k: v for k, v in groups.items() if v}
+        fig, axes = plt.subplots(1, len(groups), figsize=(5.5 * len(groups), 4))
+        for ax, (title, shown) in zip(np.atleast_1d(axes), groups.items()):
+            plot_trajectories(result.history, names, shown, final=result.parameters, ax=ax, title=f"{title}; stars: final estimate")
+        paths.append(_save(plt, fig, out / "iterations.png"))
+    record, which = (sel.validation, "validation") if sel.validation is not None else (sel.estimation, "estimation")
+    skip_here = skip if which == "validation" else max(skip, result.warmup)
+    y_sim = simulate_scaled(result.model, scaling, record.u)
+    ax = plot_simulation(record.y, y_sim, skip=skip_here, ylabel=sel.description["output"], title=f"Measured and simulated output, {which} record")
+    paths.append(_save(plt, ax.figure, out / "simulation.png"))
+    fig = plot_residuals((record.y - y_sim)[skip_here:], record.u[skip_here:],
+                         title=f"Residual diagnostics, free-run simulation error on the {which} record")
+    paths.append(_save(plt, fig, out / "residuals.png"))
+    return paths
+
+
+def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:
+    """(model, scaling, data description) from a fit JSON (``backlashid fit --json``) or a
+    plain model JSON (``model.to_json()``)."""
+    from ..identify import Scaling
+    from ..models import model_from_dict
+
+    if not path.is_file():
+        raise DataError(f"{path}: no such model file")
+    try:
+        payload = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: not a JSON file ({exc}); give the file written by backlashid fit --json") from None
+    if not isinstance(payload, dict):
+        raise DataError(f"{path}: not a backlashid model (expected a JSON object)")
+    if isinstance(payload.get("model"), dict):  # written by backlashid fit
+        scaling = Scaling.from_dict(payload["scaling"]) if "scaling" in payload else Scaling()
+        return model_from_dict(payload["model"]), scaling, payload.get("data", {})
+    return model_from_dict(payload), Scaling(), {}
+
+
+@main.command()
+@click.argument("model_file", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("data", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--input", "-i", "input_", required=True, help="Input signal (NAME, NAME[K] or a column number).")
+@click.option("--output", "-o", "output", help="Measured output, to compare with and report metrics.")
+@click.option("--range", "range_", help="Samples a:b of DATA to simulate (0-based, b excluded).")
+@click.option("--decimate", "decimate_by", type=click.IntRange(min=1), help="As in fit [default: the fit's value stored in MODEL_FILE].")
+@click.option("--skip", default=0, show_default=True, type=click.IntRange(min=0), help="Initial samples left out of the metrics.")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="CSV to write: u, y_sim (and y, residual with --output).")
+@_clean_errors
+def simulate(model_file: Path, data: Path, input_: str, output: str | None, range_: str | None, decimate_by: int | None, skip: int, out: Path) -> None:
+    """Simulate a model (JSON from fit --json, or a model's to_json) on an input record."""
+    from ..identify import evaluate_scaled, simulate_scaled
+    from ._io import Record, decimate, parse_range, read_signals
+
+    model, scaling, described = _read_model_file(model_file)
+    names = [input_] + ([output] if output else [])
+    signals = read_signals(data, names)
+    u = signals[input_]
+    y = signals[output] if output else np.zeros_like(u)
+    record = Record(u, y, str(data))
+    if range_:
+        record = record.slice(parse_range(range_, len(record), "--range"), "--range")
+    factor = decimate_by if decimate_by is not None else int(described.get("decimate", 1))
+    record = decimate(record, factor)
+    y_sim = simulate_scaled(model, scaling, record.u)
+    columns = {"u": record.u, "y_sim": y_sim}
+    if output:
+        columns.update({"y": record.y, "residual": record.y - y_sim})
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
+    click.echo(f"simulated {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else ""))
+    if output:
+        click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, skip=skip)))
+    click.echo(f"wrote {out}")
+
+
+@main.command()
+@_data_options
+@click.option("--model-file", "--model", "model_file", type=click.Path(dir_okay=False, path_type=Path), help="Model JSON (from fit --json); its scaling and decimation are used.")
+@click.option("--fit-cascade", is_flag=True, help="Fit a cascade on the estimation record instead of reading --model.")
+@click.option("--na", default=2, show_default=True, help="With --fit-cascade: a coefficients.")
+@click.option("--nb", default=2, show_default=True, help="With --fit-cascade: b coefficients.")
+@click.option("--degree", default=3, show_default=True, help="With --fit-cascade: branch degree.")
+@click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="With --fit-cascade: samples left out of the fit.")
+@click.option("--noise-std", type=float, help="Measurement noise std in output units if known [default: estimated].")
+@click.option("--initial-state", type=click.Choice(["estimate", "rest"]), default="estimate", show_default=True,
+              help="How every model starts the validation record: estimated (linear block at equilibrium, backlash memory fitted) or from rest.")
+@click.option("--png", "png", type=click.Path(dir_okay=False, path_type=Path), help="Write the diagnosis dashboard here.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON here.")
+@_clean_errors
+def diagnose(data: Path | None, input_: str, output: str, split: float | None, estimation: str | None, validation: str | None,
+             estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
+             input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
+             model_file: Path | None, fit_cascade: bool, na: int, nb: int, degree: int, warmup: int,
+             noise_std: float | None, initial_state: str, png: Path | None, json_path: Path | None) -> None:
+    """Find where a model's error lies and which unmodelled effect explains it.
+
+    \b
+    Example:
+      backlashid diagnose log.csv -i u -o y --model model.json --split 0.5 --png dashboard.png
+    """
+    if (model_file is None) == (not fit_cascade):
+        raise DataError("give either --model MODEL.json or --fit-cascade")
+    stages = ["loading data"] + (["fitting the cascade"] if fit_cascade else []) + ["diagnosing"]
+    with _progress(stages) as stage:
+        stage("loading data")
+        scaling = None
+        if model_file is not None:
+            model, scaling, described = _read_model_file(model_file)
+            if decimate_by == 1:
+                decimate_by = int(described.get("decimate", 1))
+        sel = _select(data, input_, output, split, estimation, validation, estimation_files, validation_files, decimate_by)
+        if sel.validation is None:
+            raise DataError("diagnose needs a validation record: give --split, --validation or --validation-file")
+        if scaling is None:
+            scaling = _scaling(sel.estimation, scale, dict(input_offset=input_offset, input_scale=input_scale, output_offset=output_offset, output_scale=output_scale))
+        est = (scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y))
+        val = (scaling.input_to_model(sel.validation.u), scaling.output_to_model(sel.validation.y))
+        if fit_cascade:
+            stage("fitting the cascade")
+            model = _fit_model("cascade", est[0], est[1], na, nb, 0, 0, degree, warmup, 50, False).model
+        stage("diagnosing")
+        from ..diagnosis import diagnose as run_diagnosis
+
+        noise = None if noise_std is None else noise_std / abs(scaling.output_scale)
+        report = run_diagnosis(model, estimation=est, validation=val, noise_std=noise, initial_state=initial_state)
+    if not scaling.is_identity:
+        click.echo("(the diagnosis works in model units: " + ", ".join(f"{k} {v:.6g}" for k, v in scaling.to_dict().items()) + ")")
+    click.echo(report.summary())
+    if png:
+        png.parent.mkdir(parents=True, exist_ok=True)
+        report.plot(png)
+        click.echo(f"wrote {png}")
+    if json_path:
+        _write_json(json_path, {"backlashid_version": __version__, "scaling": scaling.to_dict(), "data": sel.description, "report": report.to_dict()})
+        click.echo(f"wrote {json_path}")
+
+
+@main.command()
+@click.option("--n", "n", default=1500, show_default=True, help="Number of samples.")
+@click.option("--snr", default=25.0, show_default=True, help="Output signal-to-noise ratio.")
+@click.option("--seed", default=0, show_default=True, help="Random seed of input and noise.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("backlashid-demo"),
+    show_default=True,
+    help="Folder for the figures (PNG).",
+)
+def demo(n: int, snr: float, seed: int, out: Path) -> None:
+    """Identify the paper's Example 1 from simulated data; print estimates vs truth; plot."""
+    from .._optional import pyplot
+    from ..benchmarks import example1, example_data
+    from ..identify import fit_cascade
+    from ._plotting import plot_branches_comparison, plot_characteristic, plot_trajectories
+
+    try:
+        truth = example1()
+        data = example_data(truth, n, snr=snr, seed=seed)
+        click.echo(f"Example 1 (cascade): N = {n} uniform inputs |u| < 1, output SNR {snr:g}, seed {seed}")
+        click.echo(str(truth) + "\n")
+        result = fit_cascade(data.u, data.noisy, na=2, nb=2, degree=3)
+        click.echo(result.summary(truth))
+        click.echo(f"(noise std used to make the data: {data.noise_std:.4g})")
+        plt = pyplot()
+        out.mkdir(parents=True, exist_ok=True)
+        sim = result.model.simulate(data.u, internals=True)
+        ax = plot_characteristic(result.model.backlash, sim.x, data.noisy, title="Example 1: estimated branches over the data")
+        paths = [_save(plt, ax.figure, out / "characteristic_estimated.png")]
+        x_range = (float(sim.x.min()), float(sim.x.max()))
+        ax = plot_branches_comparison(truth.backlash, result.model.backlash, x_range, title="Example 1: true and estimated backlash (Fig. 4)")
+        paths.append(_save(plt, ax.figure, out / "characteristic_true_vs_estimated.png"))
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+        truth_values = dict(zip(result.names, result.structure.pack(truth)))
+        plot_trajectories(result.history, result.names, ["a1", "a2", "b1", "b2"], truth=truth_values, ax=axes[0], title="linear block")
+        plot_trajectories(result.history, result.names, ["m_R1", "c_L", "c_R", "m_R2", "m_L3", "m_R3", "m_L2"], truth=truth_values, ax=axes[1], title="backlash")
+        paths.append(_save(plt, fig, out / "iterations.png"))
+    except BacklashIdError as exc:
+        raise click.ClickException(str(exc)) from None
+    for p in paths:
+        click.echo(f"wrote {p}")
+
+
+@main.command()
+@click.option("--seed", default=0, show_default=True, help="Random seed of input and noise.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("backlashid-paper"),
+    show_default=True,
+    help="Folder for Figs 4-10 (PNG).",
+)
+@click.option("--example", "examples", type=click.Choice(["1", "2"]), multiple=True, help="Run only this example.")
+def paper(seed: int, out: Path, examples: tuple[str, ...]) -> None:
+    """Reproduce the paper's Examples 1 and 2: the paper's algorithm beside the default."""
+    from ..benchmarks import paper_report, run_example, write_figures
+
+    try:
+        for number in [int(e) for e in examples] or [1, 2]:
+            run = run_example(number, seed=seed)
+            click.echo(paper_report(run) + "\n")
+            for p in write_figures(run, out):
+                click.echo(f"wrote {p}")
+            click.echo("")
+    except BacklashIdError as exc:
+        raise click.ClickException(str(exc)) from None
+
+
+def _save(plt: object, fig: object, path: Path) -> Path:
+    fig.savefig(path, dpi=110, bbox_inches="tight")  # type: ignore[attr-defined]
+    plt.close(fig)  # type: ignore[attr-defined]
+    return path
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,356 @@
+"""Reading logged signals from CSV, NPZ and MATLAB .mat files.
+
+A signal is chosen by name:
+
+- ``NAME``: a CSV column with that header, an NPZ array or a MATLAB variable (a 1 x N or N x 1
+  matrix is taken as a vector);
+- ``NAME[K]``: column K (0-based) of a 2-D array or variable, or the K-th CSV column headed
+  NAME when several share one header (a blank header cell continues the name before it, as in
+  the Wiener-Hammerstein benchmark files);
+- ``K`` (digits only): the CSV column at position K (0-based), for files without a header.
+
+Sample ranges are Python slices written ``a:b`` (0-based, b excluded, negatives count from the
+end). Every problem raises :class:`~backlashid.errors.DataError` with a one-line message that
+names the file and says what to change.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataError
+
+__all__ = [
+    "Record",
+    "Selection",
+    "concatenate",
+    "decimate",
+    "load_record",
+    "parse_range",
+    "read_signals",
+    "select_records",
+    "split_fraction",
+]
+
+_SELECTOR = re.compile(r"^(?P<name>.*?)\[(?P<index>-?\d+)\]$")
+
+
+@dataclass(frozen=True)
+class Record:
+    """Input u and output y of one record, and where they came from."""
+
+    u: NDArray[np.float64]
+    y: NDArray[np.float64]
+    source: str
+
+    def __len__(self) -> int:
+        return len(self.u)
+
+    def slice(self, part: slice, label: str) -> Record:
+        """Samples ``part`` of the record (copies, so the record itself cannot change)."""
+        u, y = self.u[part].copy(), self.y[part].copy()
+        if len(u) == 0:
+            raise DataError(f"{label} selects no samples of {self.source} ({len(self)} samples): widen the range")
+        return Record(u, y, f"{self.source}[{part.start}:{part.stop}]")
+
+
+def read_signals(path: str | Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]]:
+    """The signals ``names`` of the file at ``path`` as float64 vectors of one length."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix in (".csv", ".txt"):
+        signals = _read_csv(path, names)
+    elif suffix == ".npz":
+        signals = _read_arrays(path, _load_npz(path), names, "array")
+    elif suffix == ".mat":
+        signals = _read_arrays(path, _load_mat(path), names, "variable")
+    else:
+        raise DataError(f"{path}: unknown file type {suffix!r}; give a .csv, .npz or .mat file")
+    lengths = {name: len(v) for name, v in signals.items()}
+    if len(set(lengths.values())) > 1:
+        raise DataError(f"{path}: signals of different lengths {lengths}; choose signals of one record")
+    for name, values in signals.items():
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise DataError(f"{path}: {name} has a non-finite value at sample {bad[0]}; clean the record or select a range without it")
+    return signals
+
+
+def load_record(path: str | Path, input: str, output: str) -> Record:
+    """The input and output signals of one file as a :class:`Record`."""
+    signals = read_signals(path, [input, output])
+    return Record(signals[input], signals[output], str(path))
+
+
+def concatenate(records: Sequence[Record]) -> Record:
+    """Records one after the other (the joins are jumps: mind the warm-up of each part)."""
+    if not records:
+        raise DataError("no records to join")
+    if len(records) == 1:
+        return records[0]
+    return Record(
+        np.concatenate([r.u for r in records]),
+        np.concatenate([r.y for r in records]),
+        " + ".join(r.source for r in records),
+    )
+
+
+def parse_range(text: str, n: int, label: str) -> slice:
+    """``"a:b"`` as a slice of a record of n samples, checked to select at least one sample."""
+    parts = text.split(":")
+    if len(parts) != 2:
+        raise DataError(f"{label} {text!r}: write a sample range as a:b (0-based, b excluded; a or b may be empty)")
+    try:
+        start = int(parts[0]) if parts[0].strip() else 0
+        stop = int(parts[1]) if parts[1].strip() else n
+    except ValueError:
+        raise DataError(f"{label} {text!r}: the bounds of a:b must be whole numbers") from None
+    start, stop, _ = slice(start, stop).indices(n)
+    if stop <= start:
+        raise DataError(f"{label} {text!r} selects no samples of a record of {n}: give a < b within 0..{n}")
+    return slice(start, stop)
+
+
+def split_fraction(fraction: float, n: int) -> tuple[slice, slice]:
+    """The first ``fraction`` of n samples for estimation, the rest for validation."""
+    if not 0.0 < fraction < 1.0:
+        raise DataError(f"split {fraction}: give the estimation fraction strictly between 0 and 1")
+    cut = int(round(fraction * n))
+    if cut < 1 or cut >= n:
+        raise DataError(f"split {fraction} of {n} samples leaves one part empty: use a longer record or another fraction")
+    return slice(0, cut), slice(cut, n)
+
+
+# -- file formats --------------------------------------------------------------------------------
+
+
+def _selector(text: str) -> tuple[str, int | None]:
+    m = _SELECTOR.match(text.strip())
+    if m:
+        return m.group("name"), int(m.group("index"))
+    return text.strip(), None
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _read_csv(path: Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]]:
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            text = fh.read()
+    except UnicodeDecodeError:
+        raise DataError(f"{path}: not a text file; give a CSV with one column per signal") from None
+    first_line = text.lstrip().split("\n", 1)[0]
+    delimiter = next((d for d in ",;\t" if d in first_line), None)
+    lines = text.splitlines()
+    if delimiter is None:  # whitespace-separated columns
+        rows = [line.split() for line in lines if line.strip()]
+    else:
+        rows = [row for row in csv.reader(lines, delimiter=delimiter) if any(cell.strip() for cell in row)]
+    if not rows:
+        raise DataError(f"{path}: the file is empty")
+    first = [cell.strip() for cell in rows[0]]
+    has_header = not all(_is_number(c) for c in first if c)
+    header = first if has_header else []
+    for k in range(1, len(header)):  # a blank header continues the one before (a merged cell)
+        header[k] = header[k] or header[k - 1]
+    body = rows[1:] if has_header else rows
+    if not body:
+        raise DataError(f"{path}: a header but no data rows")
+    columns = {}
+    for name in names:
+        columns[name] = _csv_column(path, header, body, name, 1 if has_header else 0)
+    return columns
+
+
+def _csv_column(path: Path, header: list[str], body: list[list[str]], selector: str, first_line: int) -> NDArray[np.float64]:
+    name, index = _selector(selector)
+    if name.isdigit() and index is None and name not in header:
+        position = int(name)
+        width = max(len(r) for r in body)
+        if position >= width:
+            raise DataError(f"{path}: no column {position} (the file has {width}); count columns from 0")
+    else:
+        matches = [k for k, h in enumerate(header) if h == name]
+        if not header:
+            raise DataError(f"{path}: the file has no header; select columns by position (0, 1, ...)")
+        if not matches:
+            shown = ", ".join(repr(h) for h in dict.fromkeys(h for h in header if h))
+            raise DataError(f"{path}: no column {name!r}; the columns are {shown}")
+        k = 0 if index is None else index
+        if not -len(matches) <= k < len(matches):
+            raise DataError(f"{path}: {len(matches)} columns are named {name!r}; choose {name}[0] to {name}[{len(matches) - 1}]")
+        position = matches[k]
+    values = np.empty(len(body))
+    for i, row in enumerate(body):
+        cell = row[position].strip() if position < len(row) else ""
+        try:
+            values[i] = float(cell)
+        except ValueError:
+            line = i + 1 + first_line
+            what = "is empty" if not cell else f"holds {cell[:30]!r}, not a number"
+            raise DataError(f"{path}: column {selector!r} {what} on line {line}; clean the file or select another column") from None
+    return values
+
+
+def _load_npz(path: Path) -> dict[str, NDArray]:
+    with path.open("rb") as fh:
+        if fh.read(4) != b"PK\x03\x04":
+            raise DataError(f"{path}: not a readable .npz file (not a zip archive); save the arrays with numpy.savez")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+    except ValueError as exc:  # pickled objects
+        raise DataError(f"{path}: cannot read the arrays ({exc}); save plain numeric arrays with numpy.savez") from None
+    except (OSError, EOFError) as exc:
+        raise DataError(f"{path}: not a readable .npz file ({exc})") from None
+
+
+def _load_mat(path: Path) -> dict[str, NDArray]:
+    from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
+
+    try:
+        data = loadmat(path, squeeze_me=False)
+    except NotImplementedError:
+        raise DataError(f"{path}: a MATLAB v7.3 (HDF5) file; save it with save(..., '-v7') or export a CSV") from None
+    except (ValueError, OSError, TypeError, MatReadError) as exc:
+        raise DataError(f"{path}: not a readable MATLAB .mat file ({exc})") from None
+    return {k: v for k, v in data.items() if not k.startswith("__")}
+
+
+def _read_arrays(path: Path, arrays: dict[str, NDArray], names: Sequence[str], kind: str) -> dict[str, NDArray[np.float64]]:
+    out = {}
+    for selector in names:
+        name, index = _selector(selector)
+        if name not in arrays:
+            shown = ", ".join(sorted(arrays)) or "none"
+            raise DataError(f"{path}: no {kind} {name!r}; the {kind}s are {shown}")
+        arr = np.asarray(arrays[name])
+        if arr.dtype.kind not in "biuf":
+            raise DataError(f"{path}: {kind} {name!r} has type {arr.dtype}, not numbers; select a numeric {kind}")
+        if arr.ndim == 2 and 1 in arr.shape:
+            arr = arr.ravel()
+        if index is not None:
+            if arr.ndim != 2:
+                raise DataError(f"{path}: {name!r} has shape {arr.shape}; [K] selects a column of a 2-D {kind}")
+            if not -arr.shape[1] <= index < arr.shape[1]:
+                raise DataError(f"{path}: {name!r} has {arr.shape[1]} columns; choose {name}[0] to {name}[{arr.shape[1] - 1}]")
+            arr = arr[:, index]
+        if arr.ndim != 1:
+            hint = f"; select a column with {name}[K]" if arr.ndim == 2 else ""
+            raise DataError(f"{path}: {kind} {name!r} has shape {arr.shape}, not a signal{hint}")
+        if arr.size == 0:
+            raise DataError(f"{path}: {kind} {name!r} is empty")
+        out[selector] = arr.astype(np.float64)
+    return out
+
+
+def decimate(record: Record, factor: int) -> Record:
+    """Every ``factor``-th sample after a zero-phase FIR anti-alias low-pass filter
+    (``scipy.signal.decimate``); ``factor`` 1 returns the record unchanged."""
+    if factor == 1:
+        return record
+    if factor < 1:
+        raise DataError(f"decimate {factor}: give a whole number >= 1")
+    from scipy.signal import decimate as _decimate
+
+    need = 3 * (20 * factor + 1) + 1  # the filter's padding (order 20 * factor)
+    if len(record) <= need:
+        raise DataError(f"{record.source}: {len(record)} samples are too few to decimate by {factor} (need more than {need})")
+    return Record(
+        _decimate(record.u, factor, ftype="fir", zero_phase=True),
+        _decimate(record.y, factor, ftype="fir", zero_phase=True),
+        f"{record.source} decimated by {factor}",
+    )
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Estimation and (optional) validation records chosen from files, and how."""
+
+    estimation: Record
+    validation: Record | None
+    description: dict[str, object]
+
+
+def select_records(
+    data: str | Path | None,
+    input: str,
+    output: str,
+    *,
+    estimation_files: Sequence[str | Path] = (),
+    validation_files: Sequence[str | Path] = (),
+    split: float | None = None,
+    estimation: str | None = None,
+    validation: str | None = None,
+    decimate_by: int = 1,
+) -> Selection:
+    """The estimation and validation records of a command line.
+
+    Either one file ``data`` split by ``split`` (estimation fraction) or by the sample ranges
+    ``estimation`` and ``validation`` (``a:b``; the whole record is for estimation when none is
+    given), or ``estimation_files`` joined one after the other (``estimation`` then selects a
+    range of each file) with ``validation_files`` (or ``data``, with ``validation`` as its range)
+    for validation. Ranges count samples of the files; ``decimate_by`` applies afterwards.
+    """
+    if split is not None and (estimation or validation):
+        raise DataError("give either --split or --estimation/--validation ranges, not both")
+    val: Record | None = None
+    if estimation_files:
+        if split is not None:
+            raise DataError("--split divides one file; with --estimation-file give --validation-file or a DATA file for validation")
+        parts = []
+        for f in estimation_files:
+            rec = load_record(f, input, output)
+            parts.append(rec.slice(parse_range(estimation, len(rec), "--estimation"), "--estimation") if estimation else rec)
+        est = concatenate(parts)
+        if validation_files:
+            val = concatenate([load_record(f, input, output) for f in validation_files])
+            if validation:
+                val = val.slice(parse_range(validation, len(val), "--validation"), "--validation")
+        elif data is not None:
+            val = load_record(data, input, output)
+            if validation:
+                val = val.slice(parse_range(validation, len(val), "--validation"), "--validation")
+        elif validation:
+            raise DataError("--validation is a range of the DATA file or the --validation-file records: give one")
+    else:
+        if data is None:
+            raise DataError("no data: give a DATA file or --estimation-file")
+        rec = load_record(data, input, output)
+        if validation_files:
+            val = concatenate([load_record(f, input, output) for f in validation_files])
+        if split is not None:
+            est_part, val_part = split_fraction(split, len(rec))
+            est, val = rec.slice(est_part, "--split"), rec.slice(val_part, "--split")
+        else:
+            est = rec.slice(parse_range(estimation, len(rec), "--estimation"), "--estimation") if estimation else rec
+            if validation:
+                val = rec.slice(parse_range(validation, len(rec), "--validation"), "--validation")
+    est = decimate(est, decimate_by)
+    val = decimate(val, decimate_by) if val is not None else None
+    description: dict[str, object] = {
+        "input": input,
+        "output": output,
+        "estimation": est.source,
+        "estimation_samples": len(est),
+        "validation": val.source if val is not None else None,
+        "validation_samples": len(val) if val is not None else 0,
+        "decimate": decimate_by,
+    }
+    return Selection(est, val, description)

@@ -1,0 +1,24 @@
+"""Sim-to-real gap diagnosis: given a fitted cascade and new data, where the simulation error
+lies, which unmodelled effect causes it, and how far adding that effect shrinks it.
+
+:func:`diagnose` runs the residual analyses (:mod:`backlashid.diagnosis.analyses`), screens and
+refits every candidate of the effect catalogue (:mod:`backlashid.diagnosis.effects`) and returns
+a :class:`DiagnosisReport`.
+"""
+
+from __future__ import annotations
+
+from ._diagnose import default_warmup, diagnose, estimated_start, held_state
+from ._report import Candidate, DiagnosisReport
+from .effects import EFFECTS, fit_effect
+
+__all__ = [
+    "Candidate",
+    "DiagnosisReport",
+    "EFFECTS",
+    "default_warmup",
+    "diagnose",
+    "estimated_start",
+    "fit_effect",
+    "held_state",
+]

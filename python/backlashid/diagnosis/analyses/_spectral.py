@@ -1,0 +1,288 @@
+"""Where in frequency the error lies: the residual spectrum against the noise floor, and the
+residual-input coherence.
+
+Frequencies are in cycles per sample (0 to 0.5); densities are one-sided (white noise of
+standard deviation s has density 2 s^2).
+
+- Bands: octaves down from the Nyquist frequency, [0.25, 0.5], [0.125, 0.25], .., the lowest
+  from 0 (at most ``MAX_BANDS`` bands, each with at least ``MIN_BAND_BINS`` periodogram bins).
+- Band power: the mean of the periodogram of the whole record over the band's bins. For white
+  noise at the floor, its ratio to the floor is chi-square with 2m degrees of freedom over 2m
+  (m bins), which gives the p-value that the band exceeds the floor (an F ratio when the floor
+  is estimated from the same record). Holm's method corrects over the bands.
+- Noise floor: 2 noise_std^2 when ``noise_std`` is given; otherwise estimated from the upper
+  half of the band (f >= 0.25) as median(periodogram) / ln 2 (the median of an exponential
+  variable is ln 2 times its mean), which assumes the model error lies mostly below f = 0.25.
+- Welch spectrum (Hann window, 50 % overlap) for display, and the magnitude-squared coherence
+  of residual and input with its threshold: under independence, P(coherence > c) =
+  (1 - c)^(K - 1) with K the effective number of independent segment averages.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import signal, stats
+
+from ...errors import DataError
+from ._residual_tests import checked_record, holm, json_float, same_length, snap_constant
+
+__all__ = ["Band", "FrequencyAnalysis", "frequency_analysis"]
+
+ALPHA = 0.05
+MAX_BANDS = 8
+MIN_BAND_BINS = 8
+MIN_SAMPLES = 128
+MAX_SEGMENT = 256  # Welch segment length at most (frequency resolution 1/256)
+FLOOR_FROM = 0.25  # the estimated floor uses f >= this
+
+
+@dataclass(frozen=True)
+class Band:
+    """One frequency band: residual power against the floor, and coherence with the input."""
+
+    lo: float
+    hi: float
+    n_bins: int  # periodogram bins in the band
+    power: float  # mean residual density over the band
+    ratio: float  # power / floor
+    energy_share: float  # share of the residual variance in this band
+    p_value: float  # band above the floor, this band alone
+    p_adjusted: float  # Holm over the bands
+    coherence_max: float  # largest residual-input coherence in the band
+    coherence_p: float  # that the band holds coherence (Bonferroni over its Welch bins)
+    coherence_p_adjusted: float  # Holm over the bands
+    alpha: float
+
+    @property
+    def label(self) -> str:
+        return f"{self.lo:.4g}-{self.hi:.4g}"
+
+    @property
+    def above_floor(self) -> bool:
+        return bool(self.p_adjusted < self.alpha)
+
+    @property
+    def coherent(self) -> bool:
+        return bool(self.coherence_p_adjusted < self.alpha)
+
+    @property
+    def ratio_db(self) -> float:
+        return float(10.0 * np.log10(self.ratio)) if self.ratio > 0 else float("-inf")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "lo": self.lo,
+            "hi": self.hi,
+            "n_bins": self.n_bins,
+            "power": float(self.power),
+            "ratio": json_float(self.ratio),
+            "ratio_db": json_float(self.ratio_db),
+            "energy_share": float(self.energy_share),
+            "p_value": float(self.p_value),
+            "p_adjusted": float(self.p_adjusted),
+            "above_floor": self.above_floor,
+            "coherence_max": json_float(self.coherence_max),
+            "coherence_p": json_float(self.coherence_p),
+            "coherence_p_adjusted": json_float(self.coherence_p_adjusted),
+            "coherent": self.coherent,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class FrequencyAnalysis:
+    """Residual spectrum by band against the noise floor, and residual-input coherence."""
+
+    n: int
+    noise_std: float
+    noise_std_estimated: bool
+    floor: float  # one-sided density of the noise floor
+    bands: tuple[Band, ...]
+    coherence_threshold: float  # pointwise, level alpha
+    coherence_threshold_global: float  # Bonferroni over all Welch bins
+    effective_segments: float
+    alpha: float
+    frequencies: NDArray[np.float64] = field(repr=False)  # Welch grid
+    psd: NDArray[np.float64] = field(repr=False)  # Welch density of the residual
+    coherence: NDArray[np.float64] = field(repr=False)  # residual-input coherence on that grid
+
+    @property
+    def exceeding(self) -> tuple[str, ...]:
+        """Bands where the residual lies significantly above the floor, strongest first."""
+        hits = sorted((b for b in self.bands if b.above_floor), key=lambda b: b.p_value)
+        return tuple(b.label for b in hits)
+
+    @property
+    def coherent(self) -> tuple[str, ...]:
+        """Bands where the residual is significantly coherent with the input."""
+        hits = sorted((b for b in self.bands if b.coherent), key=lambda b: b.coherence_p)
+        return tuple(b.label for b in hits)
+
+    @property
+    def significant(self) -> bool:
+        return bool(self.exceeding or self.coherent)
+
+    @property
+    def excess_ratio(self) -> float:
+        """Residual variance over the noise floor's (1 when the residual is the noise)."""
+        total = sum(b.power * b.n_bins for b in self.bands)
+        bins = sum(b.n_bins for b in self.bands)
+        return float(total / bins / self.floor) if bins and self.floor > 0 else float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "n": self.n,
+            "noise_std": float(self.noise_std),
+            "noise_std_estimated": self.noise_std_estimated,
+            "floor": float(self.floor),
+            "excess_ratio": json_float(self.excess_ratio),
+            "alpha": self.alpha,
+            "coherence_threshold": float(self.coherence_threshold),
+            "coherence_threshold_global": float(self.coherence_threshold_global),
+            "effective_segments": float(self.effective_segments),
+            "significant": self.significant,
+            "exceeding": list(self.exceeding),
+            "coherent": list(self.coherent),
+            "bands": [b.to_dict() for b in self.bands],
+        }
+
+    def __str__(self) -> str:
+        src = "estimated" if self.noise_std_estimated else "given"
+        lines = [
+            f"Residual spectrum by band (cycles/sample; noise std {self.noise_std:.4g} {src}, "
+            f"floor {self.floor:.3g}; coherence threshold {self.coherence_threshold_global:.3f}):"
+        ]
+        for b in self.bands:
+            marks = ("above floor" if b.above_floor else "") + (" coherent with u" if b.coherent else "")
+            lines.append(
+                f"  {b.label:>15s}  x{b.ratio:7.2f}  p = {b.p_value:.2g}  share {100 * b.energy_share:5.1f} %  "
+                f"coh max {b.coherence_max:.2f}  {marks}"
+            )
+        return "\n".join(lines)
+
+
+def _band_edges(n: int) -> NDArray[np.float64]:
+    """Octave edges from 0.5 down, the lowest band from 0, each with >= MIN_BAND_BINS bins."""
+    j = int(np.floor(np.log2(n / (2.0 * MIN_BAND_BINS))))
+    j = int(np.clip(j, 0, MAX_BANDS - 1))
+    return np.r_[0.0, 0.5 / 2.0 ** np.arange(j, -1, -1)]
+
+
+def _effective_segments(n: int, nseg: int) -> float:
+    """Welch's K with Hann 50 % overlap, reduced for the correlation of overlapping segments."""
+    step = nseg // 2
+    k = 1 + (n - nseg) // step
+    w = signal.get_window("hann", nseg)
+    denom = float(w @ w) ** 2
+    corr = 0.0
+    for lag in range(1, k):
+        shift = lag * step
+        if shift >= nseg:
+            break
+        rho2 = float(w[shift:] @ w[: nseg - shift]) ** 2 / denom
+        corr += (1.0 - lag / k) * rho2
+    return float(k / (1.0 + 2.0 * corr))
+
+
+def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | None = None) -> FrequencyAnalysis:
+    """The residual's spectrum by band against the noise floor and its coherence with the
+    input ``u`` (pass the samples after the warm-up, of one record). ``noise_std = 0``
+    (noise-free data) puts every band with any power above the floor."""
+    e = snap_constant(checked_record(residual, "residual", min_length=MIN_SAMPLES, what="a spectrum by band"), centre=True)
+    u_arr = checked_record(u, "u", min_length=MIN_SAMPLES, what="a spectrum by band")
+    same_length(e.size, u=u_arr)
+    n = e.size
+    if noise_std is not None:
+        try:
+            s = float(noise_std)
+        except (TypeError, ValueError):
+            raise DataError(f"noise_std = {noise_std!r}: give a positive number or None to estimate it") from None
+        if not (np.isfinite(s) and s >= 0.0):
+            raise DataError(f"noise_std = {noise_std!r}: give a non-negative finite number, or None to estimate it")
+
+    spectrum = np.abs(np.fft.rfft(e)) ** 2 * (2.0 / n)  # one-sided periodogram density
+    freqs = np.arange(spectrum.size) / n
+    interior = (freqs > 0.0) & (freqs < 0.5)  # DC removed, Nyquist not doubled
+    m_floor = 0
+    if noise_std is not None:
+        floor, estimated = 2.0 * float(noise_std) ** 2, False
+    else:
+        upper = spectrum[interior & (freqs >= FLOOR_FROM)]
+        floor, estimated = float(np.median(upper) / np.log(2.0)), True
+        m_floor = max(1, int(0.5 * upper.size))  # the median uses about half the information
+    total = float(spectrum[interior].sum())
+
+    nseg = int(min(MAX_SEGMENT, 2 ** int(np.floor(np.log2(n / 8)))))
+    nseg = max(nseg, 16)
+    f_w, psd = signal.welch(e, nperseg=nseg)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a zero residual has no coherence (NaN)
+        _, coh = signal.coherence(e, u_arr - u_arr.mean(), nperseg=nseg)
+    k_eff = _effective_segments(n, nseg)
+    coh_bins = (f_w > 0.0) & (f_w < 0.5)
+    n_coh = int(coh_bins.sum())
+    threshold = 1.0 - ALPHA ** (1.0 / max(k_eff - 1.0, 1.0))
+    threshold_global = 1.0 - (ALPHA / n_coh) ** (1.0 / max(k_eff - 1.0, 1.0))
+
+    edges = _band_edges(n)
+    raw = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        in_band = interior & (freqs >= lo) & (freqs < hi)
+        m = int(in_band.sum())
+        power = float(spectrum[in_band].mean()) if m else float("nan")
+        if floor > 0.0:
+            ratio = power / floor
+        else:  # noise-free: any power is above the floor
+            ratio = float("inf") if power > 0.0 else 1.0
+        if m == 0:
+            p = float("nan")
+        elif floor == 0.0:
+            p = 0.0 if power > 0.0 else 1.0
+        elif estimated:
+            p = float(stats.f.sf(ratio, 2 * m, 2 * m_floor))
+        else:
+            p = float(stats.chi2.sf(2 * m * ratio, 2 * m))
+        share = float(spectrum[in_band].sum() / total) if total > 0 else 0.0
+        c_band = coh_bins & (f_w >= lo) & (f_w < hi)
+        if c_band.any() and np.isfinite(coh[c_band]).all():
+            c_max = float(coh[c_band].max())
+            p_bin = (1.0 - min(c_max, 1.0)) ** max(k_eff - 1.0, 1.0)
+            c_p = float(min(1.0, p_bin * int(c_band.sum())))
+        else:
+            c_max, c_p = float("nan"), float("nan")
+        raw.append((float(lo), float(hi), m, power, ratio, share, p, c_max, c_p))
+    p_adj = holm([r[6] for r in raw])
+    c_adj = holm([r[8] for r in raw])
+    bands = tuple(
+        Band(
+            lo=lo,
+            hi=hi,
+            n_bins=m,
+            power=power,
+            ratio=ratio,
+            energy_share=share,
+            p_value=p,
+            p_adjusted=float(pa),
+            coherence_max=c_max,
+            coherence_p=c_p,
+            coherence_p_adjusted=float(ca),
+            alpha=ALPHA,
+        )
+        for (lo, hi, m, power, ratio, share, p, c_max, c_p), pa, ca in zip(raw, p_adj, c_adj)
+    )
+    return FrequencyAnalysis(
+        n=n,
+        noise_std=float(np.sqrt(floor / 2.0)),
+        noise_std_estimated=estimated,
+        floor=floor,
+        bands=bands,
+        coherence_threshold=float(threshold),
+        coherence_threshold_global=float(threshold_global),
+        effective_segments=k_eff,
+        alpha=ALPHA,
+        frequencies=f_w,
+        psd=psd,
+        coherence=coh,
+    )

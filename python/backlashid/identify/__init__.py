@@ -1,0 +1,38 @@
+"""Identification: from measured input/output data to a model with standard errors.
+
+The paper's iterative algorithms (Section 3, eq 17-28, and Section 4, eq 29-36) run first,
+each iteration one call into the Rust core; an output-error Levenberg-Marquardt refinement with
+exact sensitivities then removes their bias under noise. Also here: the parameter layout
+(:class:`Structure`), the Wiener-Hammerstein fit, validation metrics and the scaling of
+measured records to model units.
+"""
+
+from __future__ import annotations
+
+from ._fit import FitResult, fit_cascade, fit_sandwich
+from ._metrics import Metrics, evaluate, fit_percent, nrmse, one_step_prediction, rmse
+from ._scaling import Scaling, evaluate_scaled, simulate_scaled
+from ._structure import Estimate, Structure, normalise
+from ._wiener_hammerstein import LinearBaseline, WienerHammersteinFit, fit_wiener_hammerstein, wiener_hammerstein_model
+
+__all__ = [
+    "Estimate",
+    "FitResult",
+    "LinearBaseline",
+    "Metrics",
+    "Scaling",
+    "Structure",
+    "WienerHammersteinFit",
+    "evaluate",
+    "evaluate_scaled",
+    "fit_cascade",
+    "fit_percent",
+    "fit_sandwich",
+    "fit_wiener_hammerstein",
+    "nrmse",
+    "normalise",
+    "one_step_prediction",
+    "rmse",
+    "simulate_scaled",
+    "wiener_hammerstein_model",
+]

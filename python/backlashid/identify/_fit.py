@@ -1,0 +1,616 @@
+"""Identification of cascade (Section 3) and sandwich (Section 4) systems.
+
+The paper's iterative algorithm with internal-variable estimation runs first: each iteration
+is one core call (internal variables by eq 22-26 / 35, regressor eq 18 / 33, faer QR solve);
+this module only drives the iterations. By default the iterate with the lowest free-run
+simulation error is then refined by output-error Levenberg-Marquardt (``refine.py``), which
+removes the bias of the equation-error iterations under noise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .. import _core
+from .._validation import as_signal
+from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
+from ..models import Model
+from ._refine import OutputErrorFit, is_stable, refine_output_error, simulate, spectral_radius
+from ._structure import Structure
+
+__all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
+
+Switching = Literal["measured", "simulated"]
+
+# Perturbed LM restarts by default, for records up to this many samples. On Example 1 they
+# change nothing above 1e-4 from 1e4 samples on (12 seeds each at 1e4, 2e4, 5e4; 3 at 1e5
+# and 3e5) while doubling the time; at N = 1500 they pull 1 seed in 100 out of a shallow
+# local minimum.
+RESTARTS = 4
+RESTARTS_UP_TO = 20_000
+# Coarse to fine (``coarse``): the iterations and LM candidates on a segment of
+# max(COARSE_MIN, COARSE_PER_PARAMETER p) samples, on records COARSE_RECORDS times as long.
+# Over 20 seeds each of Examples 1 and 2 at N = 5e4 and 1e5 it ends within 0.02 standard
+# errors of the whole-record search's optimum in 1/5 to 1/3 of the time
+# (benches/coarse_to_fine.py; docs/performance.md).
+COARSE_MIN = 5_000
+COARSE_PER_PARAMETER = 200
+COARSE_RECORDS = 10
+Start = tuple[float, float, float]  # (m_R1, c_L, c_R)
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """An identified model with its parameters under the paper's names, their standard errors,
+    the iteration history (what the paper plots in Figs 5-10) and how the fit ended."""
+
+    model: Model
+    structure: Structure
+    theta: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    history: NDArray[np.float64]  # row k: parameters after iteration k + 1
+    history_rmse: NDArray[np.float64]  # free-run simulation RMSE of each row
+    iterations: int
+    converged: bool
+    reason: str  # "tolerance", "2-cycle", "iteration limit", "diverged"
+    simulation_rmse: float  # free-run simulation RMSE on the estimation data (after warm-up)
+    noise_std: float  # residual std, the noise level the fit implies
+    moving_fraction: float  # samples where the fitted backlash moves (f1 or f2)
+    method: str
+    warmup: int
+    iterative_theta: NDArray[np.float64] = field(repr=False)
+    refinement_steps: int = 0
+    # > 0: the iterations (history, history_rmse, iterative_theta) ran on the first
+    # coarse_samples samples after the warm-up, and LM refined on the whole record
+    coarse_samples: int = 0
+
+    @property
+    def names(self) -> list[str]:
+        return self.structure.names
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        return dict(zip(self.names, map(float, self.theta)))
+
+    @property
+    def standard_errors(self) -> dict[str, float]:
+        return dict(zip(self.names, map(float, np.sqrt(np.clip(np.diag(self.covariance), 0, None)))))
+
+    def errors(self, true_model: Model) -> dict[str, float]:
+        """Estimate minus truth for every parameter (the truth normalised to m_L1 = r_1 = 1)."""
+        truth = self.structure.pack(true_model)
+        return dict(zip(self.names, map(float, self.theta - truth)))
+
+    def summary(self, true_model: Model | None = None) -> str:
+        kind = "Sandwich" if self.structure.is_sandwich else "Cascade"
+        lines = [
+            f"{kind} fit ({self.method}), {self.structure}, warm-up {self.warmup} samples",
+            f"ended: {self.reason} after {self.iterations} iterations"
+            + (f" on the first {self.coarse_samples} samples" if self.coarse_samples else "")
+            + (f", then {self.refinement_steps} output-error steps" if self.refinement_steps else "")
+            + (" on the whole record" if self.coarse_samples else "")
+            + f" ({'converged' if self.converged else 'NOT converged'})",
+            f"free-run simulation RMSE on the estimation data: {self.simulation_rmse:.6g} "
+            f"(implied noise std {self.noise_std:.4g}); backlash moving on "
+            f"{100 * self.moving_fraction:.1f} % of samples",
+        ]
+        se = self.standard_errors
+        head = f"{'parameter':<10}{'estimate':>12}{'std.err':>11}"
+        truth = self.errors(true_model) if true_model is not None else None
+        if truth is not None:
+            head += f"{'true':>10}{'error':>11}{'|err|/se':>10}"
+        lines.append(head)
+        for name, value in self.parameters.items():
+            row = f"{name:<10}{value:>12.6f}{se[name]:>11.2e}"
+            if truth is not None:
+                err = truth[name]
+                ratio = abs(err) / se[name] if se[name] > 0 else float("inf")
+                row += f"{value - err:>10.4f}{err:>+11.2e}{ratio:>10.1f}"
+            lines.append(row)
+        if truth is not None:
+            lines.append(f"max |error| = {max(abs(e) for e in truth.values()):.3e}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe: model, parameters with standard errors, metrics, history."""
+        return {
+            "model": self.model.to_dict(),
+            "parameters": self.parameters,
+            "standard_errors": self.standard_errors,
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "reason": self.reason,
+            "simulation_rmse": self.simulation_rmse,
+            "noise_std": self.noise_std,
+            "moving_fraction": self.moving_fraction,
+            "method": self.method,
+            "warmup": self.warmup,
+            "coarse_samples": self.coarse_samples,
+            "history": self.history.tolist(),
+            "history_rmse": self.history_rmse.tolist(),
+        }
+
+
+# -- the paper's iterations ----------------------------------------------------------------------
+
+
+@dataclass
+class _Run:
+    """One run of the paper's iterations from one start."""
+
+    history: list[NDArray[np.float64]]
+    rmse: list[float]
+    reason: str
+    last_ls: tuple[NDArray[np.float64], float, NDArray[np.float64], int] | None  # theta_ls, rss, cov, rows
+    moving: float
+    error: BacklashIdError | None = None
+
+    def best(self) -> int:
+        return int(np.nanargmin(self.rmse))
+
+
+def _rmse(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int) -> float:
+    try:
+        e = y[warmup:] - simulate(structure, theta, u)[warmup:]
+    except BacklashIdError:
+        return float("inf")
+    with np.errstate(over="ignore", invalid="ignore"):
+        value = float(np.sqrt(np.mean(e * e)))
+    return value if np.isfinite(value) else float("inf")
+
+
+def _reflect(den: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Reflect poles outside the unit circle to 1/conj(p): same magnitude response, stable."""
+    if len(den) == 0 or spectral_radius(den) < 1.0:
+        return den
+    roots = np.roots(np.concatenate([[1.0], den]))
+    big = np.abs(roots) > 1.0
+    roots[big] = 1.0 / np.conj(roots[big])
+    return np.real(np.poly(roots))[1:]
+
+
+def _initial_theta(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], start: Start, warmup: int, literal: bool) -> NDArray[np.float64]:
+    """Iteration 1 (the paper: "only the parameters of the linear system are estimated"): an
+    ARX fit with the measured output standing in for x, and the initial m_R1, c_L, c_R. For the
+    sandwich the ARX input lags start at 2, the delay of its two blocks together, so that the
+    first x is not close to zero (``literal`` keeps lag 1, the plain reading, whose mis-scaled
+    gain makes the paper's sandwich iterations diverge; NOTES.md item 5)."""
+    s = structure
+    delay = 2 if s.is_sandwich and not literal else 1
+    lin = _core.arx(u, y, s.n_a, s.nb, delay, warmup)[0]
+    m_r1, c_l, c_r = start
+    n = s.degree
+    theta = np.concatenate([lin, [c_l], np.zeros(n - 1), [m_r1, c_r], np.zeros(n - 1)])
+    if s.is_sandwich:
+        theta = np.concatenate([theta, np.zeros(s.n_r - 1 + s.ns)])
+    return theta
+
+
+def _iteration(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], switching: Switching, warmup: int) -> tuple[Any, float, float | None]:
+    """One iteration in the core (streaming QR, no N x p matrix): the least-squares solution,
+    the fraction of samples on which the estimate moves the backlash, and the free-run
+    simulation RMSE of ``theta`` itself when the core computed it on the way (cascade), else
+    None."""
+    p = structure.unpack(theta)
+    names = structure.ls_names
+    if structure.is_sandwich:
+        ls, moving = _core.sandwich_iteration(*p.chain(), p.r, p.s, u, y, warmup, names)
+        return ls, moving, None
+    y_switch = y if switching == "measured" else simulate(structure, theta, u)
+    return _core.cascade_iteration(*p.chain(), u, y, y_switch, warmup, names)
+
+
+def _relative_change(new: NDArray[np.float64], old: NDArray[np.float64]) -> float:
+    return float(np.max(np.abs(new - old) / np.maximum(np.abs(new), 1e-3)))
+
+
+def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], start: Start, *, max_iter: int, tol: float, switching: Switching, step: float, reflect: bool, warmup: int) -> _Run:
+    s = structure
+    theta = _initial_theta(s, u, y, start, warmup, literal=not reflect)
+    # run.rmse[k] is the free-run simulation RMSE of run.history[k]. The cascade's core
+    # iteration at an iterate returns its RMSE on the way (one pass over x); the others, and
+    # the last iterate, are simulated after the loop.
+    run = _Run(history=[theta], rmse=[], reason="iteration limit", last_ls=None, moving=0.0)
+    rows = len(u) - max(warmup, 1 if s.is_sandwich else 0)
+    was_cycling = False
+    for _ in range(2, max_iter + 1):
+        try:
+            (theta_ls, rss, cov, _rcond), moving, rmse_now = _iteration(s, theta, u, y, switching, warmup)
+        except NotIdentifiableError as exc:
+            run.reason, run.error = "diverged", exc
+            break
+        except ModelError as exc:  # the estimate overflowed in simulation
+            run.reason, run.error = "diverged", exc
+            break
+        run.rmse.append(rmse_now if rmse_now is not None else _rmse(s, theta, u, y, warmup))
+        if len(run.history) > 1 and not np.isfinite(run.rmse[-1]) and np.max(np.abs(theta)) > 1e6:
+            run.reason = "diverged"
+            break
+        run.moving = moving
+        new = s.physical_from_ls(theta_ls)
+        if not np.all(np.isfinite(new)):
+            run.reason = "diverged"
+            break
+        new = theta + step * (new - theta)
+        if reflect:
+            sl_b = slice(s.n_a, s.n_a + s.nb)
+            new[sl_b] = _reflect(new[sl_b])
+            if s.is_sandwich and s.ns:
+                new[-s.ns :] = _reflect(new[-s.ns :])
+        run.last_ls = (theta_ls, rss, cov, rows)
+        change = _relative_change(new, theta)
+        theta = new
+        run.history.append(theta)
+        if change < tol:
+            run.reason = "tolerance"
+            break
+        # A 2-cycle jumps back (almost) exactly to the iterate before last, twice in a row; a
+        # spiral that still converges returns only part of the way and is left to converge.
+        back = _relative_change(theta, run.history[-3]) if len(run.history) >= 3 else np.inf
+        cycling = back < tol and back < 0.2 * change
+        if cycling and was_cycling:
+            run.reason = "2-cycle"
+            break
+        was_cycling = cycling
+    run.rmse += [_rmse(s, th, u, y, warmup) for th in run.history[len(run.rmse) :]]
+    return run
+
+
+def _is_valid(structure: Structure, theta: NDArray[np.float64]) -> bool:
+    """Stable blocks and branches that increase across the dead band (a model can be built)."""
+    if not is_stable(structure, theta):
+        return False
+    try:
+        structure.model(theta)
+    except ModelError:
+        return False
+    return True
+
+
+def _ls_covariance(structure: Structure, last_ls: tuple[NDArray[np.float64], float, NDArray[np.float64], int]) -> NDArray[np.float64]:
+    """Covariance of the physical vector from the last least-squares step, with the delta
+    method for c_R = c_2 / m_R1."""
+    theta_ls, rss, unscaled, rows = last_ls
+    p = len(theta_ls)
+    sigma2 = rss / max(rows - p, 1)
+    cov = sigma2 * unscaled
+    k_mr1, k_cr = structure.names.index("m_R1"), structure.names.index("c_R")
+    jac = np.eye(p)
+    jac[k_cr, k_cr] = 1.0 / theta_ls[k_mr1]
+    jac[k_cr, k_mr1] = -theta_ls[k_cr] / theta_ls[k_mr1] ** 2
+    return jac @ cov @ jac.T
+
+
+def _check_data(u: ArrayLike, y: ArrayLike, structure: Structure, warmup: int, y_name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    u_arr, y_arr = as_signal(u, "u"), as_signal(y, y_name)
+    if u_arr.ndim != 1 or y_arr.ndim != 1:
+        raise DataError(f"u and {y_name} must be 1-D signals (got shapes {u_arr.shape} and {y_arr.shape})")
+    if len(u_arr) != len(y_arr):
+        raise DataError(f"u has {len(u_arr)} samples but {y_name} has {len(y_arr)}: give one record")
+    for name, arr in (("u", u_arr), (y_name, y_arr)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise DataError(f"{name}[{bad[0]}] is {arr[bad[0]]}: remove or interpolate non-finite samples")
+    if not 0 <= warmup < len(u_arr):
+        raise DataError(f"warmup = {warmup}: give 0 <= warmup < {len(u_arr)} (the record length)")
+    need = 10 * structure.size
+    if len(u_arr) - warmup < need:
+        raise DataError(
+            f"{len(u_arr) - warmup} samples after the warm-up for {structure.size} parameters: "
+            f"give at least {need} (10 per parameter)"
+        )
+    if np.ptp(u_arr) == 0.0:
+        raise NotIdentifiableError("the input u is constant: the system is not excited; use a varying input")
+    if np.ptp(y_arr[warmup:]) == 0.0:
+        raise NotIdentifiableError(
+            f"{y_name} never changes: 0 % of samples move the output off the backlash dead band; "
+            "excite the system with a larger input amplitude"
+        )
+    return u_arr, y_arr
+
+
+def _moving(
+    structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], warmup: int, model: Model | None = None
+) -> float:
+    """The fraction of samples after the warm-up on which the model of ``theta`` moves the
+    backlash (f1 or f2); 0 for an estimate that is no valid model."""
+    try:
+        return (model or structure.model(theta)).moving_fraction(u, warmup=warmup)
+    except ModelError:
+        return 0.0
+
+
+def _coarse_samples(structure: Structure, rows: int, coarse: int | None) -> int:
+    """Samples (after the warm-up) of the coarse stage, 0 for none: ``coarse`` if given and
+    shorter than the record, else by default max(COARSE_MIN, COARSE_PER_PARAMETER p) on
+    records at least COARSE_RECORDS times that long."""
+    if coarse is None:
+        size = max(COARSE_MIN, COARSE_PER_PARAMETER * structure.size)
+        return size if rows >= COARSE_RECORDS * size else 0
+    if isinstance(coarse, bool) or not isinstance(coarse, (int, np.integer)) or coarse < 0:
+        raise DataError(f"coarse = {coarse!r}: give a number of samples (0 to fit on the whole record throughout)")
+    return int(coarse) if 0 < coarse < rows else 0
+
+
+def _search(
+    structure: Structure,
+    u_arr: NDArray[np.float64],
+    y_arr: NDArray[np.float64],
+    starts: Sequence[Start],
+    *,
+    paper: bool,
+    refine: bool,
+    restarts: int,
+    perturbation: float,
+    seed: int,
+    **iterations: Any,
+) -> tuple[_Run, int, OutputErrorFit | None]:
+    """The iterations from every start, the chosen iterate (index k of the run's history),
+    and unless ``refine`` is off its output-error refinement: LM from the best iterate and
+    from the ARX start of every run, the cheapest valid result, then the seeded restarts."""
+    runs = [_run(structure, u_arr, y_arr, start, **iterations) for start in starts]
+    usable = [r for r in runs if r.last_ls is not None]
+    if not usable:
+        raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
+    if paper:
+        run = usable[0]
+        k = len(run.history) - 1
+        if run.reason == "2-cycle" and run.rmse[k - 1] < run.rmse[k]:
+            k -= 1
+    else:
+        run = min(usable, key=lambda r: r.rmse[r.best()])
+        k = run.best()
+    if not refine:
+        return run, k, None
+    warmup = iterations["warmup"]
+    candidates = []
+    for r in usable:
+        for th in {id(x): x for x in (r.history[r.best()], r.history[0])}.values():
+            try:
+                candidates.append(refine_output_error(structure, u_arr, y_arr, th, warmup=warmup))
+            except BacklashIdError:
+                continue
+    if not candidates:
+        return run, k, None
+    # The cheapest candidate that is a valid model (increasing branches, stable blocks); an
+    # invalid one only when no candidate is valid (it is then reported as such).
+    refined = min(candidates, key=lambda c: (not _is_valid(structure, c.theta), c.cost))
+    # The simulation error is piecewise smooth: LM can stop at a kink or in a shallow local
+    # minimum. Restarts from seeded perturbations keep a result only if cheaper.
+    rng = np.random.default_rng(seed)
+    for _ in range(restarts):
+        start = refined.theta + perturbation * rng.standard_normal(structure.size)
+        try:
+            trial = refine_output_error(structure, u_arr, y_arr, start, warmup=warmup)
+        except BacklashIdError:
+            continue
+        if (not _is_valid(structure, trial.theta), trial.cost) < (not _is_valid(structure, refined.theta), refined.cost):
+            refined = trial
+    return run, k, refined
+
+
+def _fit(
+    structure: Structure,
+    u: ArrayLike,
+    y: ArrayLike,
+    *,
+    y_name: str,
+    initial: Start,
+    starts: Sequence[Start] | None,
+    max_iter: int,
+    tol: float,
+    switching: Switching,
+    step: float,
+    refine: bool,
+    paper: bool,
+    warmup: int,
+    min_moving: float,
+    restarts: int | None,
+    perturbation: float,
+    seed: int,
+    coarse: int | None,
+) -> FitResult:
+    if switching not in ("measured", "simulated"):
+        raise DataError(f"switching = {switching!r}: use 'measured' or 'simulated'")
+    if not 0.0 < step <= 1.0:
+        raise DataError(f"step = {step}: give a step factor in (0, 1]")
+    if max_iter < 2:
+        raise DataError(
+            f"max_iter = {max_iter}: give at least 2 (iterate 1 is the linear ARX start; the backlash "
+            "is first estimated by iterate 2)"
+        )
+    u_arr, y_arr = _check_data(u, y, structure, warmup, y_name)
+    # A feedthrough block is fitted as the same block one sample later (structure.py): the
+    # core's model output at t + shift is the measured output at t. The shifted record starts
+    # with `shift` zeros, exact from rest and otherwise inside the (then lengthened) warm-up.
+    user_warmup, shift = warmup, structure.shift
+    if shift:
+        y_arr = np.concatenate([np.zeros(shift), y_arr[:-shift]])
+        warmup = warmup + shift if warmup else 0
+    if paper:
+        starts, switching, step, refine, reflect = [initial], "measured", 1.0, False, False
+    else:
+        starts = [initial] + [tuple(s) for s in (starts or []) if tuple(s) != tuple(initial)]  # type: ignore[misc]
+        reflect = True
+    if restarts is None:  # kinks and shallow minima matter on short records only
+        restarts = RESTARTS if len(u_arr) - warmup <= RESTARTS_UP_TO else 0
+
+    def search(end: int) -> tuple[_Run, int, OutputErrorFit | None]:
+        return _search(
+            structure, u_arr[:end], y_arr[:end], starts, paper=paper, refine=refine, restarts=restarts,
+            perturbation=perturbation, seed=seed, max_iter=max_iter, tol=tol, switching=switching, step=step,
+            reflect=reflect, warmup=warmup,
+        )
+
+    segment = _coarse_samples(structure, len(u_arr) - warmup, coarse) * refine
+    found = None
+    if segment:
+        # coarse to fine: the iterations and the choice of LM start on the first `segment`
+        # samples after the warm-up, then LM on the whole record from the segment's optimum
+        end = warmup + segment
+        try:
+            run, k, refined = search(end)
+            # a segment that hardly moves the backlash says nothing about its branches
+            if refined is not None and _moving(structure, refined.theta, u_arr[:end], user_warmup) >= min_moving:
+                refined = refine_output_error(structure, u_arr, y_arr, refined.theta, warmup=warmup)
+                found = run, k, refined
+        except BacklashIdError:  # the segment is not enough: search the whole record
+            pass
+    if found is None:
+        segment = 0
+        found = search(len(u_arr))
+    run, k, refined = found
+    theta_iter = run.history[k]
+    theta, steps = (refined.theta, refined.iterations) if refined is not None else (theta_iter, 0)
+    # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
+    # stage always ends in a whole-record refinement, so the iterate is the whole record's)
+    rmse = float(np.sqrt(refined.cost / refined.n_residuals)) if refined is not None else run.rmse[k]
+    best_info = {
+        "parameters": dict(zip(structure.names, map(float, theta))),
+        "simulation_rmse": rmse,
+        "history": np.array(run.history),
+        "reason": run.reason,
+    }
+    est = structure.unpack(theta)
+    for den, name in ((est.b, "input"), (est.s, "output")):
+        radius = spectral_radius(np.asarray(den))
+        if not radius < 1.0:
+            raise NotConvergedError(
+                f"the estimated {name} linear block is unstable (spectral radius {radius:.3f}); "
+                "use the default algorithm (it reflects unstable poles) or other initial values",
+                best_info,
+            )
+    if not np.isfinite(rmse):
+        raise NotConvergedError("the identification diverged: the estimate simulates to no finite output", best_info)
+    try:
+        model = structure.model(theta)
+    except ModelError as exc:
+        raise NotConvergedError(f"the final estimate is not a valid model ({exc})", best_info) from None
+    moving = _moving(structure, theta, u_arr, user_warmup, model)
+    if moving < min_moving:
+        raise NotIdentifiableError(
+            f"only {100 * moving:.1f} % of samples move the backlash output off its dead band "
+            f"(need {100 * min_moving:.0f} %): excite the system with a larger input amplitude"
+        )
+    if refined is not None:
+        noise_var = refined.cost / max(refined.n_residuals - structure.size, 1)
+        covariance = noise_var * refined.unscaled_covariance(structure.names)
+    else:
+        _theta_ls, rss, _cov, rows = run.last_ls  # type: ignore[misc]
+        noise_var = rss / max(rows - structure.size, 1)
+        covariance = _ls_covariance(structure, run.last_ls)  # type: ignore[arg-type]
+    return FitResult(
+        model=model,
+        structure=structure,
+        theta=np.asarray(theta, dtype=np.float64),
+        covariance=covariance,
+        history=np.array(run.history),
+        history_rmse=np.array(run.rmse),
+        iterations=len(run.history),
+        converged=run.reason in ("tolerance", "2-cycle") or (refined is not None and refined.converged),
+        reason=run.reason,
+        simulation_rmse=rmse,
+        noise_std=float(np.sqrt(noise_var)),
+        moving_fraction=moving,
+        method="paper" if paper else "default",
+        warmup=user_warmup,
+        iterative_theta=np.asarray(theta_iter, dtype=np.float64),
+        refinement_steps=steps,
+        coarse_samples=segment,
+    )
+
+
+def fit_cascade(
+    u: ArrayLike,
+    y: ArrayLike,
+    na: int = 2,
+    nb: int = 2,
+    degree: int = 3,
+    *,
+    initial: Start = (1.0, 0.001, 0.001),
+    starts: Sequence[Start] | None = None,
+    max_iter: int = 50,
+    tol: float = 1e-3,
+    switching: Switching = "measured",
+    step: float = 1.0,
+    refine: bool = True,
+    paper: bool = False,
+    warmup: int = 0,
+    min_moving: float = 0.1,
+    restarts: int | None = None,
+    perturbation: float = 0.05,
+    seed: int = 0,
+    feedthrough: bool = False,
+    coarse: int | None = None,
+) -> FitResult:
+    """Identify a cascade u -> linear block (16) -> general backlash (1) -> y (Section 3).
+
+    ``initial = (m_R1, c_L, c_R)`` seeds the switching functions of the first iteration;
+    ``switching`` says which y(t-1) enters f1, f2 (eq 25-26): the "measured" output as the paper
+    reads, or the model's "simulated" one; ``step`` relaxes each update; ``warmup`` samples at
+    the start are left out of every criterion (the record's initial state is unknown).
+    ``paper=True`` runs the paper's plain algorithm (measured y, step 1, no pole reflection, no
+    refinement, the last iterate). By default the best iterate is refined by output-error
+    Levenberg-Marquardt on the free-run simulation error, then ``restarts`` LM runs from the
+    result plus N(0, ``perturbation``^2) noise (random generator seeded by ``seed``, so results
+    are reproducible), each kept only if it lowers the simulation error. By default 4 restarts
+    run on records of up to 20 000 samples (after the warm-up) and none on longer ones,
+    where the cost surface is smooth enough that they change nothing.
+
+    ``coarse`` (samples): on long records the iterations and the LM candidates (and any
+    restarts) run on the first ``coarse`` samples after the warm-up only, and LM then refines
+    the best of them on the whole record (the same optimum, several times faster). By default (None) the segment
+    is max(5000, 200 p) samples for p parameters, used on records at least 10 times as long;
+    0 fits on the whole record throughout. ``FitResult.coarse_samples`` says which ran; the
+    history is then the segment's.
+
+    ``feedthrough=True`` adds the lag-0 term a_0 u(t) to the linear block (parameters a0..a_na;
+    the model's block is ``LinearBlock(a, b, feedthrough=True)``).
+    """
+    return _fit(
+        Structure(na, nb, degree, feedthrough=feedthrough), u, y, y_name="y", initial=initial, starts=starts, max_iter=max_iter,
+        tol=tol, switching=switching, step=step, refine=refine, paper=paper, warmup=warmup, min_moving=min_moving,
+        restarts=restarts, perturbation=perturbation, seed=seed, coarse=coarse,
+    )
+
+
+def fit_sandwich(
+    u: ArrayLike,
+    w: ArrayLike,
+    na: int = 2,
+    nb: int = 2,
+    nr: int = 2,
+    ns: int = 2,
+    degree: int = 3,
+    *,
+    initial: Start = (1.25, 0.1, 0.1),
+    starts: Sequence[Start] | None = None,
+    max_iter: int = 50,
+    tol: float = 1e-3,
+    step: float = 0.5,
+    refine: bool = True,
+    paper: bool = False,
+    warmup: int = 0,
+    min_moving: float = 0.1,
+    restarts: int | None = None,
+    perturbation: float = 0.05,
+    seed: int = 0,
+    feedthrough: bool = False,
+    output_feedthrough: bool = False,
+    coarse: int | None = None,
+) -> FitResult:
+    """Identify a sandwich u -> linear (16) -> general backlash (1) -> linear (29) -> w
+    (Section 4). Options as in :func:`fit_cascade`; the default ``step`` is 0.5 and pole
+    reflection is on, since the plain iterations diverge for most noise draws.
+    ``feedthrough`` adds a_0 u(t) to the input block, ``output_feedthrough`` r_0 y(t) to the
+    output block (then r_0 = 1 is the fixed normalisation and r1..r_nr are estimated)."""
+    return _fit(
+        Structure(na, nb, degree, nr, ns, feedthrough=feedthrough, output_feedthrough=output_feedthrough), u, w, y_name="w", initial=initial, starts=starts, max_iter=max_iter,
+        tol=tol, switching="simulated", step=step, refine=refine, paper=paper, warmup=warmup, min_moving=min_moving,
+        restarts=restarts, perturbation=perturbation, seed=seed, coarse=coarse,
+    )

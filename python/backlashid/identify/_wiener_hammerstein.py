@@ -1,0 +1,454 @@
+"""Wiener-Hammerstein identification: u -> G1 -> static f -> G2 -> y.
+
+A sandwich (Section 4) whose backlash has zero width and tied branches (c_L = c_R = 0,
+m_L = m_R, so L = R = f and eq (1) reduces to y(t) = f(x(t)) whatever f's shape) is a
+Wiener-Hammerstein model. The fitted model is an ordinary :class:`SandwichModel`:
+
+    x(t) = sum_{i=1}^{n1} a_i u(t-i) - sum_j b_j x(t-j)        G1, eq (16)
+    y(t) = f(x(t)) = sum_{i=1}^{n} m_i x(t)^i                  tied branches, c_L = c_R = 0
+    w(t) = sum_{i=1}^{n2} r_i y(t-i) - sum_j s_j w(t-j)        G2, eq (29)
+
+How it is fitted (the standard route for this structure, e.g. Schoukens et al.):
+
+1. the best linear approximation (BLA): an output-error model of order n1 + n2 with an output
+   offset (the linear baseline);
+2. its poles and zeros split between G1 and G2 in every way that keeps complex-conjugate pairs
+   together; each split is refined briefly (Levenberg-Marquardt, low degree, a sub-record) and
+   the best is kept;
+3. Levenberg-Marquardt on the free-run simulation error of the full model at the requested
+   degree, with the exact Jacobian from filtered sensitivities (scipy ``least_squares``).
+
+High degrees (13-25) are well conditioned because f is fitted in a Chebyshev basis of x / k,
+with G1's gain fixed so that k = max |x| on the estimation data is 1 at the start; the
+polynomial is turned into the monomials m_i at the end. The stored model therefore has
+max |x| close to 1 on data like the estimation data, which keeps the powers x^i in range.
+Steps that move a pole of G1 or G2 onto or outside the unit circle are rejected.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.polynomial import chebyshev
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import least_squares
+from scipy.signal import lfilter
+
+from .._validation import as_signal
+from ..errors import DataError, ModelError, NotConvergedError
+from ..models import GeneralBacklash, LinearBlock, SandwichModel
+
+__all__ = ["LinearBaseline", "WienerHammersteinFit", "fit_wiener_hammerstein", "wiener_hammerstein_model"]
+
+_UNSTABLE = 0.9999  # a step that puts a pole beyond this modulus is rejected
+_PENALTY = 10.0  # residual returned for a rejected (unstable) parameter vector
+
+
+def _delayed(v: NDArray[np.float64], k: int) -> NDArray[np.float64]:
+    """v(t - k) with zeros before the record."""
+    if k == 0:
+        return v
+    out = np.zeros_like(v)
+    out[k:] = v[:-k]
+    return out
+
+
+def _radius(den: NDArray[np.float64]) -> float:
+    return float(np.abs(np.roots(den)).max()) if len(den) > 1 else 0.0
+
+
+def wiener_hammerstein_model(
+    a: ArrayLike, b: ArrayLike, m: ArrayLike, r: ArrayLike, s: ArrayLike, *, feedthrough: bool = False
+) -> SandwichModel:
+    """The sandwich u -> G1(a, b) -> f -> G2(r, s) with f(x) = sum_i m_i x^i: a zero-width
+    backlash with tied branches (c_L = c_R = 0, m_L = m_R = m). Needs m_1 > 0.
+    ``feedthrough=True``: a and r start at lag 0 (both blocks)."""
+    m_list = [float(v) for v in np.atleast_1d(np.asarray(m, dtype=np.float64))]
+    return SandwichModel(
+        LinearBlock(a, b, feedthrough=feedthrough),
+        GeneralBacklash(0.0, 0.0, m_list, m_list),
+        LinearBlock(r, s, feedthrough=feedthrough),
+    )
+
+
+@dataclass(frozen=True)
+class LinearBaseline:
+    """The best linear approximation: w(t) = G(q) u(t) + offset, an output-error model
+    of order n1 + n2 (input lags from 2, the two blocks' delays, or from 0 with feedthrough;
+    the lag-1 coefficient is then zero) plus a constant output offset."""
+
+    linear: LinearBlock
+    offset: float
+
+    def simulate(self, u: ArrayLike) -> NDArray[np.float64]:
+        """Free-run output from rest."""
+        return self.linear.simulate(u) + self.offset
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"linear": self.linear.to_dict(), "offset": self.offset}
+
+
+@dataclass(frozen=True)
+class WienerHammersteinFit:
+    """A fitted Wiener-Hammerstein model (a tied, zero-width :class:`SandwichModel`), its
+    linear baseline, and how the fit went. RMSEs are free-run simulation errors on the
+    estimation data after ``warmup`` samples."""
+
+    model: SandwichModel
+    baseline: LinearBaseline
+    degree: int
+    orders: tuple[int, int]
+    warmup: int
+    simulation_rmse: float
+    baseline_rmse: float
+    fit_time: float  # seconds, BLA to the end
+    iterations: int  # function evaluations of the final Levenberg-Marquardt run
+    converged: bool  # the final run met its tolerance (not its evaluation limit)
+    split_rmse: tuple[float, ...]  # after the short refinement of each pole/zero split, best first
+    g1_poles: NDArray[np.complex128] = field(repr=False)  # the BLA poles given to G1 by the chosen split
+    g1_zeros: NDArray[np.complex128] = field(repr=False)
+
+    @property
+    def m(self) -> NDArray[np.float64]:
+        """Coefficients m_1..m_n of the static nonlinearity f(x) = sum m_i x^i."""
+        return self.model.backlash.m_left
+
+    def nonlinearity(self, x: ArrayLike) -> NDArray[np.float64]:
+        """f(x), the static block."""
+        return self.model.backlash.left(as_signal(x, "x"))
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """a1.., b1.. (G1), m1..mn (f), r1.., s1.. (G2); a0 and r0 with feedthrough."""
+        g1, g2 = self.model.input_linear, self.model.output_linear
+        out: dict[str, float] = {}
+        for prefix, lags, values in (
+            ("a", g1.lags, g1.a),
+            ("b", range(1, g1.nb + 1), g1.b),
+            ("m", range(1, len(self.m) + 1), self.m),
+            ("r", g2.lags, g2.a),
+            ("s", range(1, g2.nb + 1), g2.b),
+        ):
+            out.update({f"{prefix}{i}": float(v) for i, v in zip(lags, values)})
+        return out
+
+    def summary(self) -> str:
+        n1, n2 = self.orders
+        return "\n".join(
+            [
+                f"Wiener-Hammerstein fit: G1 order {n1}, f degree {self.degree}, G2 order {n2}, warm-up {self.warmup}",
+                f"free-run simulation RMSE on the estimation data: {self.simulation_rmse:.6g} "
+                f"(linear baseline {self.baseline_rmse:.6g}, {self.baseline_rmse / self.simulation_rmse:.1f}x larger)",
+                f"{len(self.split_rmse)} pole/zero splits tried; final LM: {self.iterations} evaluations"
+                f" ({'converged' if self.converged else 'evaluation limit'}); {self.fit_time:.1f} s",
+            ]
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": self.model.to_dict(),
+            "baseline": self.baseline.to_dict(),
+            "degree": self.degree,
+            "orders": list(self.orders),
+            "warmup": self.warmup,
+            "simulation_rmse": self.simulation_rmse,
+            "baseline_rmse": self.baseline_rmse,
+            "fit_time": self.fit_time,
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "split_rmse": list(self.split_rmse),
+        }
+
+
+# -- the parametrisation used while fitting ------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Param:
+    """theta = [a (lags d..n1), b (n1), c_1..c_n (Chebyshev coefficients of f in x / k),
+    r (lags d..n2), s (n2)], with f(x) = sum_i c_i (T_i(x / k) - T_i(0)) so that f(0) = 0;
+    the first lag d is 0 with feedthrough, else 1."""
+
+    n1: int
+    n2: int
+    degree: int
+    feedthrough: bool = False
+    k: float = 1.0
+
+    @property
+    def delay(self) -> int:
+        return 0 if self.feedthrough else 1
+
+    @property
+    def sizes(self) -> list[int]:
+        d = self.delay
+        return [self.n1 + 1 - d, self.n1, self.degree, self.n2 + 1 - d, self.n2]
+
+    def numerator(self, coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.r_[np.zeros(self.delay), coefficients]
+
+    def split(self, theta: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+        return np.split(theta, np.cumsum(self.sizes)[:-1])
+
+    def basis(self, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """T_i(z) - T_i(0) and d/dx T_i(z), i = 1..n, z = x / k (three-term recurrences)."""
+        z = x / self.k
+        n = self.degree
+        t = np.empty((len(z), n + 1))
+        dt = np.empty((len(z), n + 1))
+        t[:, 0], dt[:, 0] = 1.0, 0.0
+        t[:, 1], dt[:, 1] = z, 1.0
+        for i in range(1, n):
+            t[:, i + 1] = 2.0 * z * t[:, i] - t[:, i - 1]
+            dt[:, i + 1] = 2.0 * t[:, i] + 2.0 * z * dt[:, i] - dt[:, i - 1]
+        t0 = chebyshev.chebval(0.0, np.eye(n + 1))  # T_i(0)
+        return t[:, 1:] - t0[1:], dt[:, 1:] / self.k
+
+    def stable(self, theta: NDArray[np.float64]) -> bool:
+        _, b, _, _, s = self.split(theta)
+        return max(_radius(np.r_[1.0, b]), _radius(np.r_[1.0, s])) < _UNSTABLE
+
+    def simulate(self, theta: NDArray[np.float64], u: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        a, b, c, r, s = self.split(theta)
+        x = lfilter(self.numerator(a), np.r_[1.0, b], u)
+        basis, dbasis = self.basis(x)
+        f = basis @ c
+        w = lfilter(self.numerator(r), np.r_[1.0, s], f)
+        return x, basis, dbasis, f, w
+
+    def residuals(self, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int) -> NDArray[np.float64]:
+        if not self.stable(theta):
+            return np.full(len(y) - warmup, _PENALTY)
+        with np.errstate(over="ignore", invalid="ignore"):
+            e = (self.simulate(theta, u)[-1] - y)[warmup:]
+        return e if np.all(np.isfinite(e)) else np.full(len(y) - warmup, _PENALTY)
+
+    def jacobian(self, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int) -> NDArray[np.float64]:
+        """d w / d theta: G1's sensitivities (filtered by 1/B) scaled by f'(x) and passed
+        through G2; f's basis functions through G2; G2's own sensitivities."""
+        if not self.stable(theta):
+            return np.zeros((len(y) - warmup, len(theta)))
+        a, b, c, r, s = self.split(theta)
+        x, basis, dbasis, f, w = self.simulate(theta, u)
+        d = self.delay
+        den1, num2, den2 = np.r_[1.0, b], self.numerator(r), np.r_[1.0, s]
+        u_f, x_f = lfilter([1.0], den1, u), lfilter([1.0], den1, x)
+        dx = np.column_stack(
+            [_delayed(u_f, i) for i in range(d, self.n1 + 1)] + [-_delayed(x_f, j) for j in range(1, self.n1 + 1)]
+        )
+        j_g1 = lfilter(num2, den2, dx * (dbasis @ c)[:, None], axis=0)
+        j_f = lfilter(num2, den2, basis, axis=0)
+        f_f, w_f = lfilter([1.0], den2, f), lfilter([1.0], den2, w)
+        j_g2 = np.column_stack(
+            [_delayed(f_f, i) for i in range(d, self.n2 + 1)] + [-_delayed(w_f, j) for j in range(1, self.n2 + 1)]
+        )
+        return np.hstack([j_g1, j_f, j_g2])[warmup:]
+
+    def fit(self, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, max_nfev: int) -> Any:
+        return least_squares(
+            self.residuals, theta, jac=self.jacobian, args=(u, y, warmup), method="lm", max_nfev=max_nfev,
+            ftol=1e-10, xtol=1e-10,
+        )
+
+    def monomials(self, c: NDArray[np.float64]) -> NDArray[np.float64]:
+        """m_1..m_n of f(x) = sum_i m_i x^i."""
+        t0 = chebyshev.chebval(0.0, np.eye(self.degree + 1))
+        full = np.r_[-float(c @ t0[1:]), c]  # the constant that makes f(0) = 0
+        p = chebyshev.cheb2poly(full)  # in z = x / k
+        p = np.r_[p, np.zeros(self.degree + 1 - len(p))]
+        return p[1:] / self.k ** np.arange(1, self.degree + 1)
+
+
+# -- best linear approximation and its splits ----------------------------------------------------
+
+
+def _best_linear(u: NDArray[np.float64], y: NDArray[np.float64], order: int, delay: int, warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Output-error model num/den of the given order (numerator lags delay..order) plus an
+    output offset: an ARX start, then Levenberg-Marquardt on the simulation error."""
+    n_num = order + 1 - delay
+    cols = [_delayed(u, delay + i) for i in range(n_num)] + [-_delayed(y, j) for j in range(1, order + 1)]
+    lag = order + 1
+    arx = np.linalg.lstsq(np.column_stack(cols + [np.ones_like(u)])[lag:], y[lag:], rcond=None)[0]
+    if _radius(np.r_[1.0, arx[n_num : n_num + order]]) >= _UNSTABLE:  # keep the ARX numerator, damp the poles
+        arx[n_num : n_num + order] = np.poly(0.9 * np.exp(1j * np.linspace(0.3, 2.5, order))).real[1:]
+
+    def residuals(th: NDArray[np.float64]) -> NDArray[np.float64]:
+        den = np.r_[1.0, th[n_num : n_num + order]]
+        if _radius(den) >= _UNSTABLE:
+            return np.full(len(y) - warmup, _PENALTY)
+        return (lfilter(np.r_[np.zeros(delay), th[:n_num]], den, u) + th[-1] - y)[warmup:]
+
+    th = least_squares(residuals, arx, method="lm").x
+    return np.r_[np.zeros(delay), th[:n_num]], np.r_[1.0, th[n_num : n_num + order]], float(th[-1])
+
+
+def _conjugate_groups(roots: NDArray[np.complex128]) -> list[list[complex]]:
+    """Real roots alone, complex roots with their conjugates."""
+    left = list(roots)
+    groups = []
+    while left:
+        r = left.pop(0)
+        if abs(r.imag) > 1e-9 * max(1.0, abs(r)) and left:
+            j = int(np.argmin([abs(q - np.conj(r)) for q in left]))
+            groups.append([r, left.pop(j)])
+        else:
+            groups.append([complex(r.real, 0.0)])
+    return groups
+
+
+def _subsets(roots: NDArray[np.complex128], sizes: range) -> list[tuple[list[complex], list[complex]]]:
+    """(chosen, rest) for every choice of whole conjugate groups with a size in ``sizes``."""
+    groups = _conjugate_groups(roots)
+    out = []
+    for m in range(len(groups) + 1):
+        for pick in itertools.combinations(range(len(groups)), m):
+            chosen = [q for g in pick for q in groups[g]]
+            if len(chosen) in sizes:
+                out.append((chosen, [q for g in range(len(groups)) if g not in pick for q in groups[g]]))
+    return out
+
+
+def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], n1: int, n2: int, room: tuple[int, int]) -> list[tuple[list[complex], ...]]:
+    """(G1 poles, G2 poles, G1 zeros, G2 zeros) with n1 poles in G1, n2 in G2, and at most
+    n1 and n2 zeros (n - 1 when the block keeps a one-sample delay). Only when no split keeps
+    every zero (e.g. a complex pair when each block has room for one zero) are zeros left out:
+    the refinement moves the numerators anyway."""
+    whole, partial = [], []
+    for p1, p2 in _subsets(poles, range(n1, n1 + 1)):
+        for z1, rest in _subsets(zeros, range(0, room[0] + 1)):
+            if len(rest) <= room[1]:
+                whole.append((p1, p2, z1, rest))
+                continue
+            fits = [z2 for z2, _ in _subsets(np.asarray(rest), range(0, room[1] + 1))]
+            most = max(len(z2) for z2 in fits)
+            partial += [(p1, p2, z1, z2) for z2 in fits if len(z2) == most]
+    return whole or partial
+
+
+def _theta_from_split(param: _Param, u: NDArray[np.float64], split: tuple[list[complex], ...], gain: float) -> NDArray[np.float64]:
+    """G1 = Z1/P1 (lagged to its order) scaled so that max |x| = k, f(x) = x, G2 carries the gain."""
+    p1, p2, z1, z2 = split
+    d = param.delay
+    b, s = np.poly(p1).real, np.poly(p2).real
+    a = np.r_[np.zeros(param.n1 - d - len(z1)), np.poly(z1).real]
+    r = np.r_[np.zeros(param.n2 - d - len(z2)), np.poly(z2).real] * gain
+    x = lfilter(param.numerator(a), b, u)
+    scale = np.max(np.abs(x)) / param.k
+    c = np.zeros(param.degree)
+    c[0] = param.k  # c_1 T_1(x / k) = x
+    return np.r_[a / scale, b[1:], c, r * scale, s[1:]]
+
+
+def _check(u: ArrayLike, y: ArrayLike, degree: int, orders: tuple[int, int], warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    u_arr, y_arr = as_signal(u, "u"), as_signal(y, "y")
+    if u_arr.ndim != 1 or y_arr.ndim != 1 or len(u_arr) != len(y_arr):
+        raise DataError(f"u and y must be 1-D signals of one record (got shapes {u_arr.shape} and {y_arr.shape})")
+    for name, arr in (("u", u_arr), ("y", y_arr)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise DataError(f"{name}[{bad[0]}] is {arr[bad[0]]}: remove or interpolate non-finite samples")
+    if not isinstance(degree, (int, np.integer)) or degree < 1:
+        raise DataError(f"degree = {degree!r}: give a whole number >= 1")
+    if len(orders) != 2 or any(not isinstance(n, (int, np.integer)) or n < 1 for n in orders):
+        raise DataError(f"orders = {orders!r}: give (n1, n2), the orders of G1 and G2, each >= 1")
+    if not 0 <= warmup < len(u_arr):
+        raise DataError(f"warmup = {warmup}: give 0 <= warmup < {len(u_arr)} (the record length)")
+    n_par = 2 * sum(orders) + degree
+    if len(u_arr) - warmup < 10 * n_par:
+        raise DataError(f"{len(u_arr) - warmup} samples after the warm-up for {n_par} parameters: give at least {10 * n_par}")
+    if np.ptp(u_arr) == 0.0:
+        raise DataError("the input u is constant: the system is not excited; use a varying input")
+    return u_arr, y_arr
+
+
+def fit_wiener_hammerstein(
+    u: ArrayLike,
+    y: ArrayLike,
+    degree: int = 20,
+    orders: tuple[int, int] = (3, 3),
+    *,
+    warmup: int = 100,
+    max_iter: int = 200,
+    split_samples: int = 20_000,
+    split_degree: int = 3,
+    split_iter: int = 15,
+    feedthrough: bool = False,
+) -> WienerHammersteinFit:
+    """Identify u -> G1 -> f -> G2 -> y (a sandwich with a tied, zero-width backlash).
+
+    ``degree``: degree n of f (13-25 for a sharp nonlinearity such as a diode; the cost of
+    each iteration grows linearly with it). On the SYSID 2009 benchmark (100 000 training
+    samples) the free-run test RMSE was 0.95 / 0.71 / 0.53 mV at degree 15 / 20 / 25 (linear
+    baseline 43.3 mV), 11-15 s per fit; degree 30 got worse (0.95 mV). ``orders = (n1, n2)``: orders of G1 and G2 (each
+    with a one-sample delay, so the model's total delay is 2 samples; ``feedthrough=True``
+    gives both a lag-0 term instead, ``LinearBlock(.., feedthrough=True)``). ``warmup`` samples at
+    the start are left out of every criterion (the record does not start at rest).
+    ``max_iter`` bounds the function evaluations of the final Levenberg-Marquardt run;
+    ``split_samples``, ``split_degree`` and ``split_iter`` set the short refinement that
+    ranks the pole/zero splits of the best linear approximation. Deterministic: no random
+    numbers are drawn.
+
+    Raises DataError for bad data or settings, NotConvergedError if no split gives a stable
+    model.
+    """
+    u_arr, y_arr = _check(u, y, degree, orders, warmup)
+    n1, n2 = int(orders[0]), int(orders[1])
+    started = time.perf_counter()
+    delay = 0 if feedthrough else 2
+    num, den, offset = _best_linear(u_arr, y_arr, n1 + n2, delay, warmup)
+    baseline = LinearBaseline(LinearBlock(num, den[1:], feedthrough=True) if feedthrough else LinearBlock(num[1:], den[1:]), offset)
+    baseline_rmse = float(np.sqrt(np.mean((baseline.simulate(u_arr) - y_arr)[warmup:] ** 2)))
+    lead = np.trim_zeros(num, "f")
+    poles, zeros = np.roots(den), np.roots(lead)
+
+    short = _Param(n1, n2, min(split_degree, degree), feedthrough)
+    n_short = min(len(u_arr), max(split_samples, warmup + 10 * (2 * (n1 + n2) + short.degree)))
+    u_s, y_s = u_arr[:n_short], y_arr[:n_short]
+    ranked = []
+    room = (n1 - short.delay, n2 - short.delay)
+    for split in _splits(poles, zeros, n1, n2, room):
+        theta = _theta_from_split(short, u_s, split, float(lead[0]))
+        if not short.stable(theta):
+            continue
+        res = short.fit(theta, u_s, y_s, warmup, split_iter)
+        rmse = float(np.sqrt(np.mean(res.fun**2)))
+        if short.stable(res.x) and np.isfinite(rmse):
+            ranked.append((rmse, res.x, split))
+    if not ranked:
+        raise NotConvergedError("no split of the best linear approximation's poles and zeros gives a stable start")
+    ranked.sort(key=lambda item: item[0])
+    _, theta_short, split = ranked[0]
+
+    full = _Param(n1, n2, degree, feedthrough)
+    a, b, c_short, r, s = short.split(theta_short)
+    c = np.zeros(degree)
+    c[: short.degree] = c_short
+    res = full.fit(np.r_[a, b, c, r, s], u_arr, y_arr, warmup, max_iter)
+    a, b, c, r, s = full.split(res.x)
+    m = full.monomials(c)
+    if m[0] < 0:  # f'(0) < 0: use -x as the internal signal, so that m_1 > 0
+        a, m = -a, m * (-1.0) ** np.arange(1, degree + 1)
+    try:
+        model = wiener_hammerstein_model(a, b, m, r, s, feedthrough=feedthrough)
+    except ModelError as exc:
+        raise NotConvergedError(f"the fitted static block is not usable as tied branches: {exc}") from None
+    rmse = float(np.sqrt(np.mean((model.simulate(u_arr) - y_arr)[warmup:] ** 2)))
+    return WienerHammersteinFit(
+        model=model,
+        baseline=baseline,
+        degree=degree,
+        orders=(n1, n2),
+        warmup=warmup,
+        simulation_rmse=rmse,
+        baseline_rmse=baseline_rmse,
+        fit_time=time.perf_counter() - started,
+        iterations=int(res.nfev),
+        converged=bool(res.status > 0),
+        split_rmse=tuple(item[0] for item in ranked),
+        g1_poles=np.asarray(split[0]),
+        g1_zeros=np.asarray(split[2]),
+    )

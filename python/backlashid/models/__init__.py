@@ -1,0 +1,30 @@
+"""Models: the general backlash (eq 1-15), the linear block (eq 16 / 29), the cascade (Fig. 2)
+and sandwich (Fig. 3) chains built from them, and their dict / JSON form.
+
+Every model is frozen, simulated sample by sample in the Rust core, and round-trips through
+``to_dict`` / ``to_json`` and :func:`model_from_dict` / :func:`model_from_json`.
+"""
+
+from __future__ import annotations
+
+from ._backlash import BranchCheck, GeneralBacklash, SwitchingSignals
+from ._cascade import CascadeModel, CascadeSimulation, CascadeState
+from ._linear import LinearBlock
+from ._sandwich import SandwichModel, SandwichSimulation, SandwichState
+from ._serialization import Model, model_from_dict, model_from_json
+
+__all__ = [
+    "BranchCheck",
+    "CascadeModel",
+    "CascadeSimulation",
+    "CascadeState",
+    "GeneralBacklash",
+    "LinearBlock",
+    "Model",
+    "SandwichModel",
+    "SandwichSimulation",
+    "SandwichState",
+    "SwitchingSignals",
+    "model_from_dict",
+    "model_from_json",
+]

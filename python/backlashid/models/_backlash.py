@@ -1,0 +1,199 @@
+"""The general backlash of eq (1)-(15)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .. import _core
+from .._validation import as_coefficients, as_scalar, as_signal, format_list, frozen
+from ..errors import DataError
+
+__all__ = ["GeneralBacklash", "BranchCheck", "SwitchingSignals"]
+
+
+def _finite_range(lo: Any, hi: Any) -> tuple[float, float]:
+    a, b = as_scalar(lo, "x_min", DataError), as_scalar(hi, "x_max", DataError)
+    if not (np.isfinite(a) and np.isfinite(b)):
+        raise DataError(f"the x-range [{a}, {b}] must be finite: give the range the data cover")
+    return a, b
+
+
+@dataclass(frozen=True)
+class BranchCheck:
+    """Where, on [x_min, x_max], the paper's assumption fails: a branch that does not increase,
+    or L(x) <= R(x) (the branches cross at the ends of each interval)."""
+
+    x_min: float
+    x_max: float
+    left_not_increasing: list[tuple[float, float]]
+    right_not_increasing: list[tuple[float, float]]
+    crossed: list[tuple[float, float]]
+
+    @property
+    def is_valid(self) -> bool:
+        return not (self.left_not_increasing or self.right_not_increasing or self.crossed)
+
+    @property
+    def crossings(self) -> list[float]:
+        """The x where L and R cross inside the range."""
+        ends = [e for interval in self.crossed for e in interval]
+        return [e for e in ends if self.x_min < e < self.x_max]
+
+    def __str__(self) -> str:
+        if self.is_valid:
+            return f"both branches increase and do not cross on [{self.x_min:.6g}, {self.x_max:.6g}]"
+        parts = []
+        fmt = lambda iv: ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in iv)  # noqa: E731
+        if self.left_not_increasing:
+            parts.append(f"L does not increase on {fmt(self.left_not_increasing)}")
+        if self.right_not_increasing:
+            parts.append(f"R does not increase on {fmt(self.right_not_increasing)}")
+        if self.crossed:
+            parts.append(f"L <= R (branches crossed) on {fmt(self.crossed)}")
+        return "; ".join(parts)
+
+
+@dataclass(frozen=True)
+class SwitchingSignals:
+    """Internal signals of the switching-function form, eq (9)-(15)."""
+
+    xi1: NDArray[np.float64]  # x(t) + c_L, eq (9)
+    xi2: NDArray[np.float64]  # x(t) - c_R, eq (10)
+    f1: NDArray[np.bool_]  # eq (12)
+    f2: NDArray[np.bool_]  # eq (13), exclusive of f1 (case order of eq 1)
+    y: NDArray[np.float64]  # eq (15)
+
+
+class GeneralBacklash:
+    """General backlash (eq 1): y(t) = L(x) if x <= z_L, R(x) if x >= z_R, else y(t-1), with
+
+        L(x) = sum_{i=1}^n m_Li (x + c_L)^i   (eq 4),    R(x) = sum_{i=1}^n m_Ri (x - c_R)^i   (eq 5).
+
+    ``m_left = [m_L1, .., m_Ln]``, ``m_right = [m_R1, .., m_Rn]``; degree 1 is the classic
+    straight backlash. Widths c_L, c_R >= 0 (0 gives a static, possibly different, pair of
+    curves). Both branches must increase across the dead band [-c_L, c_R]; use
+    :meth:`check_branches` for the range your data covers.
+    """
+
+    __slots__ = ("_c_left", "_c_right", "_m_left", "_m_right", "_native")
+
+    def __init__(self, c_left: float, c_right: float, m_left: ArrayLike, m_right: ArrayLike) -> None:
+        c_l = as_scalar(c_left, "c_left")
+        c_r = as_scalar(c_right, "c_right")
+        m_l = as_coefficients(m_left, "m_left")
+        m_r = as_coefficients(m_right, "m_right")
+        self._native = _core.GeneralBacklash(c_l, c_r, m_l, m_r)  # validates, raises ModelError
+        self._c_left, self._c_right = c_l, c_r
+        self._m_left, self._m_right = frozen(m_l), frozen(m_r)
+
+    # -- parameters, under the paper's symbols too ------------------------------------------
+    @property
+    def c_left(self) -> float:
+        return self._c_left
+
+    @property
+    def c_right(self) -> float:
+        return self._c_right
+
+    @property
+    def m_left(self) -> NDArray[np.float64]:
+        return self._m_left
+
+    @property
+    def m_right(self) -> NDArray[np.float64]:
+        return self._m_right
+
+    c_L = c_left
+    c_R = c_right
+    m_L = m_left
+    m_R = m_right
+
+    @property
+    def degree(self) -> int:
+        """n: the higher of the two branch degrees."""
+        return max(len(self._m_left), len(self._m_right))
+
+    # -- evaluation ----------------------------------------------------------------------------
+    def left(self, x: ArrayLike) -> NDArray[np.float64]:
+        """L(x), eq (4)."""
+        return self._native.left(np.atleast_1d(as_signal(x, "x")))
+
+    def right(self, x: ArrayLike) -> NDArray[np.float64]:
+        """R(x), eq (5)."""
+        return self._native.right(np.atleast_1d(as_signal(x, "x")))
+
+    def simulate(
+        self, x: ArrayLike, *, y0: float = 0.0, form: Literal["eq1", "breakpoints"] = "eq1"
+    ) -> NDArray[np.float64]:
+        """The output y for the internal signal x, from memory y(0) = y0.
+
+        ``form="eq1"`` compares branch values with y(t-1) (fast); ``"breakpoints"`` follows
+        eq (1) literally through z_L and z_R of eq (2)-(3) (a root search per sample).
+        """
+        if form not in ("eq1", "breakpoints"):
+            raise DataError(f"form = {form!r}: use 'eq1' or 'breakpoints'")
+        return self._native.simulate(as_signal(x, "x"), as_scalar(y0, "y0", DataError), form)
+
+    def switching(self, x: ArrayLike, *, y0: float = 0.0) -> SwitchingSignals:
+        """The switching-function form, eq (9)-(15), with the case order of eq (1)."""
+        xi1, xi2, f1, f2, y = self._native.switching(as_signal(x, "x"), as_scalar(y0, "y0", DataError))
+        return SwitchingSignals(xi1=xi1, xi2=xi2, f1=f1, f2=f2, y=y)
+
+    def breakpoints(self, y_prev: float, x_range: tuple[float, float]) -> tuple[float, float]:
+        """z_L, z_R of eq (2)-(3): where L and R reach y_prev, searched on ``x_range``
+        (-inf or +inf when the branch does not reach y_prev there)."""
+        lo, hi = _finite_range(x_range[0], x_range[1])
+        y = as_scalar(y_prev, "y_prev", DataError)
+        if not np.isfinite(y):
+            raise DataError(f"y_prev = {y}: give a finite value")
+        return self._native.breakpoints(y, lo, hi)
+
+    def check_branches(self, x_min: float, x_max: float) -> BranchCheck:
+        """Check on [x_min, x_max] that both branches increase and do not cross."""
+        d: Any = self._native.check_branches(*_finite_range(x_min, x_max))
+        return BranchCheck(**d)
+
+    def characteristic(self, x_min: float, x_max: float, num: int = 400) -> tuple[NDArray[np.float64], ...]:
+        """(x, L(x), R(x)) on a grid, for plotting the characteristic (Fig. 1, 4, 7)."""
+        x = np.linspace(x_min, x_max, num)
+        return x, self.left(x), self.right(x)
+
+    # -- serialisation -------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "c_left": self._c_left,
+            "c_right": self._c_right,
+            "m_left": self._m_left.tolist(),
+            "m_right": self._m_right.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> GeneralBacklash:
+        return cls(data["c_left"], data["c_right"], data["m_left"], data["m_right"])
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # rebuilt (and revalidated) from its parameters: the Rust object does not pickle
+        return (GeneralBacklash, (self._c_left, self._c_right, self._m_left.tolist(), self._m_right.tolist()))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, GeneralBacklash):
+            return NotImplemented
+        return (
+            self._c_left == other._c_left
+            and self._c_right == other._c_right
+            and np.array_equal(self._m_left, other._m_left)
+            and np.array_equal(self._m_right, other._m_right)
+        )
+
+    def __hash__(self) -> int:
+        return hash((self._c_left, self._c_right, tuple(self._m_left), tuple(self._m_right)))
+
+    def __repr__(self) -> str:
+        return (
+            f"GeneralBacklash(c_L={self._c_left:.6g}, c_R={self._c_right:.6g}, "
+            f"m_L={format_list(self._m_left)}, m_R={format_list(self._m_right)})"
+        )
