@@ -6,7 +6,7 @@
   where the model has it (the backlash memory y(t-1) of the cascade; the output block's past
   w(t-j) of the sandwich). Always smaller; it says little about simulation quality.
 
-``skip`` leaves out an initial transient (records rarely start at rest).
+``warmup`` samples at the start are left out (records rarely start at rest), as in the fits.
 """
 
 from __future__ import annotations
@@ -24,35 +24,35 @@ __all__ = ["Metrics", "evaluate", "fit_percent", "nrmse", "one_step_prediction",
 
 
 
-def _pair(y: ArrayLike, y_hat: ArrayLike, skip: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _pair(y: ArrayLike, y_hat: ArrayLike, warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     a, b = as_signal(y, "y").ravel(), as_signal(y_hat, "y_hat").ravel()
     if a.shape != b.shape:
         raise DataError(f"y has {a.size} samples and y_hat {b.size}: compare signals of one record")
-    if not 0 <= skip < a.size:
-        raise DataError(f"skip = {skip}: give 0 <= skip < {a.size} (the record length)")
-    return a[skip:], b[skip:]
+    if not 0 <= warmup < a.size:
+        raise DataError(f"warmup = {warmup}: give 0 <= warmup < {a.size} (the record length)")
+    return a[warmup:], b[warmup:]
 
 
-def rmse(y: ArrayLike, y_hat: ArrayLike, *, skip: int = 0) -> float:
-    """Root mean square of y - y_hat over the samples from ``skip`` on."""
-    a, b = _pair(y, y_hat, skip)
+def rmse(y: ArrayLike, y_hat: ArrayLike, *, warmup: int = 0) -> float:
+    """Root mean square of y - y_hat over the samples from ``warmup`` on."""
+    a, b = _pair(y, y_hat, warmup)
     return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
-def nrmse(y: ArrayLike, y_hat: ArrayLike, *, skip: int = 0) -> float:
-    """RMSE divided by the standard deviation of y (both from ``skip`` on): 0 is perfect, 1
+def nrmse(y: ArrayLike, y_hat: ArrayLike, *, warmup: int = 0) -> float:
+    """RMSE divided by the standard deviation of y (both from ``warmup`` on): 0 is perfect, 1
     is no better than the mean."""
-    a, b = _pair(y, y_hat, skip)
+    a, b = _pair(y, y_hat, warmup)
     std = float(np.std(a))
     if std == 0.0:
         raise DataError("y is constant over the evaluated samples: NRMSE is undefined")
     return float(np.sqrt(np.mean((a - b) ** 2))) / std
 
 
-def fit_percent(y: ArrayLike, y_hat: ArrayLike, *, skip: int = 0) -> float:
+def fit_percent(y: ArrayLike, y_hat: ArrayLike, *, warmup: int = 0) -> float:
     """100 (1 - ||y - y_hat|| / ||y - mean(y)||), as MATLAB's compare reports it; equals
     100 (1 - NRMSE)."""
-    return 100.0 * (1.0 - nrmse(y, y_hat, skip=skip))
+    return 100.0 * (1.0 - nrmse(y, y_hat, warmup=warmup))
 
 
 def one_step_prediction(model: Model, u: ArrayLike, y: ArrayLike) -> NDArray[np.float64]:
@@ -91,26 +91,26 @@ class Metrics:
     simulation_fit_percent: float
     prediction_rmse: float
     samples: int
-    skip: int
+    warmup: int
 
     def __str__(self) -> str:
         return (
             f"free-run simulation: RMSE {self.simulation_rmse:.6g}, NRMSE {self.simulation_nrmse:.4f}, "
             f"fit {self.simulation_fit_percent:.2f} %; one-step prediction: RMSE {self.prediction_rmse:.6g} "
-            f"({self.samples} samples after skipping {self.skip})"
+            f"({self.samples} samples after a warm-up of {self.warmup})"
         )
 
 
-def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, skip: int = 0) -> Metrics:
-    """Both kinds of error of ``model`` on the record (u, y), from sample ``skip`` on."""
+def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0) -> Metrics:
+    """Both kinds of error of ``model`` on the record (u, y), from sample ``warmup`` on."""
     u_arr, y_arr = as_signal(u, "u").ravel(), as_signal(y, "y").ravel()
     simulated = model.simulate(u_arr)
     predicted = one_step_prediction(model, u_arr, y_arr)
     return Metrics(
-        simulation_rmse=rmse(y_arr, simulated, skip=skip),
-        simulation_nrmse=nrmse(y_arr, simulated, skip=skip),
-        simulation_fit_percent=fit_percent(y_arr, simulated, skip=skip),
-        prediction_rmse=rmse(y_arr, predicted, skip=skip),
-        samples=y_arr.size - skip,
-        skip=skip,
+        simulation_rmse=rmse(y_arr, simulated, warmup=warmup),
+        simulation_nrmse=nrmse(y_arr, simulated, warmup=warmup),
+        simulation_fit_percent=fit_percent(y_arr, simulated, warmup=warmup),
+        prediction_rmse=rmse(y_arr, predicted, warmup=warmup),
+        samples=y_arr.size - warmup,
+        warmup=warmup,
     )

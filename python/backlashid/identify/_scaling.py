@@ -83,10 +83,10 @@ def simulate_scaled(model: Model, scaling: Scaling, u: ArrayLike) -> NDArray[np.
     return scaling.output_from_model(model.simulate(scaling.input_to_model(u)))
 
 
-def evaluate_scaled(model: Model, scaling: Scaling, u: ArrayLike, y: ArrayLike, *, skip: int = 0) -> Metrics:
+def evaluate_scaled(model: Model, scaling: Scaling, u: ArrayLike, y: ArrayLike, *, warmup: int = 0) -> Metrics:
     """:func:`backlashid.evaluate` in measured units: the affine map leaves NRMSE and fit %
     unchanged and multiplies both RMSEs by |output_scale|."""
-    m = evaluate(model, scaling.input_to_model(u), scaling.output_to_model(y), skip=skip)
+    m = evaluate(model, scaling.input_to_model(u), scaling.output_to_model(y), warmup=warmup)
     k = abs(scaling.output_scale)
     return Metrics(
         simulation_rmse=m.simulation_rmse * k,
@@ -94,5 +94,5 @@ def evaluate_scaled(model: Model, scaling: Scaling, u: ArrayLike, y: ArrayLike, 
         simulation_fit_percent=m.simulation_fit_percent,
         prediction_rmse=m.prediction_rmse * k,
         samples=m.samples,
-        skip=m.skip,
+        warmup=m.warmup,
     )
