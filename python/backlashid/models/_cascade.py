@@ -47,7 +47,6 @@ class CascadeSimulation:
     f2: NDArray[np.bool_]
     final_state: CascadeState
 
-    @property
     def moving_fraction(self) -> float:
         """Fraction of samples where the backlash output moved along a branch (f1 or f2)."""
         return float(np.mean(self.f1 | self.f2))

@@ -80,7 +80,6 @@ class LinearBlock:
         p = np.array([complex(re, im) for re, im in self._native.poles()], dtype=np.complex128)
         return p[np.argsort(-np.abs(p), kind="stable")]
 
-    @property
     def spectral_radius(self) -> float:
         """Largest pole modulus (0 for an FIR block)."""
         p = self.poles()
@@ -88,9 +87,8 @@ class LinearBlock:
 
     def is_stable(self) -> bool:
         """True when every pole lies strictly inside the unit circle."""
-        return self.spectral_radius < 1.0
+        return self.spectral_radius() < 1.0
 
-    @property
     def static_gain(self) -> float:
         """Steady-state gain sum(a) / (1 + sum(b)); inf at a pole z = 1."""
         den = 1.0 + float(self._b.sum())

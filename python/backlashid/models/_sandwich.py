@@ -49,7 +49,6 @@ class SandwichSimulation:
     f2: NDArray[np.bool_]
     final_state: SandwichState
 
-    @property
     def moving_fraction(self) -> float:
         return float(np.mean(self.f1 | self.f2))
 
