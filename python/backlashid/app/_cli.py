@@ -126,7 +126,7 @@ def _fit_model(kind: str, u: np.ndarray, y: np.ndarray, na: int, nb: int, nr: in
     if kind == "sandwich":
         return fit_sandwich(u, y, na=na, nb=nb, nr=nr, ns=ns, degree=degree, warmup=warmup, max_iter=max_iter,
                             feedthrough=feedthrough, output_feedthrough=feedthrough, coarse=coarse)
-    return fit_wiener_hammerstein(u, y, degree=degree, orders=(nb, ns), warmup=warmup, feedthrough=feedthrough)
+    return fit_wiener_hammerstein(u, y, nb=nb, ns=ns, degree=degree, warmup=warmup, feedthrough=feedthrough)
 
 
 def _metrics_dict(metrics: Any) -> dict[str, Any]:

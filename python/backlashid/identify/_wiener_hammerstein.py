@@ -4,13 +4,13 @@ A sandwich (Section 4) whose backlash has zero width and tied branches (c_L = c_
 m_L = m_R, so L = R = f and eq (1) reduces to y(t) = f(x(t)) whatever f's shape) is a
 Wiener-Hammerstein model. The fitted model is an ordinary :class:`SandwichModel`:
 
-    x(t) = sum_{i=1}^{n1} a_i u(t-i) - sum_j b_j x(t-j)        G1, eq (16)
+    x(t) = sum_{i=1}^{nb} a_i u(t-i) - sum_j b_j x(t-j)        G1, eq (16)
     y(t) = f(x(t)) = sum_{i=1}^{n} m_i x(t)^i                  tied branches, c_L = c_R = 0
-    w(t) = sum_{i=1}^{n2} r_i y(t-i) - sum_j s_j w(t-j)        G2, eq (29)
+    w(t) = sum_{i=1}^{ns} r_i y(t-i) - sum_j s_j w(t-j)        G2, eq (29)
 
 How it is fitted (the standard route for this structure, e.g. Schoukens et al.):
 
-1. the best linear approximation (BLA): an output-error model of order n1 + n2 with an output
+1. the best linear approximation (BLA): an output-error model of order nb + ns with an output
    offset (the linear baseline);
 2. its poles and zeros split between G1 and G2 in every way that keeps complex-conjugate pairs
    together; each split is refined briefly (Levenberg-Marquardt, low degree, a sub-record) and
@@ -78,7 +78,7 @@ def wiener_hammerstein_model(
 @dataclass(frozen=True)
 class LinearBaseline:
     """The best linear approximation: w(t) = G(q) u(t) + offset, an output-error model
-    of order n1 + n2 (input lags from 2, the two blocks' delays, or from 0 with feedthrough;
+    of order nb + ns (input lags from 2, the two blocks' delays, or from 0 with feedthrough;
     the lag-1 coefficient is then zero) plus a constant output offset."""
 
     linear: LinearBlock
@@ -101,7 +101,8 @@ class WienerHammersteinFit:
     model: SandwichModel
     baseline: LinearBaseline
     degree: int
-    orders: tuple[int, int]
+    nb: int
+    ns: int
     warmup: int
     simulation_rmse: float
     baseline_rmse: float
@@ -137,10 +138,10 @@ class WienerHammersteinFit:
         return out
 
     def summary(self) -> str:
-        n1, n2 = self.orders
         return "\n".join(
             [
-                f"Wiener-Hammerstein fit: G1 order {n1}, f degree {self.degree}, G2 order {n2}, warm-up {self.warmup}",
+                f"Wiener-Hammerstein fit: G1 order nb = {self.nb}, f degree {self.degree}, G2 order ns = {self.ns}, "
+                f"warm-up {self.warmup}",
                 f"free-run simulation RMSE on the estimation data: {self.simulation_rmse:.6g} "
                 f"(linear baseline {self.baseline_rmse:.6g}, {self.baseline_rmse / self.simulation_rmse:.1f}x larger)",
                 f"{len(self.split_rmse)} pole/zero splits tried; final LM: {self.iterations} evaluations"
@@ -153,7 +154,8 @@ class WienerHammersteinFit:
             "model": self.model.to_dict(),
             "baseline": self.baseline.to_dict(),
             "degree": self.degree,
-            "orders": list(self.orders),
+            "nb": self.nb,
+            "ns": self.ns,
             "warmup": self.warmup,
             "simulation_rmse": self.simulation_rmse,
             "baseline_rmse": self.baseline_rmse,
@@ -169,12 +171,12 @@ class WienerHammersteinFit:
 
 @dataclass(frozen=True)
 class _Param:
-    """theta = [a (lags d..n1), b (n1), c_1..c_n (Chebyshev coefficients of f in x / k),
-    r (lags d..n2), s (n2)], with f(x) = sum_i c_i (T_i(x / k) - T_i(0)) so that f(0) = 0;
+    """theta = [a (lags d..nb), b (nb), c_1..c_n (Chebyshev coefficients of f in x / k),
+    r (lags d..ns), s (ns)], with f(x) = sum_i c_i (T_i(x / k) - T_i(0)) so that f(0) = 0;
     the first lag d is 0 with feedthrough, else 1."""
 
-    n1: int
-    n2: int
+    nb: int
+    ns: int
     degree: int
     feedthrough: bool = False
     k: float = 1.0
@@ -186,7 +188,7 @@ class _Param:
     @property
     def sizes(self) -> list[int]:
         d = self.delay
-        return [self.n1 + 1 - d, self.n1, self.degree, self.n2 + 1 - d, self.n2]
+        return [self.nb + 1 - d, self.nb, self.degree, self.ns + 1 - d, self.ns]
 
     def numerator(self, coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.r_[np.zeros(self.delay), coefficients]
@@ -238,13 +240,13 @@ class _Param:
         den1, num2, den2 = np.r_[1.0, b], self.numerator(r), np.r_[1.0, s]
         u_f, x_f = lfilter([1.0], den1, u), lfilter([1.0], den1, x)
         dx = np.column_stack(
-            [_delayed(u_f, i) for i in range(d, self.n1 + 1)] + [-_delayed(x_f, j) for j in range(1, self.n1 + 1)]
+            [_delayed(u_f, i) for i in range(d, self.nb + 1)] + [-_delayed(x_f, j) for j in range(1, self.nb + 1)]
         )
         j_g1 = lfilter(num2, den2, dx * (dbasis @ c)[:, None], axis=0)
         j_f = lfilter(num2, den2, basis, axis=0)
         f_f, w_f = lfilter([1.0], den2, f), lfilter([1.0], den2, w)
         j_g2 = np.column_stack(
-            [_delayed(f_f, i) for i in range(d, self.n2 + 1)] + [-_delayed(w_f, j) for j in range(1, self.n2 + 1)]
+            [_delayed(f_f, i) for i in range(d, self.ns + 1)] + [-_delayed(w_f, j) for j in range(1, self.ns + 1)]
         )
         return np.hstack([j_g1, j_f, j_g2])[warmup:]
 
@@ -312,13 +314,13 @@ def _subsets(roots: NDArray[np.complex128], sizes: range) -> list[tuple[list[com
     return out
 
 
-def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], n1: int, n2: int, room: tuple[int, int]) -> list[tuple[list[complex], ...]]:
-    """(G1 poles, G2 poles, G1 zeros, G2 zeros) with n1 poles in G1, n2 in G2, and at most
-    n1 and n2 zeros (n - 1 when the block keeps a one-sample delay). Only when no split keeps
+def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], nb: int, ns: int, room: tuple[int, int]) -> list[tuple[list[complex], ...]]:
+    """(G1 poles, G2 poles, G1 zeros, G2 zeros) with nb poles in G1, ns in G2, and at most
+    nb and ns zeros (n - 1 when the block keeps a one-sample delay). Only when no split keeps
     every zero (e.g. a complex pair when each block has room for one zero) are zeros left out:
     the refinement moves the numerators anyway."""
     whole, partial = [], []
-    for p1, p2 in _subsets(poles, range(n1, n1 + 1)):
+    for p1, p2 in _subsets(poles, range(nb, nb + 1)):
         for z1, rest in _subsets(zeros, range(0, room[0] + 1)):
             if len(rest) <= room[1]:
                 whole.append((p1, p2, z1, rest))
@@ -334,8 +336,8 @@ def _theta_from_split(param: _Param, u: NDArray[np.float64], split: tuple[list[c
     p1, p2, z1, z2 = split
     d = param.delay
     b, s = np.poly(p1).real, np.poly(p2).real
-    a = np.r_[np.zeros(param.n1 - d - len(z1)), np.poly(z1).real]
-    r = np.r_[np.zeros(param.n2 - d - len(z2)), np.poly(z2).real] * gain
+    a = np.r_[np.zeros(param.nb - d - len(z1)), np.poly(z1).real]
+    r = np.r_[np.zeros(param.ns - d - len(z2)), np.poly(z2).real] * gain
     x = lfilter(param.numerator(a), b, u)
     scale = np.max(np.abs(x)) / param.k
     c = np.zeros(param.degree)
@@ -343,7 +345,7 @@ def _theta_from_split(param: _Param, u: NDArray[np.float64], split: tuple[list[c
     return np.r_[a / scale, b[1:], c, r * scale, s[1:]]
 
 
-def _check(u: ArrayLike, y: ArrayLike, degree: int, orders: tuple[int, int], warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _check(u: ArrayLike, y: ArrayLike, degree: int, nb: int, ns: int, warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     u_arr, y_arr = as_signal(u, "u"), as_signal(y, "y")
     if u_arr.ndim != 1 or y_arr.ndim != 1 or len(u_arr) != len(y_arr):
         raise DataError(f"u and y must be 1-D signals of one record (got shapes {u_arr.shape} and {y_arr.shape})")
@@ -353,11 +355,12 @@ def _check(u: ArrayLike, y: ArrayLike, degree: int, orders: tuple[int, int], war
             raise DataError(f"{name}[{bad[0]}] is {arr[bad[0]]}: remove or interpolate non-finite samples")
     if not isinstance(degree, (int, np.integer)) or degree < 1:
         raise DataError(f"degree = {degree!r}: give a whole number >= 1")
-    if len(orders) != 2 or any(not isinstance(n, (int, np.integer)) or n < 1 for n in orders):
-        raise DataError(f"orders = {orders!r}: give (n1, n2), the orders of G1 and G2, each >= 1")
+    for name, n, block in (("nb", nb, "G1"), ("ns", ns, "G2")):
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise DataError(f"{name} = {n!r}: give the order of {block}, a whole number >= 1")
     if not 0 <= warmup < len(u_arr):
         raise DataError(f"warmup = {warmup}: give 0 <= warmup < {len(u_arr)} (the record length)")
-    n_par = 2 * sum(orders) + degree
+    n_par = 2 * (nb + ns) + degree
     if len(u_arr) - warmup < 10 * n_par:
         raise DataError(f"{len(u_arr) - warmup} samples after the warm-up for {n_par} parameters: give at least {10 * n_par}")
     if np.ptp(u_arr) == 0.0:
@@ -368,9 +371,10 @@ def _check(u: ArrayLike, y: ArrayLike, degree: int, orders: tuple[int, int], war
 def fit_wiener_hammerstein(
     u: ArrayLike,
     y: ArrayLike,
-    degree: int = 20,
-    orders: tuple[int, int] = (3, 3),
     *,
+    nb: int = 3,
+    ns: int = 3,
+    degree: int = 20,
     warmup: int = 100,
     max_iter: int = 200,
     split_samples: int = 20_000,
@@ -383,7 +387,7 @@ def fit_wiener_hammerstein(
     ``degree``: degree n of f (13-25 for a sharp nonlinearity such as a diode; the cost of
     each iteration grows linearly with it). On the SYSID 2009 benchmark (100 000 training
     samples) the free-run test RMSE was 0.95 / 0.71 / 0.53 mV at degree 15 / 20 / 25 (linear
-    baseline 43.3 mV), 11-15 s per fit; degree 30 got worse (0.95 mV). ``orders = (n1, n2)``: orders of G1 and G2 (each
+    baseline 43.3 mV), 11-15 s per fit; degree 30 got worse (0.95 mV). ``nb``, ``ns``: orders of G1 and G2 (each
     with a one-sample delay, so the model's total delay is 2 samples; ``feedthrough=True``
     gives both a lag-0 term instead, ``LinearBlock(.., feedthrough=True)``). ``warmup`` samples at
     the start are left out of every criterion (the record does not start at rest).
@@ -395,22 +399,22 @@ def fit_wiener_hammerstein(
     Raises DataError for bad data or settings, NotConvergedError if no split gives a stable
     model.
     """
-    u_arr, y_arr = _check(u, y, degree, orders, warmup)
-    n1, n2 = int(orders[0]), int(orders[1])
+    u_arr, y_arr = _check(u, y, degree, nb, ns, warmup)
+    nb, ns = int(nb), int(ns)
     started = time.perf_counter()
     delay = 0 if feedthrough else 2
-    num, den, offset = _best_linear(u_arr, y_arr, n1 + n2, delay, warmup)
+    num, den, offset = _best_linear(u_arr, y_arr, nb + ns, delay, warmup)
     baseline = LinearBaseline(LinearBlock(num, den[1:], feedthrough=True) if feedthrough else LinearBlock(num[1:], den[1:]), offset)
     baseline_rmse = float(np.sqrt(np.mean((baseline.simulate(u_arr) - y_arr)[warmup:] ** 2)))
     lead = np.trim_zeros(num, "f")
     poles, zeros = np.roots(den), np.roots(lead)
 
-    short = _Param(n1, n2, min(split_degree, degree), feedthrough)
-    n_short = min(len(u_arr), max(split_samples, warmup + 10 * (2 * (n1 + n2) + short.degree)))
+    short = _Param(nb, ns, min(split_degree, degree), feedthrough)
+    n_short = min(len(u_arr), max(split_samples, warmup + 10 * (2 * (nb + ns) + short.degree)))
     u_s, y_s = u_arr[:n_short], y_arr[:n_short]
     ranked = []
-    room = (n1 - short.delay, n2 - short.delay)
-    for split in _splits(poles, zeros, n1, n2, room):
+    room = (nb - short.delay, ns - short.delay)
+    for split in _splits(poles, zeros, nb, ns, room):
         theta = _theta_from_split(short, u_s, split, float(lead[0]))
         if not short.stable(theta):
             continue
@@ -423,7 +427,7 @@ def fit_wiener_hammerstein(
     ranked.sort(key=lambda item: item[0])
     _, theta_short, split = ranked[0]
 
-    full = _Param(n1, n2, degree, feedthrough)
+    full = _Param(nb, ns, degree, feedthrough)
     a, b, c_short, r, s = short.split(theta_short)
     c = np.zeros(degree)
     c[: short.degree] = c_short
@@ -441,7 +445,8 @@ def fit_wiener_hammerstein(
         model=model,
         baseline=baseline,
         degree=degree,
-        orders=(n1, n2),
+        nb=nb,
+        ns=ns,
         warmup=warmup,
         simulation_rmse=rmse,
         baseline_rmse=baseline_rmse,
