@@ -9,7 +9,9 @@ removes the bias of the equation-error iterations under noise.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
+import inspect
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -17,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
+from .._docstrings import fill
 from .._validation import as_signal
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
@@ -398,22 +401,22 @@ def _fit(
     structure: Structure,
     u: ArrayLike,
     y: ArrayLike,
-    *,
     y_name: str,
+    *,
     initial: Start,
-    starts: Sequence[Start] | None,
-    max_iter: int,
-    tol: float,
     switching: Switching,
     step: float,
-    refine: bool,
-    paper: bool,
-    warmup: int,
-    min_moving: float,
-    restarts: int | None,
-    perturbation: float,
-    seed: int,
-    coarse: int | None,
+    starts: Sequence[Start] | None = None,
+    max_iter: int = 50,
+    tol: float = 1e-3,
+    refine: bool = True,
+    paper: bool = False,
+    warmup: int = 0,
+    min_moving: float = 0.1,
+    restarts: int | None = None,
+    perturbation: float = 0.05,
+    seed: int = 0,
+    coarse: int | None = None,
 ) -> FitResult:
     if switching not in ("measured", "simulated"):
         raise DataError(f"switching = {switching!r}: use 'measured' or 'simulated'")
@@ -525,6 +528,90 @@ def _fit(
     )
 
 
+# The options both fits share: declared once (the keyword defaults of ``_fit``), documented
+# once (``_OPTIONS_DOC``), shown in the signature and docstring of each (``_shared_options``).
+_OPTIONS_DOC = """starts : sequence of (float, float, float), optional
+    Further starts (m_R1, c_L, c_R) of the iterations; the run with the lowest simulation
+    error is refined (default algorithm only).
+max_iter : int, default 50
+    Iterations of the paper's algorithm, at least 2 (iterate 1 is the linear ARX start).
+tol : float, default 1e-3
+    The iterations stop when no parameter changes by more than this, relative to its size.
+refine : bool, default True
+    Refine the best iterate by output-error Levenberg-Marquardt on the free-run simulation
+    error, which removes the bias of the equation-error iterations under noise.
+paper : bool, default False
+    Run the paper's plain algorithm instead: measured y(t-1) in the switching functions,
+    step 1, no pole reflection, no refinement, and the last iterate is the result.
+warmup : int, default 0
+    Samples at the start left out of every criterion (the record's initial state is unknown).
+min_moving : float, default 0.1
+    Smallest fraction of samples on which the fitted backlash must move (f1 or f2 of
+    eq 12-13); below it the data do not determine the branches.
+restarts : int, optional
+    Levenberg-Marquardt restarts from the result plus N(0, ``perturbation`` ** 2) noise, each
+    kept only if it lowers the simulation error. By default 4 on records of up to 20 000
+    samples after the warm-up and none on longer ones, where they change nothing.
+perturbation : float, default 0.05
+    Standard deviation of the restarts' perturbation.
+seed : int, default 0
+    Seed of the restarts' random generator, so that results are reproducible.
+coarse : int, optional
+    Coarse to fine: the iterations and the Levenberg-Marquardt candidates (and any restarts)
+    run on the first ``coarse`` samples after the warm-up only, and Levenberg-Marquardt then
+    refines the best of them on the whole record (the same optimum, several times faster).
+    By default the segment is max(5000, 200 p) samples for p parameters, used on records at
+    least 10 times as long; 0 fits on the whole record throughout.
+    ``FitResult.coarse_samples`` says which ran; the history is then the segment's."""
+_DATA_DOC = """u : array_like
+    Input u(t), 1-D, finite.
+{y} : array_like
+    Measured output {y}(t), 1-D, finite, as long as ``u``.
+na : int, default 2
+    Input lags of the {block} (a_1..a_na of eq 16).
+nb : int, default 2
+    Output lags of the {block} (b_1..b_nb of eq 16)."""
+_OUTCOME_DOC = """Returns
+-------
+FitResult
+    The model, its parameters under the paper's names with standard errors, the iteration
+    history and how the fit ended.
+
+Raises
+------
+DataError
+    If the data or a setting cannot be used (non-finite samples, too short a record, a bad
+    warm-up, order or option).
+NotIdentifiableError
+    If the data do not determine the parameters (a constant input or output, a
+    rank-deficient regressor, a backlash that hardly moves).
+NotConvergedError
+    If the estimate is unstable, diverges or is no valid model; its ``best`` holds it."""
+_OPTIONS = ("starts", "max_iter", "tol", "refine", "paper", "warmup", "min_moving", "restarts", "perturbation", "seed", "coarse")
+
+
+def _shared_options(function: Callable[..., FitResult]) -> Callable[..., FitResult]:
+    """``function(.., **options)`` with the shared options of :func:`_fit` in its signature
+    (what ``help``, ``inspect`` and Sphinx show), its docstring (``{options}``) and its
+    argument check (an unknown or a missing keyword raises TypeError, as for any function)."""
+    shared = [p for name, p in inspect.signature(_fit).parameters.items() if name in _OPTIONS]
+    own = inspect.signature(function)
+    signature = own.replace(parameters=[p for p in own.parameters.values() if p.kind is not p.VAR_KEYWORD] + shared)
+
+    @functools.wraps(function)
+    def checked(*args: Any, **kwargs: Any) -> FitResult:
+        try:
+            signature.bind(*args, **kwargs)
+        except TypeError as exc:
+            raise TypeError(f"{function.__name__}() {exc}") from None
+        return function(*args, **kwargs)
+
+    checked.__signature__ = signature  # type: ignore[attr-defined]
+    return fill(options=_OPTIONS_DOC, outcome=_OUTCOME_DOC)(checked)
+
+
+@_shared_options
+@fill(data=_DATA_DOC.format(y="y", block="linear block"))
 def fit_cascade(
     u: ArrayLike,
     y: ArrayLike,
@@ -533,52 +620,51 @@ def fit_cascade(
     degree: int = 3,
     *,
     initial: Start = (1.0, 0.001, 0.001),
-    starts: Sequence[Start] | None = None,
-    max_iter: int = 50,
-    tol: float = 1e-3,
     switching: Switching = "measured",
     step: float = 1.0,
-    refine: bool = True,
-    paper: bool = False,
-    warmup: int = 0,
-    min_moving: float = 0.1,
-    restarts: int | None = None,
-    perturbation: float = 0.05,
-    seed: int = 0,
     feedthrough: bool = False,
-    coarse: int | None = None,
+    **options: Any,
 ) -> FitResult:
     """Identify a cascade u -> linear block (16) -> general backlash (1) -> y (Section 3).
 
-    ``initial = (m_R1, c_L, c_R)`` seeds the switching functions of the first iteration;
-    ``switching`` says which y(t-1) enters f1, f2 (eq 25-26): the "measured" output as the paper
-    reads, or the model's "simulated" one; ``step`` relaxes each update; ``warmup`` samples at
-    the start are left out of every criterion (the record's initial state is unknown).
-    ``paper=True`` runs the paper's plain algorithm (measured y, step 1, no pole reflection, no
-    refinement, the last iterate). By default the best iterate is refined by output-error
-    Levenberg-Marquardt on the free-run simulation error, then ``restarts`` LM runs from the
-    result plus N(0, ``perturbation``^2) noise (random generator seeded by ``seed``, so results
-    are reproducible), each kept only if it lowers the simulation error. By default 4 restarts
-    run on records of up to 20 000 samples (after the warm-up) and none on longer ones,
-    where the cost surface is smooth enough that they change nothing.
+    The paper's iterative algorithm (eq 17-28) runs first, each iteration one call into the
+    Rust core; by default the iterate with the lowest free-run simulation error is then
+    refined by output-error Levenberg-Marquardt with exact sensitivities.
 
-    ``coarse`` (samples): on long records the iterations and the LM candidates (and any
-    restarts) run on the first ``coarse`` samples after the warm-up only, and LM then refines
-    the best of them on the whole record (the same optimum, several times faster). By default (None) the segment
-    is max(5000, 200 p) samples for p parameters, used on records at least 10 times as long;
-    0 fits on the whole record throughout. ``FitResult.coarse_samples`` says which ran; the
-    history is then the segment's.
+    Parameters
+    ----------
+    {data}
+    degree : int, default 3
+        Degree n of the backlash branches (eq 4-5).
+    initial : (float, float, float), default (1.0, 0.001, 0.001)
+        (m_R1, c_L, c_R) that seed the switching functions of the first iteration.
+    switching : {'measured', 'simulated'}, default 'measured'
+        Which y(t-1) enters f1, f2 (eq 25-26): the measured output, as the paper reads, or
+        the model's simulated one.
+    step : float, default 1.0
+        Relaxation of each update, in (0, 1].
+    feedthrough : bool, default False
+        Add the lag-0 term a_0 u(t) to the linear block (parameters a0..a_na; the model's
+        block is ``LinearBlock(a, b, feedthrough=True)``).
+    {options}
 
-    ``feedthrough=True`` adds the lag-0 term a_0 u(t) to the linear block (parameters a0..a_na;
-    the model's block is ``LinearBlock(a, b, feedthrough=True)``).
+    {outcome}
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+    >>> result = bid.fit_cascade(data.u, data.noisy, na=2, nb=2, degree=3)
+    >>> round(result.parameters["c_L"], 2), result.converged
+    (0.6, True)
     """
     return _fit(
-        Structure(na, nb, degree, feedthrough=feedthrough), u, y, y_name="y", initial=initial, starts=starts, max_iter=max_iter,
-        tol=tol, switching=switching, step=step, refine=refine, paper=paper, warmup=warmup, min_moving=min_moving,
-        restarts=restarts, perturbation=perturbation, seed=seed, coarse=coarse,
+        Structure(na, nb, degree, feedthrough=feedthrough), u, y, "y", initial=initial, switching=switching, step=step, **options
     )
 
 
+@_shared_options
+@fill(data=_DATA_DOC.format(y="w", block="input block"))
 def fit_sandwich(
     u: ArrayLike,
     w: ArrayLike,
@@ -589,28 +675,48 @@ def fit_sandwich(
     degree: int = 3,
     *,
     initial: Start = (1.25, 0.1, 0.1),
-    starts: Sequence[Start] | None = None,
-    max_iter: int = 50,
-    tol: float = 1e-3,
     step: float = 0.5,
-    refine: bool = True,
-    paper: bool = False,
-    warmup: int = 0,
-    min_moving: float = 0.1,
-    restarts: int | None = None,
-    perturbation: float = 0.05,
-    seed: int = 0,
     feedthrough: bool = False,
     output_feedthrough: bool = False,
-    coarse: int | None = None,
+    **options: Any,
 ) -> FitResult:
-    """Identify a sandwich u -> linear (16) -> general backlash (1) -> linear (29) -> w
-    (Section 4). Options as in :func:`fit_cascade`; the default ``step`` is 0.5 and pole
-    reflection is on, since the plain iterations diverge for most noise draws.
-    ``feedthrough`` adds a_0 u(t) to the input block, ``output_feedthrough`` r_0 y(t) to the
-    output block (then r_0 = 1 is the fixed normalisation and r1..r_nr are estimated)."""
-    return _fit(
-        Structure(na, nb, degree, nr, ns, feedthrough=feedthrough, output_feedthrough=output_feedthrough), u, w, y_name="w", initial=initial, starts=starts, max_iter=max_iter,
-        tol=tol, switching="simulated", step=step, refine=refine, paper=paper, warmup=warmup, min_moving=min_moving,
-        restarts=restarts, perturbation=perturbation, seed=seed, coarse=coarse,
-    )
+    """Identify a sandwich u -> linear (16) -> general backlash (1) -> linear (29) -> w (Section 4).
+
+    The paper's iterative algorithm (eq 29-36) with the internal y simulated (eq 35), then by
+    default the output-error refinement, as in :func:`fit_cascade`. The default ``step`` is
+    0.5 and unstable poles are reflected, since the plain iterations diverge for most noise
+    draws.
+
+    Parameters
+    ----------
+    {data}
+    nr : int, default 2
+        Input lags of the output block (r_1..r_nr of eq 29; r_1 = 1 is the normalisation).
+    ns : int, default 2
+        Output lags of the output block (s_1..s_ns of eq 29).
+    degree : int, default 3
+        Degree n of the backlash branches (eq 4-5).
+    initial : (float, float, float), default (1.25, 0.1, 0.1)
+        (m_R1, c_L, c_R) that seed the switching functions of the first iteration.
+    step : float, default 0.5
+        Relaxation of each update, in (0, 1].
+    feedthrough : bool, default False
+        Add a_0 u(t) to the input block.
+    output_feedthrough : bool, default False
+        Add r_0 y(t) to the output block (r_0 = 1 is then the normalisation and r1..r_nr are
+        estimated).
+    {options}
+
+    {outcome}
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> truth = bid.example2()
+    >>> data = bid.example_data(truth, 1500, snr=100, seed=0)
+    >>> result = bid.fit_sandwich(data.u, data.noisy)
+    >>> round(result.parameters["c_R"], 1), result.model.output_linear.nb
+    (0.5, 2)
+    """
+    structure = Structure(na, nb, degree, nr, ns, feedthrough=feedthrough, output_feedthrough=output_feedthrough)
+    return _fit(structure, u, w, "w", initial=initial, switching="simulated", step=step, **options)
