@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import pickle
 
 import numpy as np
 import pytest
@@ -221,8 +222,9 @@ def test_divergence_of_the_papers_sandwich_algorithm_carries_the_best_iterate():
     with pytest.raises(NotConvergedError) as info:
         fit_sandwich(d.u, d.noisy, paper=True)
     best = info.value.best
-    assert set(best) >= {"parameters", "history", "simulation_rmse"}
-    assert best["history"].shape[1] == 14
+    assert isinstance(best, bid.FitResult) and not best.converged
+    assert len(best.parameters) == 14 and best.history.shape[1] == 14 and isinstance(best.simulation_rmse, float)
+    assert pickle.loads(pickle.dumps(info.value)).best.parameters == best.parameters
     # the default algorithm gets the same record right
     assert max_error(fit_sandwich(d.u, d.noisy), truth) < 1e-8
 

@@ -49,47 +49,139 @@ Start = tuple[float, float, float]  # (m_R1, c_L, c_R)
 
 @dataclass(frozen=True)
 class FitResult:
-    """An identified model with its parameters under the paper's names, their standard errors,
-    the iteration history (what the paper plots in Figs 5-10) and how the fit ended."""
+    """An identified cascade or sandwich: the model, its parameters under the paper's names
+    with standard errors, the iteration history (what the paper plots in Figs 5-10) and how
+    the fit ended.
 
-    model: Model
+    Returned by :func:`fit_cascade` and :func:`fit_sandwich`, and held by
+    ``NotConvergedError.best`` when a fit fails.
+
+    Attributes
+    ----------
+    model : CascadeModel or SandwichModel or None
+        The identified model; None only in ``NotConvergedError.best`` when the estimate is no
+        valid model (e.g. branches that fall across the dead band).
+    structure : Structure
+        Orders, degree and the parameter layout.
+    theta : numpy.ndarray
+        The estimate, in the order of ``structure.names``.
+    covariance : numpy.ndarray
+        Its covariance matrix (NaN where a failed fit could not compute it).
+    history : numpy.ndarray
+        Row k: the parameters after iteration k + 1 of the paper's algorithm.
+    history_rmse : numpy.ndarray
+        The free-run simulation RMSE of each row of ``history``.
+    iterations : int
+        Iterations of the paper's algorithm.
+    converged : bool
+        The iterations or the refinement met their tolerance.
+    reason : str
+        How the iterations ended: "tolerance", "2-cycle", "iteration limit" or "diverged".
+    simulation_rmse : float
+        Free-run simulation RMSE on the estimation data after the warm-up.
+    noise_std : float
+        Residual standard deviation, the noise level the fit implies.
+    moving_fraction : float
+        Fraction of samples on which the fitted backlash moves (f1 or f2 of eq 12-13).
+    method : str
+        "default" or "paper".
+    warmup : int
+        Samples at the start left out of every criterion.
+    iterative_theta : numpy.ndarray
+        The chosen iterate of the paper's algorithm, before the refinement.
+    refinement_steps : int
+        Accepted output-error Levenberg-Marquardt steps.
+    coarse_samples : int
+        When > 0, the iterations (``history``, ``history_rmse``, ``iterative_theta``) ran on
+        the first ``coarse_samples`` samples after the warm-up and the refinement on the whole
+        record.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+    >>> result = bid.fit_cascade(data.u, data.noisy)
+    >>> result.names[:4], result.reason
+    (['a1', 'a2', 'b1', 'b2'], 'tolerance')
+    """
+
+    model: Model | None
     structure: Structure
     theta: NDArray[np.float64]
     covariance: NDArray[np.float64]
-    history: NDArray[np.float64]  # row k: parameters after iteration k + 1
-    history_rmse: NDArray[np.float64]  # free-run simulation RMSE of each row
+    history: NDArray[np.float64]
+    history_rmse: NDArray[np.float64]
     iterations: int
     converged: bool
-    reason: str  # "tolerance", "2-cycle", "iteration limit", "diverged"
-    simulation_rmse: float  # free-run simulation RMSE on the estimation data (after warm-up)
-    noise_std: float  # residual std, the noise level the fit implies
-    moving_fraction: float  # samples where the fitted backlash moves (f1 or f2)
+    reason: str
+    simulation_rmse: float
+    noise_std: float
+    moving_fraction: float
     method: str
     warmup: int
     iterative_theta: NDArray[np.float64] = field(repr=False)
     refinement_steps: int = 0
-    # > 0: the iterations (history, history_rmse, iterative_theta) ran on the first
-    # coarse_samples samples after the warm-up, and LM refined on the whole record
     coarse_samples: int = 0
 
     @property
     def names(self) -> list[str]:
+        """The parameter names, in the order of ``theta`` (``structure.names``)."""
         return self.structure.names
 
     @property
     def parameters(self) -> dict[str, float]:
+        """The estimate by name: ``theta`` under ``names``."""
         return dict(zip(self.names, map(float, self.theta)))
 
     @property
     def standard_errors(self) -> dict[str, float]:
+        """The standard errors by name: the square roots of the diagonal of ``covariance``."""
         return dict(zip(self.names, map(float, np.sqrt(np.clip(np.diag(self.covariance), 0, None)))))
 
     def errors(self, true_model: Model) -> dict[str, float]:
-        """Estimate minus truth for every parameter (the truth normalised to m_L1 = r_1 = 1)."""
+        """Estimate minus truth for every parameter.
+
+        Parameters
+        ----------
+        true_model : CascadeModel or SandwichModel
+            The true system, of this fit's structure; it is normalised to m_L1 = r_1 = 1
+            first, as the estimate is.
+
+        Returns
+        -------
+        dict of str to float
+            ``theta - truth`` by parameter name.
+
+        Raises
+        ------
+        DataError
+            If ``true_model`` has other orders or a higher degree than the fit.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> truth = bid.example1()
+        >>> data = bid.example_data(truth, 1500, snr=None, seed=0)
+        >>> max(abs(e) for e in bid.fit_cascade(data.u, data.noisy).errors(truth).values()) < 1e-6
+        True
+        """
         truth = self.structure.pack(true_model)
         return dict(zip(self.names, map(float, self.theta - truth)))
 
     def summary(self, true_model: Model | None = None) -> str:
+        """The fit as a table: how it ended, its simulation error, every parameter with its
+        standard error (and with ``true_model`` the truth and the error in standard errors).
+
+        Parameters
+        ----------
+        true_model : CascadeModel or SandwichModel, optional
+            The true system, to compare the estimate with.
+
+        Returns
+        -------
+        str
+            Several lines of text.
+        """
         kind = "Sandwich" if self.structure.is_sandwich else "Cascade"
         lines = [
             f"{kind} fit ({self.method}), {self.structure}, warm-up {self.warmup} samples",
@@ -120,23 +212,59 @@ class FitResult:
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe: model, parameters with standard errors, metrics, history."""
+        """The fit as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+            The model (``to_dict()``, or None), parameters and standard errors by name, how
+            the fit ended, its simulation error, settings and the iteration history.
+        """
         return {
-            "model": self.model.to_dict(),
+            "model": self.model.to_dict() if self.model is not None else None,
             "parameters": self.parameters,
             "standard_errors": self.standard_errors,
-            "iterations": self.iterations,
-            "converged": self.converged,
+            "iterations": int(self.iterations),
+            "converged": bool(self.converged),
             "reason": self.reason,
-            "simulation_rmse": self.simulation_rmse,
-            "noise_std": self.noise_std,
-            "moving_fraction": self.moving_fraction,
+            "simulation_rmse": float(self.simulation_rmse),
+            "noise_std": float(self.noise_std),
+            "moving_fraction": float(self.moving_fraction),
             "method": self.method,
-            "warmup": self.warmup,
-            "coarse_samples": self.coarse_samples,
+            "warmup": int(self.warmup),
+            "coarse_samples": int(self.coarse_samples),
             "history": self.history.tolist(),
             "history_rmse": self.history_rmse.tolist(),
         }
+
+    def plot(
+        self, shown: list[str] | None = None, *, truth: Model | None = None, ax: Any = None, title: str | None = None
+    ) -> Any:
+        """Plot the parameter estimates over the iterations (the paper's Figs 5, 6, 8-10),
+        with the final estimate as stars; :func:`backlashid.app.plot_trajectories`.
+
+        Parameters
+        ----------
+        shown : list of str, optional
+            The parameters to draw (default all of ``names``).
+        truth : CascadeModel or SandwichModel, optional
+            The true system, drawn as dotted lines.
+        ax : matplotlib.axes.Axes, optional
+            The axes to draw on (default a new figure).
+        title : str, optional
+            The title.
+
+        Returns
+        -------
+        matplotlib.axes.Axes
+            The axes drawn on.
+        """
+        from ..app import plot_trajectories
+
+        values = dict(zip(self.names, map(float, self.structure.pack(truth)))) if truth is not None else None
+        return plot_trajectories(
+            self.history, self.names, shown or self.names, truth=values, final=self.parameters, ax=ax, title=title
+        )
 
 
 # -- the paper's iterations ----------------------------------------------------------------------
@@ -473,41 +601,38 @@ def _fit(
     # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
     # stage always ends in a whole-record refinement, so the iterate is the whole record's)
     rmse = float(np.sqrt(refined.cost / refined.n_residuals)) if refined is not None else run.rmse[k]
-    best_info = {
-        "parameters": dict(zip(structure.names, map(float, theta))),
-        "simulation_rmse": rmse,
-        "history": np.array(run.history),
-        "reason": run.reason,
-    }
+    try:
+        model, invalid = structure.model(theta), None
+    except ModelError as exc:
+        model, invalid = None, exc
+    failure = None
     est = structure.unpack(theta)
     for den, name in ((est.b, "input"), (est.s, "output")):
         radius = spectral_radius(np.asarray(den))
         if not radius < 1.0:
-            raise NotConvergedError(
+            failure = (
                 f"the estimated {name} linear block is unstable (spectral radius {radius:.3f}); "
-                "use the default algorithm (it reflects unstable poles) or other initial values",
-                best_info,
+                "use the default algorithm (it reflects unstable poles) or other initial values"
             )
-    if not np.isfinite(rmse):
-        raise NotConvergedError("the identification diverged: the estimate simulates to no finite output", best_info)
-    try:
-        model = structure.model(theta)
-    except ModelError as exc:
-        raise NotConvergedError(f"the final estimate is not a valid model ({exc})", best_info) from None
-    moving = _moving(structure, theta, u_arr, user_warmup, model)
-    if moving < min_moving:
+            break
+    if failure is None and not np.isfinite(rmse):
+        failure = "the identification diverged: the estimate simulates to no finite output"
+    if failure is None and invalid is not None:
+        failure = f"the final estimate is not a valid model ({invalid})"
+    moving = _moving(structure, theta, u_arr, user_warmup, model) if model is not None else 0.0
+    if failure is not None:
+        try:
+            noise_var, covariance = _covariance(structure, run, refined)
+        except BacklashIdError:  # the failed estimate has no usable covariance
+            noise_var, covariance = np.nan, np.full((structure.size, structure.size), np.nan)
+    elif moving < min_moving:
         raise NotIdentifiableError(
             f"only {100 * moving:.1f} % of samples move the backlash output off its dead band "
             f"(need {100 * min_moving:.0f} %): excite the system with a larger input amplitude"
         )
-    if refined is not None:
-        noise_var = refined.cost / max(refined.n_residuals - structure.size, 1)
-        covariance = noise_var * refined.unscaled_covariance(structure.names)
     else:
-        _theta_ls, rss, _cov, rows = run.last_ls  # type: ignore[misc]
-        noise_var = rss / max(rows - structure.size, 1)
-        covariance = _ls_covariance(structure, run.last_ls)  # type: ignore[arg-type]
-    return FitResult(
+        noise_var, covariance = _covariance(structure, run, refined)
+    result = FitResult(
         model=model,
         structure=structure,
         theta=np.asarray(theta, dtype=np.float64),
@@ -515,7 +640,7 @@ def _fit(
         history=np.array(run.history),
         history_rmse=np.array(run.rmse),
         iterations=len(run.history),
-        converged=run.reason in ("tolerance", "2-cycle") or (refined is not None and refined.converged),
+        converged=failure is None and (run.reason in ("tolerance", "2-cycle") or (refined is not None and refined.converged)),
         reason=run.reason,
         simulation_rmse=rmse,
         noise_std=float(np.sqrt(noise_var)),
@@ -526,6 +651,19 @@ def _fit(
         refinement_steps=steps,
         coarse_samples=segment,
     )
+    if failure is not None:
+        raise NotConvergedError(failure, result)
+    return result
+
+
+def _covariance(structure: Structure, run: _Run, refined: OutputErrorFit | None) -> tuple[float, NDArray[np.float64]]:
+    """The noise variance and the covariance of the estimate: from the refinement's factor,
+    else from the last least-squares step of the iterations."""
+    if refined is not None:
+        noise_var = refined.cost / max(refined.n_residuals - structure.size, 1)
+        return noise_var, noise_var * refined.unscaled_covariance(structure.names)
+    _theta_ls, rss, _cov, rows = run.last_ls  # type: ignore[misc]
+    return rss / max(rows - structure.size, 1), _ls_covariance(structure, run.last_ls)  # type: ignore[arg-type]
 
 
 # The options both fits share: declared once (the keyword defaults of ``_fit``), documented
