@@ -49,7 +49,7 @@ class DataError(BacklashIdError, ValueError):
     >>> bid.evaluate(bid.example1(), [0.0, 1.0], [0.0, 1.0], warmup=5)
     Traceback (most recent call last):
     ...
-    backlashid.errors.DataError: warmup = 5: give 0 <= warmup < 2 (the record length)
+    backlashid.errors.DataError: warmup = 5: give a whole number of samples, 0 <= warmup < 2 (the record length)
     """
 
 

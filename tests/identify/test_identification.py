@@ -199,6 +199,7 @@ def test_constant_input_is_not_identifiable():
         ({"u": np.linspace(-1, 1, 50), "y": np.zeros(50)}, "at least"),
         ({"u": np.zeros((100, 2)), "y": np.zeros(100)}, "1-D"),
         ({"warmup": 5000}, "warmup"),
+        ({"warmup": 2.5}, "whole number"),
         ({"switching": "predicted"}, "switching"),
         ({"step": 0.0}, "step"),
         ({"degree": 0}, "degree"),

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._docstrings import fill
-from .._validation import as_signal
+from .._validation import identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
 from ._refine import OutputErrorFit, is_stable, refine_output_error, simulate, spectral_radius
@@ -417,34 +417,6 @@ def _ls_covariance(structure: Structure, last_ls: tuple[NDArray[np.float64], flo
     return jac @ cov @ jac.T
 
 
-def _check_data(u: ArrayLike, y: ArrayLike, structure: Structure, warmup: int, y_name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    u_arr, y_arr = as_signal(u, "u"), as_signal(y, y_name)
-    if u_arr.ndim != 1 or y_arr.ndim != 1:
-        raise DataError(f"u and {y_name} must be 1-D signals (got shapes {u_arr.shape} and {y_arr.shape})")
-    if len(u_arr) != len(y_arr):
-        raise DataError(f"u has {len(u_arr)} samples but {y_name} has {len(y_arr)}: give one record")
-    for name, arr in (("u", u_arr), (y_name, y_arr)):
-        bad = np.flatnonzero(~np.isfinite(arr))
-        if bad.size:
-            raise DataError(f"{name}[{bad[0]}] is {arr[bad[0]]}: remove or interpolate non-finite samples")
-    if not 0 <= warmup < len(u_arr):
-        raise DataError(f"warmup = {warmup}: give 0 <= warmup < {len(u_arr)} (the record length)")
-    need = 10 * structure.size
-    if len(u_arr) - warmup < need:
-        raise DataError(
-            f"{len(u_arr) - warmup} samples after the warm-up for {structure.size} parameters: "
-            f"give at least {need} (10 per parameter)"
-        )
-    if np.ptp(u_arr) == 0.0:
-        raise NotIdentifiableError("the input u is constant: the system is not excited; use a varying input")
-    if np.ptp(y_arr[warmup:]) == 0.0:
-        raise NotIdentifiableError(
-            f"{y_name} never changes: 0 % of samples move the output off the backlash dead band; "
-            "excite the system with a larger input amplitude"
-        )
-    return u_arr, y_arr
-
-
 def _moving(
     structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], warmup: int, model: Model | None = None
 ) -> float:
@@ -555,7 +527,14 @@ def _fit(
             f"max_iter = {max_iter}: give at least 2 (iterate 1 is the linear ARX start; the backlash "
             "is first estimated by iterate 2)"
         )
-    u_arr, y_arr = _check_data(u, y, structure, warmup, y_name)
+    u_arr, y_arr = identification_record(
+        u, y, y_name=y_name, warmup=warmup, parameters=structure.size, constant_input=NotIdentifiableError
+    )
+    if np.ptp(y_arr[warmup:]) == 0.0:
+        raise NotIdentifiableError(
+            f"{y_name} never changes: 0 % of samples move the output off the backlash dead band; "
+            "excite the system with a larger input amplitude"
+        )
     # A feedthrough block is fitted as the same block one sample later (structure.py): the
     # core's model output at t + shift is the measured output at t. The shifted record starts
     # with `shift` zeros, exact from rest and otherwise inside the (then lengthened) warm-up.

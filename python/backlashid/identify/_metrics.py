@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_signal
+from .._validation import as_signal, check_warmup, one_record
 from ..errors import DataError
 from ..models import CascadeModel, Model, SandwichModel
 
@@ -25,11 +25,8 @@ __all__ = ["Metrics", "evaluate", "fit_percent", "nrmse", "one_step_prediction",
 
 
 def _pair(y: ArrayLike, y_hat: ArrayLike, warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    a, b = as_signal(y, "y").ravel(), as_signal(y_hat, "y_hat").ravel()
-    if a.shape != b.shape:
-        raise DataError(f"y has {a.size} samples and y_hat {b.size}: compare signals of one record")
-    if not 0 <= warmup < a.size:
-        raise DataError(f"warmup = {warmup}: give 0 <= warmup < {a.size} (the record length)")
+    a, b = one_record(y, y_hat, ("y", "y_hat"), flatten=True)
+    warmup = check_warmup(warmup, a.size)
     return a[warmup:], b[warmup:]
 
 
@@ -62,9 +59,7 @@ def one_step_prediction(model: Model, u: ArrayLike, y: ArrayLike) -> NDArray[np.
     measured), B one step of eq (1). Sandwich: w(t) = sum_i r_i y(t-i) - sum_j s_j w_meas(t-j),
     with the backlash output y simulated (it is not measured). Before the record: zero.
     """
-    u_arr, y_arr = as_signal(u, "u").ravel(), as_signal(y, "y").ravel()
-    if u_arr.shape != y_arr.shape:
-        raise DataError(f"u has {u_arr.size} samples and y {y_arr.size}: give one record")
+    u_arr, y_arr = one_record(u, y, flatten=True)
     past = lambda s, k: np.concatenate([np.zeros(k), s[:-k]]) if k else s  # noqa: E731
     if isinstance(model, CascadeModel):
         x = model.linear.simulate(u_arr)

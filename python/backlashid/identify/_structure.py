@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import check_whole
 from ..errors import DataError
 from ..models import CascadeModel, GeneralBacklash, LinearBlock, Model, SandwichModel
 
@@ -61,8 +62,7 @@ class Structure:
 
     def __post_init__(self) -> None:
         for name, value, least in (("na", self.na, 1), ("nb", self.nb, 0), ("degree", self.degree, 1)):
-            if not isinstance(value, (int, np.integer)) or value < least:
-                raise DataError(f"{name} = {value!r}: give a whole number >= {least}")
+            check_whole(value, name, least)
         if self.is_sandwich and (self.nr < 1 or self.ns < 0):
             raise DataError(f"nr = {self.nr}, ns = {self.ns}: the output block needs nr >= 1, ns >= 0")
         if self.output_feedthrough and not self.is_sandwich:

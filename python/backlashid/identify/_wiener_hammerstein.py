@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from .._validation import as_signal
+from .._validation import as_signal, check_whole, identification_record
 from ..errors import DataError, ModelError, NotConvergedError
 from ..models import GeneralBacklash, LinearBlock, SandwichModel
 
@@ -345,29 +345,6 @@ def _theta_from_split(param: _Param, u: NDArray[np.float64], split: tuple[list[c
     return np.r_[a / scale, b[1:], c, r * scale, s[1:]]
 
 
-def _check(u: ArrayLike, y: ArrayLike, degree: int, nb: int, ns: int, warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    u_arr, y_arr = as_signal(u, "u"), as_signal(y, "y")
-    if u_arr.ndim != 1 or y_arr.ndim != 1 or len(u_arr) != len(y_arr):
-        raise DataError(f"u and y must be 1-D signals of one record (got shapes {u_arr.shape} and {y_arr.shape})")
-    for name, arr in (("u", u_arr), ("y", y_arr)):
-        bad = np.flatnonzero(~np.isfinite(arr))
-        if bad.size:
-            raise DataError(f"{name}[{bad[0]}] is {arr[bad[0]]}: remove or interpolate non-finite samples")
-    if not isinstance(degree, (int, np.integer)) or degree < 1:
-        raise DataError(f"degree = {degree!r}: give a whole number >= 1")
-    for name, n, block in (("nb", nb, "G1"), ("ns", ns, "G2")):
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise DataError(f"{name} = {n!r}: give the order of {block}, a whole number >= 1")
-    if not 0 <= warmup < len(u_arr):
-        raise DataError(f"warmup = {warmup}: give 0 <= warmup < {len(u_arr)} (the record length)")
-    n_par = 2 * (nb + ns) + degree
-    if len(u_arr) - warmup < 10 * n_par:
-        raise DataError(f"{len(u_arr) - warmup} samples after the warm-up for {n_par} parameters: give at least {10 * n_par}")
-    if np.ptp(u_arr) == 0.0:
-        raise DataError("the input u is constant: the system is not excited; use a varying input")
-    return u_arr, y_arr
-
-
 def fit_wiener_hammerstein(
     u: ArrayLike,
     y: ArrayLike,
@@ -399,8 +376,9 @@ def fit_wiener_hammerstein(
     Raises DataError for bad data or settings, NotConvergedError if no split gives a stable
     model.
     """
-    u_arr, y_arr = _check(u, y, degree, nb, ns, warmup)
-    nb, ns = int(nb), int(ns)
+    degree, nb, ns = check_whole(degree, "degree", 1), check_whole(nb, "nb", 1), check_whole(ns, "ns", 1)
+    # a constant input has always been a DataError here (NotIdentifiableError in the iterative fits)
+    u_arr, y_arr = identification_record(u, y, y_name="y", warmup=warmup, parameters=2 * (nb + ns) + degree, constant_input=DataError)
     started = time.perf_counter()
     delay = 0 if feedthrough else 2
     num, den, offset = _best_linear(u_arr, y_arr, nb + ns, delay, warmup)

@@ -13,10 +13,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
-from .._validation import as_scalar, as_signal
+from .._validation import as_scalar, as_signal, check_instance
 from ..errors import DataError
 from ._backlash import GeneralBacklash
-from ._chain import FORMAT_VERSION, _check_state, _check_type, _ModelIO, _moving_fraction, _values
+from ._chain import FORMAT_VERSION, _ModelIO, _moving_fraction, _values
 from ._linear import LinearBlock
 
 __all__ = ["CascadeModel", "CascadeSimulation", "CascadeState"]
@@ -61,8 +61,8 @@ class CascadeModel(_ModelIO):
     _native: Any = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        _check_type(self.linear, LinearBlock, "linear")
-        _check_type(self.backlash, GeneralBacklash, "backlash")
+        check_instance(self.linear, LinearBlock, "linear")
+        check_instance(self.backlash, GeneralBacklash, "backlash")
         object.__setattr__(self, "_native", _core.CascadeModel(self.linear._native, self.backlash._native))
 
     def __reduce__(self) -> tuple[Any, ...]:
@@ -88,7 +88,7 @@ class CascadeModel(_ModelIO):
         """The output y for input u; with ``internals=True`` a :class:`CascadeSimulation`
         that also holds x, f1, f2 and the final state."""
         s = initial_state if initial_state is not None else self.rest_state()
-        _check_state(s, CascadeState)
+        check_instance(s, CascadeState, "initial_state", DataError)
         u = as_signal(u, "u")
         if not internals:
             return self._native.simulate(u, list(s.u_past), list(s.x_past), s.y_prev)
@@ -101,7 +101,7 @@ class CascadeModel(_ModelIO):
         """The fraction of samples after ``warmup`` on which the backlash moves (f1 or f2 of
         eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
         s = initial_state if initial_state is not None else self.rest_state()
-        _check_state(s, CascadeState)
+        check_instance(s, CascadeState, "initial_state", DataError)
         return _moving_fraction(self._native, u, (list(s.u_past), list(s.x_past), s.y_prev), warmup)
 
     def to_dict(self) -> dict[str, Any]:

@@ -8,10 +8,9 @@ import json
 from abc import ABC, abstractmethod
 from typing import Any
 
-import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import as_signal
+from .._validation import as_signal, check_warmup
 from ..errors import DataError, ModelError
 
 FORMAT_VERSION = 1
@@ -21,25 +20,14 @@ def _values(values: ArrayLike, name: str) -> tuple[float, ...]:
     return tuple(float(v) for v in as_signal(values, name).ravel())
 
 
-def _check_type(value: Any, cls: type, name: str) -> None:
-    if not isinstance(value, cls):
-        raise ModelError(f"{name} must be a {cls.__name__}, got {type(value).__name__}")
-
-
-def _check_state(state: Any, cls: type) -> None:
-    if not isinstance(state, cls):
-        raise DataError(f"initial_state must be a {cls.__name__}, got {type(state).__name__}")
-
-
 def _moving_fraction(native: Any, u: ArrayLike, state: tuple[Any, ...], warmup: Any) -> float:
     """The core's count of moving samples after ``warmup`` (checked), as a fraction."""
     u = as_signal(u, "u")
     n = len(u)
     if n == 0:
         raise DataError("u is empty: give at least one sample")
-    if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or not 0 <= warmup < n:
-        raise DataError(f"warmup = {warmup!r}: give a whole number of samples, 0 <= warmup < {n} (the record length)")
-    return native.moving_count(u, *state, int(warmup)) / (n - int(warmup))
+    warmup = check_warmup(warmup, n)
+    return native.moving_count(u, *state, warmup) / (n - warmup)
 
 
 def _parse_json(text: str) -> dict[str, Any]:

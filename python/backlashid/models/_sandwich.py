@@ -14,9 +14,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
-from .._validation import as_signal, format_list
+from .._validation import as_signal, check_instance, format_list
+from ..errors import DataError
 from ._backlash import GeneralBacklash
-from ._chain import FORMAT_VERSION, _check_state, _check_type, _ModelIO, _moving_fraction, _values
+from ._chain import FORMAT_VERSION, _ModelIO, _moving_fraction, _values
 from ._linear import LinearBlock
 
 __all__ = ["SandwichModel", "SandwichSimulation", "SandwichState"]
@@ -66,9 +67,9 @@ class SandwichModel(_ModelIO):
     _native: Any = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        _check_type(self.input_linear, LinearBlock, "input_linear")
-        _check_type(self.backlash, GeneralBacklash, "backlash")
-        _check_type(self.output_linear, LinearBlock, "output_linear")
+        check_instance(self.input_linear, LinearBlock, "input_linear")
+        check_instance(self.backlash, GeneralBacklash, "backlash")
+        check_instance(self.output_linear, LinearBlock, "output_linear")
         object.__setattr__(
             self,
             "_native",
@@ -110,7 +111,7 @@ class SandwichModel(_ModelIO):
         """The output w for input u; with ``internals=True`` a :class:`SandwichSimulation`
         that also holds x, y, f1, f2 and the final state."""
         s = initial_state if initial_state is not None else self.rest_state()
-        _check_state(s, SandwichState)
+        check_instance(s, SandwichState, "initial_state", DataError)
         u = as_signal(u, "u")
         args = (list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past))
         if not internals:
@@ -122,7 +123,7 @@ class SandwichModel(_ModelIO):
         """The fraction of samples after ``warmup`` on which the backlash moves (f1 or f2 of
         eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
         s = initial_state if initial_state is not None else self.rest_state()
-        _check_state(s, SandwichState)
+        check_instance(s, SandwichState, "initial_state", DataError)
         state = (list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past))
         return _moving_fraction(self._native, u, state, warmup)
 
