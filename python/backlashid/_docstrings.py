@@ -43,3 +43,15 @@ def fill(**sections: str) -> Callable[[T], T]:
 
 def _indent(text: str, prefix: str) -> str:
     return "\n".join(prefix + line if line else line for line in text.splitlines())
+
+
+AXES = """ax : matplotlib.axes.Axes, optional
+    The axes to draw on (default a new figure).
+title : str, optional
+    The title.
+
+Returns
+-------
+matplotlib.axes.Axes
+    The axes drawn on."""
+"""The end of a ``plot`` method's Parameters and its Returns (``{axes}``)."""

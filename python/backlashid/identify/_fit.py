@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
-from .._docstrings import fill
+from .._docstrings import AXES, fill
 from .._validation import identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
@@ -237,6 +237,7 @@ class FitResult:
             "history_rmse": self.history_rmse.tolist(),
         }
 
+    @fill(axes=AXES)
     def plot(
         self, shown: list[str] | None = None, *, truth: Model | None = None, ax: Any = None, title: str | None = None
     ) -> Any:
@@ -249,15 +250,7 @@ class FitResult:
             The parameters to draw (default all of ``names``).
         truth : CascadeModel or SandwichModel, optional
             The true system, drawn as dotted lines.
-        ax : matplotlib.axes.Axes, optional
-            The axes to draw on (default a new figure).
-        title : str, optional
-            The title.
-
-        Returns
-        -------
-        matplotlib.axes.Axes
-            The axes drawn on.
+        {axes}
         """
         from ..app import plot_trajectories
 

@@ -16,7 +16,7 @@ from .. import _core
 from .._validation import as_scalar, as_signal, check_instance
 from ..errors import DataError
 from ._backlash import GeneralBacklash
-from ._chain import FORMAT_VERSION, _ModelIO, _moving_fraction, _values
+from ._chain import FORMAT_VERSION, _ModelIO, _moving_fraction, _Simulation, _values
 from ._linear import LinearBlock
 
 __all__ = ["CascadeModel", "CascadeSimulation", "CascadeState"]
@@ -38,7 +38,7 @@ class CascadeState:
 
 
 @dataclass(frozen=True)
-class CascadeSimulation:
+class CascadeSimulation(_Simulation):
     """A cascade simulation with its internal signals (eq 16, eq 12-13)."""
 
     output: NDArray[np.float64]  # y
@@ -46,10 +46,6 @@ class CascadeSimulation:
     f1: NDArray[np.bool_]
     f2: NDArray[np.bool_]
     final_state: CascadeState
-
-    def moving_fraction(self) -> float:
-        """Fraction of samples where the backlash output moved along a branch (f1 or f2)."""
-        return float(np.mean(self.f1 | self.f2))
 
 
 @dataclass(frozen=True, eq=True)

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import json
 from abc import ABC, abstractmethod
+from dataclasses import asdict, fields, is_dataclass
 from typing import Any
 
-from numpy.typing import ArrayLike
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_signal, check_warmup
 from ..errors import DataError, ModelError
@@ -40,6 +42,52 @@ def _parse_json(text: str) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ModelError("not a backlashid model description: expected a JSON object")
     return data
+
+
+class _Simulation:
+    """What the cascade's and the sandwich's simulations share (dataclasses with ``output``,
+    ``f1``, ``f2`` and ``final_state``): the fraction of moving samples, a summary and a
+    JSON-safe dict."""
+
+    output: NDArray[np.float64]
+    f1: NDArray[np.bool_]
+    f2: NDArray[np.bool_]
+
+    def moving_fraction(self) -> float:
+        """The fraction of samples on which the backlash moves along a branch.
+
+        Returns
+        -------
+        float
+            The mean of f1 or f2 (eq 12-13).
+        """
+        return float(np.mean(self.f1 | self.f2))
+
+    def summary(self) -> str:
+        """The simulation as one line of text.
+
+        Returns
+        -------
+        str
+            The number of samples, the output's range and the moving fraction.
+        """
+        kind = type(self).__name__.replace("Simulation", "").lower()
+        span = f", output in [{self.output.min():.6g}, {self.output.max():.6g}]" if self.output.size else ""
+        return f"{kind} simulation: {self.output.size} samples{span}, backlash moving on {100 * self.moving_fraction():.1f} % of samples"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The simulation as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+            Every signal as a list, and the final state's fields.
+        """
+        out: dict[str, Any] = {}
+        for f in fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            out[f.name] = asdict(value) if is_dataclass(value) else np.asarray(value).tolist()
+        return out
 
 
 class _ModelIO(ABC):

@@ -17,7 +17,7 @@ from .. import _core
 from .._validation import as_signal, check_instance, format_list
 from ..errors import DataError
 from ._backlash import GeneralBacklash
-from ._chain import FORMAT_VERSION, _ModelIO, _moving_fraction, _values
+from ._chain import FORMAT_VERSION, _ModelIO, _moving_fraction, _Simulation, _values
 from ._linear import LinearBlock
 
 __all__ = ["SandwichModel", "SandwichSimulation", "SandwichState"]
@@ -40,7 +40,7 @@ class SandwichState:
 
 
 @dataclass(frozen=True)
-class SandwichSimulation:
+class SandwichSimulation(_Simulation):
     """A sandwich simulation with its internal signals."""
 
     output: NDArray[np.float64]  # w
@@ -49,9 +49,6 @@ class SandwichSimulation:
     f1: NDArray[np.bool_]
     f2: NDArray[np.bool_]
     final_state: SandwichState
-
-    def moving_fraction(self) -> float:
-        return float(np.mean(self.f1 | self.f2))
 
 
 @dataclass(frozen=True, eq=True)
