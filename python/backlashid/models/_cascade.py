@@ -50,16 +50,11 @@ class CascadeState(_State):
 
 
 @dataclass(frozen=True)
-@fill(signals=DOCS.signals.format(state="CascadeState"))
+@fill(outputs=DOCS.outputs.format(output="y", block="linear block"), signals=DOCS.signals.format(state="CascadeState"))
 class CascadeSimulation(_Simulation):
     """A cascade simulation with its internal signals (eq 16, eq 12-13).
 
-    Attributes
-    ----------
-    output : numpy.ndarray
-        The output y.
-    x : numpy.ndarray
-        The linear block's output, the backlash's input.
+    {outputs}
     {signals}
 
     Examples

@@ -30,6 +30,12 @@ DataError
     If u is not a finite 1-D signal, or the state is not a {state} of the model's orders.
 ModelError
     If the simulation overflows (an unstable block)."""
+_OUTPUTS = """Attributes
+----------
+output : numpy.ndarray
+    The output {output}.
+x : numpy.ndarray
+    The {block}'s output, the backlash's input."""
 _SIGNALS = """f1 : numpy.ndarray of bool
     The left branch is active (eq 12).
 f2 : numpy.ndarray of bool
@@ -44,7 +50,7 @@ Returns
 float
     The fraction of samples after ``warmup`` on which the backlash moves (f1 or f2 of
     eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
-DOCS = SimpleNamespace(simulate=_SIMULATE, simulate_raises=_SIMULATE_RAISES, signals=_SIGNALS, moving=_MOVING)
+DOCS = SimpleNamespace(simulate=_SIMULATE, simulate_raises=_SIMULATE_RAISES, outputs=_OUTPUTS, signals=_SIGNALS, moving=_MOVING)
 
 
 def _values(values: ArrayLike, name: str) -> tuple[float, ...]:

@@ -48,16 +48,11 @@ class SandwichState(_State):
 
 
 @dataclass(frozen=True)
-@fill(signals=DOCS.signals.format(state="SandwichState"))
+@fill(outputs=DOCS.outputs.format(output="w", block="input block"), signals=DOCS.signals.format(state="SandwichState"))
 class SandwichSimulation(_Simulation):
     """A sandwich simulation with its internal signals.
 
-    Attributes
-    ----------
-    output : numpy.ndarray
-        The output w.
-    x : numpy.ndarray
-        The input block's output, the backlash's input.
+    {outputs}
     y : numpy.ndarray
         The backlash's output, the output block's input.
     {signals}
