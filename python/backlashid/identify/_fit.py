@@ -723,12 +723,7 @@ def _shared_options(function: Callable[..., FitResult]) -> Callable[..., FitResu
 @_shared_options
 @fill(data=_DATA_DOC.format(y="y", block="linear block"))
 def fit_cascade(
-    u: ArrayLike,
-    y: ArrayLike,
-    na: int = 2,
-    nb: int = 2,
-    degree: int = 3,
-    *,
+    u: ArrayLike, y: ArrayLike, na: int = 2, nb: int = 2, degree: int = 3, *,
     initial: Start = (1.0, 0.001, 0.001),
     switching: Switching = "measured",
     step: float = 1.0,
@@ -776,14 +771,7 @@ def fit_cascade(
 @_shared_options
 @fill(data=_DATA_DOC.format(y="w", block="input block"))
 def fit_sandwich(
-    u: ArrayLike,
-    w: ArrayLike,
-    na: int = 2,
-    nb: int = 2,
-    nr: int = 2,
-    ns: int = 2,
-    degree: int = 3,
-    *,
+    u: ArrayLike, w: ArrayLike, na: int = 2, nb: int = 2, nr: int = 2, ns: int = 2, degree: int = 3, *,
     initial: Start = (1.25, 0.1, 0.1),
     step: float = 0.5,
     feedthrough: bool = False,

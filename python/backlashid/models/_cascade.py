@@ -73,15 +73,12 @@ class CascadeSimulation(_Simulation):
 
 
 @dataclass(frozen=True, eq=True)
+@fill(model=DOCS.model)
 class CascadeModel(_ModelIO):
     """The cascade of Section 3 (Fig. 2): a linear block (16) followed by a general
     backlash (1), u -> x -> y.
 
-    Frozen; pickles, compares by value and round-trips through ``to_dict`` / ``to_json``. A
-    block of the wrong type raises ModelError.
-
-    Attributes
-    ----------
+    {model}
     linear : LinearBlock
         The linear block, u -> x.
     backlash : GeneralBacklash

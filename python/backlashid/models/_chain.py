@@ -30,6 +30,11 @@ DataError
     If u is not a finite 1-D signal, or the state is not a {state} of the model's orders.
 ModelError
     If the simulation overflows (an unstable block)."""
+_MODEL = """Frozen; pickles, compares by value and round-trips through ``to_dict`` / ``to_json``. A
+block of the wrong type raises ModelError.
+
+Attributes
+----------"""
 _OUTPUTS = """Attributes
 ----------
 output : numpy.ndarray
@@ -50,7 +55,7 @@ Returns
 float
     The fraction of samples after ``warmup`` on which the backlash moves (f1 or f2 of
     eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
-DOCS = SimpleNamespace(simulate=_SIMULATE, simulate_raises=_SIMULATE_RAISES, outputs=_OUTPUTS, signals=_SIGNALS, moving=_MOVING)
+DOCS = SimpleNamespace(model=_MODEL, simulate=_SIMULATE, simulate_raises=_SIMULATE_RAISES, outputs=_OUTPUTS, signals=_SIGNALS, moving=_MOVING)
 
 
 def _values(values: ArrayLike, name: str) -> tuple[float, ...]:

@@ -67,16 +67,14 @@ class SandwichSimulation(_Simulation):
 
 
 @dataclass(frozen=True, eq=True)
+@fill(model=DOCS.model)
 class SandwichModel(_ModelIO):
     """The sandwich of Section 4 (Fig. 3): input block (16), general backlash (1), output
     block (29), u -> x -> y -> w.
 
-    The output block is a :class:`LinearBlock` with a = r and b = s of eq (29). Frozen;
-    pickles, compares by value and round-trips through ``to_dict`` / ``to_json``. A block of
-    the wrong type raises ModelError.
+    The output block is a :class:`LinearBlock` with a = r and b = s of eq (29).
 
-    Attributes
-    ----------
+    {model}
     input_linear : LinearBlock
         The input block, u -> x.
     backlash : GeneralBacklash
