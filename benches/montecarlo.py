@@ -35,12 +35,12 @@ def run(example: str, snr: float | None, paper: bool, seeds: int, n: int) -> dic
             err = result.errors(model)
         except bid.NotConvergedError as exc:
             best = exc.best
-            if not isinstance(best, dict):
+            if best is None:
                 failures += 1
                 continue
             truth = bid.identify.Structure(*_orders(model)).pack(model)
-            values = np.array(list(best["parameters"].values()))
-            err = dict(zip(best["parameters"], values - truth))
+            values = np.array(list(best.parameters.values()))
+            err = dict(zip(best.parameters, values - truth))
         except bid.BacklashIdError:
             failures += 1
             continue

@@ -61,3 +61,66 @@ def frozen(values: list[float]) -> NDArray[np.float64]:
 
 def format_list(values: NDArray[np.float64]) -> str:
     return "[" + ", ".join(f"{v:.6g}" for v in values) + "]"
+
+
+# -- checks of the models' arguments and the identification's records (models, identify) ------
+
+
+def check_instance(value: Any, cls: type, name: str, error: type[Exception] = ModelError) -> None:
+    """Raise ``error`` unless ``value`` is a ``cls`` (a model's block, a simulation's state)."""
+    if not isinstance(value, cls):
+        raise error(f"{name} must be a {cls.__name__}, got {type(value).__name__}")
+
+
+def check_whole(value: Any, name: str, least: int) -> int:
+    """A whole number >= ``least`` (an order, a degree), as an int."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        raise DataError(f"{name} = {value!r}: give a whole number >= {least}")
+    return int(value)
+
+
+def check_warmup(warmup: Any, n: int) -> int:
+    """The samples left out at the start of a record of ``n``: a whole number, 0 <= warmup < n."""
+    if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or not 0 <= warmup < n:
+        raise DataError(f"warmup = {warmup!r}: give a whole number of samples, 0 <= warmup < {n} (the record length)")
+    return int(warmup)
+
+
+def check_finite(values: NDArray[np.float64], name: str) -> None:
+    """Name the first NaN or inf sample of a signal."""
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        raise DataError(f"{name}[{bad[0]}] is {values[bad[0]]}: remove or interpolate non-finite samples")
+
+
+def one_record(
+    a: Any, b: Any, names: tuple[str, str] = ("u", "y"), *, flatten: bool = False
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two signals of one record: 1-D (or flattened) float64 arrays of one length."""
+    a_arr, b_arr = as_signal(a, names[0]), as_signal(b, names[1])
+    if flatten:
+        a_arr, b_arr = a_arr.ravel(), b_arr.ravel()
+    elif a_arr.ndim != 1 or b_arr.ndim != 1:
+        raise DataError(f"{names[0]} and {names[1]} must be 1-D signals (got shapes {a_arr.shape} and {b_arr.shape})")
+    if a_arr.size != b_arr.size:
+        raise DataError(f"{names[0]} has {a_arr.size} samples but {names[1]} has {b_arr.size}: give one record")
+    return a_arr, b_arr
+
+
+def identification_record(
+    u: Any, y: Any, *, y_name: str, warmup: Any, parameters: int, constant_input: type[Exception]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """What every fit checks: one finite record, a warm-up inside it, at least 10 samples per
+    parameter after it, and an input that varies (else ``constant_input`` is raised)."""
+    u_arr, y_arr = one_record(u, y, ("u", y_name))
+    check_finite(u_arr, "u")
+    check_finite(y_arr, y_name)
+    check_warmup(warmup, len(u_arr))
+    need = 10 * parameters
+    if len(u_arr) - warmup < need:
+        raise DataError(
+            f"{len(u_arr) - warmup} samples after the warm-up for {parameters} parameters: give at least {need} (10 per parameter)"
+        )
+    if np.ptp(u_arr) == 0.0:
+        raise constant_input("the input u is constant: the system is not excited; use a varying input")
+    return u_arr, y_arr

@@ -13,30 +13,104 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the identify layer sits above: only its type is named here
+    from .identify import FitResult
+
 __all__ = ["BacklashIdError", "DataError", "ModelError", "NotIdentifiableError", "NotConvergedError"]
 
 
 class BacklashIdError(Exception):
-    """Base class of the errors raised by backlashid."""
+    """Base class of the errors raised by backlashid.
+
+    Catch it to handle every error backlashid raises on purpose; anything else is a bug.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> try:
+    ...     bid.LinearBlock([])
+    ... except bid.BacklashIdError as exc:
+    ...     print(type(exc).__name__)
+    ModelError
+    """
 
 
 class DataError(BacklashIdError, ValueError):
-    """The data cannot be used as given; the message says how to fix it."""
+    """The data cannot be used as given; the message says how to fix it.
+
+    Raised for NaN or inf samples, a wrong dimensionality, an empty or too short record, a
+    dtype that is not numbers, or a bad setting such as a warm-up longer than the record.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> bid.evaluate(bid.example1(), [0.0, 1.0], [0.0, 1.0], warmup=5)
+    Traceback (most recent call last):
+    ...
+    backlashid.errors.DataError: warmup = 5: give a whole number of samples, 0 <= warmup < 2 (the record length)
+    """
 
 
 class ModelError(BacklashIdError, ValueError):
-    """The model parameters are invalid, or the model diverged; the message says why."""
+    """The model parameters are invalid, or the model diverged; the message says why.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> bid.GeneralBacklash(-0.1, 0.1, [1.0], [1.0])
+    Traceback (most recent call last):
+    ...
+    backlashid.errors.ModelError: ...
+    """
 
 
 class NotIdentifiableError(BacklashIdError):
-    """The data do not determine the parameters; the message says what to change."""
+    """The data do not determine the parameters; the message says what to change.
+
+    Raised for a constant input or output, a backlash that hardly leaves its dead band, or a
+    rank-deficient regressor.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import backlashid as bid
+    >>> bid.fit_cascade(np.ones(500), np.arange(500.0))
+    Traceback (most recent call last):
+    ...
+    backlashid.errors.NotIdentifiableError: the input u is constant: ...
+    """
 
 
 class NotConvergedError(BacklashIdError):
-    """The identification diverged or did not converge. ``best`` holds the best result found
-    (lowest simulation error), or None when no usable iterate exists."""
+    """The identification diverged or did not converge.
 
-    def __init__(self, message: str, best: object = None) -> None:
+    Parameters
+    ----------
+    message : str
+        What went wrong and what to try instead.
+    best : FitResult, optional
+        The estimate the fit ended with (``converged`` False; its ``model`` is None when the
+        estimate is no valid model), or None when no usable estimate exists.
+
+    Attributes
+    ----------
+    best : FitResult or None
+        As given; it survives pickling (e.g. from a Dask worker).
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> data = bid.example_data(bid.example2(), 1500, snr=None, seed=1)
+    >>> try:
+    ...     bid.fit_sandwich(data.u, data.noisy, paper=True)
+    ... except bid.NotConvergedError as exc:
+    ...     print(type(exc.best).__name__, exc.best.converged)
+    FitResult False
+    """
+
+    def __init__(self, message: str, best: FitResult | None = None) -> None:
         super().__init__(message)
         self.best = best
 

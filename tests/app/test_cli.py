@@ -47,7 +47,7 @@ def test_fit_recovers_example1_and_writes_json_and_figures(tmp_path, csv_file):
         assert abs(value - truth[name]) < 0.1, (name, value, truth[name])
         assert 0 < payload["standard_errors"][name] < 0.1
     val = payload["metrics"]["validation"]
-    assert val["simulation_fit_percent"] > 90 and val["samples"] == 750 - 10 and val["skip"] == 10
+    assert val["simulation_fit_percent"] > 90 and val["samples"] == 750 - 10 and val["warmup"] == 10
     assert val["prediction_rmse"] < val["simulation_rmse"] * 1.5
     assert "free-run" in payload["metric_labels"]["simulation_rmse"] and "one-step" in payload["metric_labels"]["prediction_rmse"]
     assert payload["data"]["estimation_samples"] == 750 and payload["scaling"]["input_scale"] == 1.0

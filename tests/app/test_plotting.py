@@ -28,7 +28,7 @@ def test_simulation_plot_states_the_fit_percent(ex1):
     y_sim = ex1.simulate(d.u)
     ax = plot_simulation(d.noisy, y_sim, skip=50)
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
-    expected = fit_percent(d.noisy, y_sim, skip=50)
+    expected = fit_percent(d.noisy, y_sim, warmup=50)
     assert any(f"fit {expected:.1f} %" in label for label in labels)
     assert any("skipped transient (50 samples)" in label for label in labels)
     np.testing.assert_array_equal(ax.lines[1].get_ydata(), y_sim)

@@ -216,7 +216,7 @@ def test_linear_order_is_one_more_pole_than_the_user_assumes():
     b_true = np.convolve(np.r_[1.0, lin.b], [1.0, -pole])[1:]
     true = bid.CascadeModel(bid.LinearBlock(a_true, b_true), c.nominal.backlash)
     assert true.linear.nb == c.nb + 1 and true.linear.is_stable()
-    assert true.linear.static_gain == pytest.approx(lin.static_gain, rel=1e-12)
+    assert true.linear.static_gain() == pytest.approx(lin.static_gain(), rel=1e-12)
     np.testing.assert_allclose(true_output(c), record(c, library_output(true, c.u_full)), atol=1e-10)
 
 

@@ -191,7 +191,7 @@ def test_held_start_needs_an_equilibrium() -> None:
 
     m = bx.example1()
     state = held_state(m, 0.6, 0.2)
-    assert state.x_past == (m.linear.static_gain * 0.6,) * 2 and state.u_past == (0.6, 0.6)
+    assert state.x_past == (m.linear.static_gain() * 0.6,) * 2 and state.u_past == (0.6, 0.6)
     integrator = bx.CascadeModel(bx.LinearBlock([0.5], [-1.0]), m.backlash)  # x(t) = x(t-1) + 0.5 u(t-1)
     with pytest.raises(bx.ModelError, match="pole at z = 1.*initial_state='rest'"):
         held_state(integrator, 0.6, 0.2)

@@ -224,7 +224,7 @@ def test_one_step_prediction_uses_the_output_feedthrough():
     u = np.random.default_rng(7).uniform(-1, 1, 500)
     w = model.simulate(u)
     np.testing.assert_allclose(bid.identify.one_step_prediction(model, u, w), w, atol=1e-12)
-    assert bid.evaluate(model, u, w, skip=10).prediction_rmse < 1e-12
+    assert bid.evaluate(model, u, w, warmup=10).prediction_rmse < 1e-12
 
 
 def test_a_feedthrough_model_is_the_lagged_model_one_sample_later():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import pickle
 
 import numpy as np
 import pytest
@@ -198,6 +199,7 @@ def test_constant_input_is_not_identifiable():
         ({"u": np.linspace(-1, 1, 50), "y": np.zeros(50)}, "at least"),
         ({"u": np.zeros((100, 2)), "y": np.zeros(100)}, "1-D"),
         ({"warmup": 5000}, "warmup"),
+        ({"warmup": 2.5}, "whole number"),
         ({"switching": "predicted"}, "switching"),
         ({"step": 0.0}, "step"),
         ({"degree": 0}, "degree"),
@@ -221,8 +223,9 @@ def test_divergence_of_the_papers_sandwich_algorithm_carries_the_best_iterate():
     with pytest.raises(NotConvergedError) as info:
         fit_sandwich(d.u, d.noisy, paper=True)
     best = info.value.best
-    assert set(best) >= {"parameters", "history", "simulation_rmse"}
-    assert best["history"].shape[1] == 14
+    assert isinstance(best, bid.FitResult) and not best.converged
+    assert len(best.parameters) == 14 and best.history.shape[1] == 14 and isinstance(best.simulation_rmse, float)
+    assert pickle.loads(pickle.dumps(info.value)).best.parameters == best.parameters
     # the default algorithm gets the same record right
     assert max_error(fit_sandwich(d.u, d.noisy), truth) < 1e-8
 

@@ -25,7 +25,7 @@ def test_formulas_against_a_hand_computation():
     assert nrmse(y, y_hat) == pytest.approx(np.sqrt(0.5 / 4) / np.std(y))
     # fit % = 100 (1 - ||y - y_hat|| / ||y - mean y||)
     assert fit_percent(y, y_hat) == pytest.approx(100 * (1 - np.sqrt(0.5) / np.sqrt(5.0)))
-    assert rmse(y, y_hat, skip=2) == pytest.approx(np.sqrt(0.25 / 2))
+    assert rmse(y, y_hat, warmup=2) == pytest.approx(np.sqrt(0.25 / 2))
 
 
 def test_cascade_prediction_feeds_back_the_measured_memory():
@@ -65,7 +65,7 @@ def test_a_wrong_model_simulates_worse_than_the_true_one_on_validation_data():
     "call, match",
     [
         (lambda: rmse([1.0, 2.0], [1.0]), "samples"),
-        (lambda: rmse([1.0, 2.0], [1.0, 2.0], skip=2), "skip"),
+        (lambda: rmse([1.0, 2.0], [1.0, 2.0], warmup=2), "warmup"),
         (lambda: nrmse([1.0, 1.0, 1.0], [1.0, 2.0, 3.0]), "constant"),
         (lambda: one_step_prediction(bid.example1(), [0.0, 1.0], [0.0]), "samples"),
         (lambda: one_step_prediction("model", [0.0], [0.0]), "CascadeModel"),

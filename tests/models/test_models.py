@@ -71,7 +71,7 @@ def test_cascade_internals_are_consistent(model, u):
     np.testing.assert_allclose(sim.output[sim.f2], R[sim.f2], **TOL)
     hold = ~sim.f1 & ~sim.f2
     np.testing.assert_allclose(sim.output[hold], y_prev[hold], **TOL)
-    assert sim.moving_fraction == pytest.approx(np.mean(sim.f1 | sim.f2))
+    assert sim.moving_fraction() == pytest.approx(np.mean(sim.f1 | sim.f2))
     assert sim.final_state.y_prev == sim.output[-1]
     # the core's count of the same flags, without storing them
     k = len(u) // 3

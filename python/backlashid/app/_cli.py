@@ -126,7 +126,7 @@ def _fit_model(kind: str, u: np.ndarray, y: np.ndarray, na: int, nb: int, nr: in
     if kind == "sandwich":
         return fit_sandwich(u, y, na=na, nb=nb, nr=nr, ns=ns, degree=degree, warmup=warmup, max_iter=max_iter,
                             feedthrough=feedthrough, output_feedthrough=feedthrough, coarse=coarse)
-    return fit_wiener_hammerstein(u, y, degree=degree, orders=(nb, ns), warmup=warmup, feedthrough=feedthrough)
+    return fit_wiener_hammerstein(u, y, nb=nb, ns=ns, degree=degree, warmup=warmup, feedthrough=feedthrough)
 
 
 def _metrics_dict(metrics: Any) -> dict[str, Any]:
@@ -190,9 +190,9 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse)
         stage("computing metrics")
         skip = warmup if skip is None else skip
-        metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, skip=max(skip, warmup))}
+        metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, warmup=max(skip, warmup))}
         if sel.validation is not None:
-            metrics["validation"] = evaluate_scaled(result.model, scaling, sel.validation.u, sel.validation.y, skip=skip)
+            metrics["validation"] = evaluate_scaled(result.model, scaling, sel.validation.u, sel.validation.y, warmup=skip)
         figures: list[Path] = []
         if plots_dir:
             stage("writing figures")
@@ -315,7 +315,7 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
     np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
     click.echo(f"simulated {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else ""))
     if output:
-        click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, skip=skip)))
+        click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, warmup=skip)))
     click.echo(f"wrote {out}")
 
 

@@ -141,8 +141,8 @@ def plot_simulation(
         _, ax = plt.subplots(figsize=(10, 3.8))
     ys, sims = as_signal(y, "y").ravel(), as_signal(y_sim, "y_sim").ravel()
     t = np.arange(len(ys)) * dt
-    fit = fit_percent(ys, sims, skip=skip)
-    err = rmse(ys, sims, skip=skip)
+    fit = fit_percent(ys, sims, warmup=skip)
+    err = rmse(ys, sims, warmup=skip)
     ax.plot(t, ys, color="0.3", lw=1, label="measured")
     ax.plot(t, sims, color="C3", lw=1, label=f"simulated (free run): fit {fit:.1f} %, RMSE {err:.4g}")
     if skip:

@@ -69,7 +69,7 @@ def run_example(number: int, *, seed: int = 0, n: int = 1500) -> ExampleRun:
         history, outcome = plain.history, f"simulation RMSE {plain.simulation_rmse:.4g}"
     except NotConvergedError as exc:
         best: Any = exc.best
-        history, outcome = best["history"], f"diverged ({exc})"
+        history, outcome = best.history, f"diverged ({exc})"
     default = st.fit(data.u, data.noisy, initial=st.initial)
     structure = default.structure
     truth = dict(zip(structure.names, structure.pack(model)))

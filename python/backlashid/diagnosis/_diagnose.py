@@ -94,7 +94,7 @@ def _record(pair: Any, name: str) -> tuple[Array, Array]:
 def default_warmup(model: CascadeModel, n: int) -> int:
     """Samples until the slowest pole's transient decays to 1e-4 (plus the block's memory and
     the longest dead time searched), at least 20, at most n // 5."""
-    rho = model.linear.spectral_radius
+    rho = model.linear.spectral_radius()
     rho = rho() if callable(rho) else rho
     settle = math.ceil(math.log(1e-4) / math.log(rho)) if 0.0 < rho < 1.0 else 0
     w = settle + model.linear.na + model.linear.nb + MAX_DELAY

@@ -9,7 +9,9 @@ removes the bias of the equation-error iterations under noise.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
+import inspect
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -17,7 +19,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
-from .._validation import as_signal
+from .._docstrings import AXES, fill
+from .._validation import identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
 from ._refine import OutputErrorFit, is_stable, refine_output_error, simulate, spectral_radius
@@ -46,47 +49,139 @@ Start = tuple[float, float, float]  # (m_R1, c_L, c_R)
 
 @dataclass(frozen=True)
 class FitResult:
-    """An identified model with its parameters under the paper's names, their standard errors,
-    the iteration history (what the paper plots in Figs 5-10) and how the fit ended."""
+    """An identified cascade or sandwich: the model, its parameters under the paper's names
+    with standard errors, the iteration history (what the paper plots in Figs 5-10) and how
+    the fit ended.
 
-    model: Model
+    Returned by :func:`fit_cascade` and :func:`fit_sandwich`, and held by
+    ``NotConvergedError.best`` when a fit fails.
+
+    Attributes
+    ----------
+    model : CascadeModel or SandwichModel or None
+        The identified model; None only in ``NotConvergedError.best`` when the estimate is no
+        valid model (e.g. branches that fall across the dead band).
+    structure : Structure
+        Orders, degree and the parameter layout.
+    theta : numpy.ndarray
+        The estimate, in the order of ``structure.names``.
+    covariance : numpy.ndarray
+        Its covariance matrix (NaN where a failed fit could not compute it).
+    history : numpy.ndarray
+        Row k: the parameters after iteration k + 1 of the paper's algorithm.
+    history_rmse : numpy.ndarray
+        The free-run simulation RMSE of each row of ``history``.
+    iterations : int
+        Iterations of the paper's algorithm.
+    converged : bool
+        The iterations or the refinement met their tolerance.
+    reason : str
+        How the iterations ended: "tolerance", "2-cycle", "iteration limit" or "diverged".
+    simulation_rmse : float
+        Free-run simulation RMSE on the estimation data after the warm-up.
+    noise_std : float
+        Residual standard deviation, the noise level the fit implies.
+    moving_fraction : float
+        Fraction of samples on which the fitted backlash moves (f1 or f2 of eq 12-13).
+    method : str
+        "default" or "paper".
+    warmup : int
+        Samples at the start left out of every criterion.
+    iterative_theta : numpy.ndarray
+        The chosen iterate of the paper's algorithm, before the refinement.
+    refinement_steps : int
+        Accepted output-error Levenberg-Marquardt steps.
+    coarse_samples : int
+        When > 0, the iterations (``history``, ``history_rmse``, ``iterative_theta``) ran on
+        the first ``coarse_samples`` samples after the warm-up and the refinement on the whole
+        record.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+    >>> result = bid.fit_cascade(data.u, data.noisy)
+    >>> result.names[:4], result.reason
+    (['a1', 'a2', 'b1', 'b2'], 'tolerance')
+    """
+
+    model: Model | None
     structure: Structure
     theta: NDArray[np.float64]
     covariance: NDArray[np.float64]
-    history: NDArray[np.float64]  # row k: parameters after iteration k + 1
-    history_rmse: NDArray[np.float64]  # free-run simulation RMSE of each row
+    history: NDArray[np.float64]
+    history_rmse: NDArray[np.float64]
     iterations: int
     converged: bool
-    reason: str  # "tolerance", "2-cycle", "iteration limit", "diverged"
-    simulation_rmse: float  # free-run simulation RMSE on the estimation data (after warm-up)
-    noise_std: float  # residual std, the noise level the fit implies
-    moving_fraction: float  # samples where the fitted backlash moves (f1 or f2)
+    reason: str
+    simulation_rmse: float
+    noise_std: float
+    moving_fraction: float
     method: str
     warmup: int
     iterative_theta: NDArray[np.float64] = field(repr=False)
     refinement_steps: int = 0
-    # > 0: the iterations (history, history_rmse, iterative_theta) ran on the first
-    # coarse_samples samples after the warm-up, and LM refined on the whole record
     coarse_samples: int = 0
 
     @property
     def names(self) -> list[str]:
+        """The parameter names, in the order of ``theta`` (``structure.names``)."""
         return self.structure.names
 
     @property
     def parameters(self) -> dict[str, float]:
+        """The estimate by name: ``theta`` under ``names``."""
         return dict(zip(self.names, map(float, self.theta)))
 
     @property
     def standard_errors(self) -> dict[str, float]:
+        """The standard errors by name: the square roots of the diagonal of ``covariance``."""
         return dict(zip(self.names, map(float, np.sqrt(np.clip(np.diag(self.covariance), 0, None)))))
 
     def errors(self, true_model: Model) -> dict[str, float]:
-        """Estimate minus truth for every parameter (the truth normalised to m_L1 = r_1 = 1)."""
+        """Estimate minus truth for every parameter.
+
+        Parameters
+        ----------
+        true_model : CascadeModel or SandwichModel
+            The true system, of this fit's structure; it is normalised to m_L1 = r_1 = 1
+            first, as the estimate is.
+
+        Returns
+        -------
+        dict of str to float
+            ``theta - truth`` by parameter name.
+
+        Raises
+        ------
+        DataError
+            If ``true_model`` has other orders or a higher degree than the fit.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> truth = bid.example1()
+        >>> data = bid.example_data(truth, 1500, snr=None, seed=0)
+        >>> max(abs(e) for e in bid.fit_cascade(data.u, data.noisy).errors(truth).values()) < 1e-6
+        True
+        """
         truth = self.structure.pack(true_model)
         return dict(zip(self.names, map(float, self.theta - truth)))
 
     def summary(self, true_model: Model | None = None) -> str:
+        """The fit as a table: how it ended, its simulation error, every parameter with its
+        standard error (and with ``true_model`` the truth and the error in standard errors).
+
+        Parameters
+        ----------
+        true_model : CascadeModel or SandwichModel, optional
+            The true system, to compare the estimate with.
+
+        Returns
+        -------
+        str
+            Several lines of text.
+        """
         kind = "Sandwich" if self.structure.is_sandwich else "Cascade"
         lines = [
             f"{kind} fit ({self.method}), {self.structure}, warm-up {self.warmup} samples",
@@ -117,23 +212,52 @@ class FitResult:
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe: model, parameters with standard errors, metrics, history."""
+        """The fit as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+            The model (``to_dict()``, or None), parameters and standard errors by name, how
+            the fit ended, its simulation error, settings and the iteration history.
+        """
         return {
-            "model": self.model.to_dict(),
+            "model": self.model.to_dict() if self.model is not None else None,
             "parameters": self.parameters,
             "standard_errors": self.standard_errors,
-            "iterations": self.iterations,
-            "converged": self.converged,
+            "iterations": int(self.iterations),
+            "converged": bool(self.converged),
             "reason": self.reason,
-            "simulation_rmse": self.simulation_rmse,
-            "noise_std": self.noise_std,
-            "moving_fraction": self.moving_fraction,
+            "simulation_rmse": float(self.simulation_rmse),
+            "noise_std": float(self.noise_std),
+            "moving_fraction": float(self.moving_fraction),
             "method": self.method,
-            "warmup": self.warmup,
-            "coarse_samples": self.coarse_samples,
+            "warmup": int(self.warmup),
+            "coarse_samples": int(self.coarse_samples),
             "history": self.history.tolist(),
             "history_rmse": self.history_rmse.tolist(),
         }
+
+    @fill(axes=AXES)
+    def plot(
+        self, shown: list[str] | None = None, *, truth: Model | None = None, ax: Any = None, title: str | None = None
+    ) -> Any:
+        """Plot the parameter estimates over the iterations (the paper's Figs 5, 6, 8-10),
+        with the final estimate as stars; :func:`backlashid.app.plot_trajectories`.
+
+        Parameters
+        ----------
+        shown : list of str, optional
+            The parameters to draw (default all of ``names``).
+        truth : CascadeModel or SandwichModel, optional
+            The true system, drawn as dotted lines.
+        {axes}
+        """
+        from ..app import plot_trajectories
+
+        values = dict(zip(self.names, map(float, self.structure.pack(truth)))) if truth is not None else None
+        return plot_trajectories(
+            self.history, self.names, shown or self.names, truth=values, final=self.parameters, ax=ax, title=title
+        )
 
 
 # -- the paper's iterations ----------------------------------------------------------------------
@@ -286,34 +410,6 @@ def _ls_covariance(structure: Structure, last_ls: tuple[NDArray[np.float64], flo
     return jac @ cov @ jac.T
 
 
-def _check_data(u: ArrayLike, y: ArrayLike, structure: Structure, warmup: int, y_name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    u_arr, y_arr = as_signal(u, "u"), as_signal(y, y_name)
-    if u_arr.ndim != 1 or y_arr.ndim != 1:
-        raise DataError(f"u and {y_name} must be 1-D signals (got shapes {u_arr.shape} and {y_arr.shape})")
-    if len(u_arr) != len(y_arr):
-        raise DataError(f"u has {len(u_arr)} samples but {y_name} has {len(y_arr)}: give one record")
-    for name, arr in (("u", u_arr), (y_name, y_arr)):
-        bad = np.flatnonzero(~np.isfinite(arr))
-        if bad.size:
-            raise DataError(f"{name}[{bad[0]}] is {arr[bad[0]]}: remove or interpolate non-finite samples")
-    if not 0 <= warmup < len(u_arr):
-        raise DataError(f"warmup = {warmup}: give 0 <= warmup < {len(u_arr)} (the record length)")
-    need = 10 * structure.size
-    if len(u_arr) - warmup < need:
-        raise DataError(
-            f"{len(u_arr) - warmup} samples after the warm-up for {structure.size} parameters: "
-            f"give at least {need} (10 per parameter)"
-        )
-    if np.ptp(u_arr) == 0.0:
-        raise NotIdentifiableError("the input u is constant: the system is not excited; use a varying input")
-    if np.ptp(y_arr[warmup:]) == 0.0:
-        raise NotIdentifiableError(
-            f"{y_name} never changes: 0 % of samples move the output off the backlash dead band; "
-            "excite the system with a larger input amplitude"
-        )
-    return u_arr, y_arr
-
-
 def _moving(
     structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], warmup: int, model: Model | None = None
 ) -> float:
@@ -398,22 +494,22 @@ def _fit(
     structure: Structure,
     u: ArrayLike,
     y: ArrayLike,
-    *,
     y_name: str,
+    *,
     initial: Start,
-    starts: Sequence[Start] | None,
-    max_iter: int,
-    tol: float,
     switching: Switching,
     step: float,
-    refine: bool,
-    paper: bool,
-    warmup: int,
-    min_moving: float,
-    restarts: int | None,
-    perturbation: float,
-    seed: int,
-    coarse: int | None,
+    starts: Sequence[Start] | None = None,
+    max_iter: int = 50,
+    tol: float = 1e-3,
+    refine: bool = True,
+    paper: bool = False,
+    warmup: int = 0,
+    min_moving: float = 0.1,
+    restarts: int | None = None,
+    perturbation: float = 0.05,
+    seed: int = 0,
+    coarse: int | None = None,
 ) -> FitResult:
     if switching not in ("measured", "simulated"):
         raise DataError(f"switching = {switching!r}: use 'measured' or 'simulated'")
@@ -424,7 +520,14 @@ def _fit(
             f"max_iter = {max_iter}: give at least 2 (iterate 1 is the linear ARX start; the backlash "
             "is first estimated by iterate 2)"
         )
-    u_arr, y_arr = _check_data(u, y, structure, warmup, y_name)
+    u_arr, y_arr = identification_record(
+        u, y, y_name=y_name, warmup=warmup, parameters=structure.size, constant_input=NotIdentifiableError
+    )
+    if np.ptp(y_arr[warmup:]) == 0.0:
+        raise NotIdentifiableError(
+            f"{y_name} never changes: 0 % of samples move the output off the backlash dead band; "
+            "excite the system with a larger input amplitude"
+        )
     # A feedthrough block is fitted as the same block one sample later (structure.py): the
     # core's model output at t + shift is the measured output at t. The shifted record starts
     # with `shift` zeros, exact from rest and otherwise inside the (then lengthened) warm-up.
@@ -470,41 +573,38 @@ def _fit(
     # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
     # stage always ends in a whole-record refinement, so the iterate is the whole record's)
     rmse = float(np.sqrt(refined.cost / refined.n_residuals)) if refined is not None else run.rmse[k]
-    best_info = {
-        "parameters": dict(zip(structure.names, map(float, theta))),
-        "simulation_rmse": rmse,
-        "history": np.array(run.history),
-        "reason": run.reason,
-    }
+    try:
+        model, invalid = structure.model(theta), None
+    except ModelError as exc:
+        model, invalid = None, exc
+    failure = None
     est = structure.unpack(theta)
     for den, name in ((est.b, "input"), (est.s, "output")):
         radius = spectral_radius(np.asarray(den))
         if not radius < 1.0:
-            raise NotConvergedError(
+            failure = (
                 f"the estimated {name} linear block is unstable (spectral radius {radius:.3f}); "
-                "use the default algorithm (it reflects unstable poles) or other initial values",
-                best_info,
+                "use the default algorithm (it reflects unstable poles) or other initial values"
             )
-    if not np.isfinite(rmse):
-        raise NotConvergedError("the identification diverged: the estimate simulates to no finite output", best_info)
-    try:
-        model = structure.model(theta)
-    except ModelError as exc:
-        raise NotConvergedError(f"the final estimate is not a valid model ({exc})", best_info) from None
-    moving = _moving(structure, theta, u_arr, user_warmup, model)
-    if moving < min_moving:
+            break
+    if failure is None and not np.isfinite(rmse):
+        failure = "the identification diverged: the estimate simulates to no finite output"
+    if failure is None and invalid is not None:
+        failure = f"the final estimate is not a valid model ({invalid})"
+    moving = _moving(structure, theta, u_arr, user_warmup, model) if model is not None else 0.0
+    if failure is not None:
+        try:
+            noise_var, covariance = _covariance(structure, run, refined)
+        except BacklashIdError:  # the failed estimate has no usable covariance
+            noise_var, covariance = np.nan, np.full((structure.size, structure.size), np.nan)
+    elif moving < min_moving:
         raise NotIdentifiableError(
             f"only {100 * moving:.1f} % of samples move the backlash output off its dead band "
             f"(need {100 * min_moving:.0f} %): excite the system with a larger input amplitude"
         )
-    if refined is not None:
-        noise_var = refined.cost / max(refined.n_residuals - structure.size, 1)
-        covariance = noise_var * refined.unscaled_covariance(structure.names)
     else:
-        _theta_ls, rss, _cov, rows = run.last_ls  # type: ignore[misc]
-        noise_var = rss / max(rows - structure.size, 1)
-        covariance = _ls_covariance(structure, run.last_ls)  # type: ignore[arg-type]
-    return FitResult(
+        noise_var, covariance = _covariance(structure, run, refined)
+    result = FitResult(
         model=model,
         structure=structure,
         theta=np.asarray(theta, dtype=np.float64),
@@ -512,7 +612,7 @@ def _fit(
         history=np.array(run.history),
         history_rmse=np.array(run.rmse),
         iterations=len(run.history),
-        converged=run.reason in ("tolerance", "2-cycle") or (refined is not None and refined.converged),
+        converged=failure is None and (run.reason in ("tolerance", "2-cycle") or (refined is not None and refined.converged)),
         reason=run.reason,
         simulation_rmse=rmse,
         noise_std=float(np.sqrt(noise_var)),
@@ -523,94 +623,198 @@ def _fit(
         refinement_steps=steps,
         coarse_samples=segment,
     )
+    if failure is not None:
+        raise NotConvergedError(failure, result)
+    return result
 
 
+def _covariance(structure: Structure, run: _Run, refined: OutputErrorFit | None) -> tuple[float, NDArray[np.float64]]:
+    """The noise variance and the covariance of the estimate: from the refinement's factor,
+    else from the last least-squares step of the iterations."""
+    if refined is not None:
+        noise_var = refined.cost / max(refined.n_residuals - structure.size, 1)
+        return noise_var, noise_var * refined.unscaled_covariance(structure.names)
+    _theta_ls, rss, _cov, rows = run.last_ls  # type: ignore[misc]
+    return rss / max(rows - structure.size, 1), _ls_covariance(structure, run.last_ls)  # type: ignore[arg-type]
+
+
+# The options both fits share: declared once (the keyword defaults of ``_fit``), documented
+# once (``_OPTIONS_DOC``), shown in the signature and docstring of each (``_shared_options``).
+_OPTIONS_DOC = """starts : sequence of (float, float, float), optional
+    Further starts (m_R1, c_L, c_R) of the iterations; the run with the lowest simulation
+    error is refined (default algorithm only).
+max_iter : int, default 50
+    Iterations of the paper's algorithm, at least 2 (iterate 1 is the linear ARX start).
+tol : float, default 1e-3
+    The iterations stop when no parameter changes by more than this, relative to its size.
+refine : bool, default True
+    Refine the best iterate by output-error Levenberg-Marquardt on the free-run simulation
+    error, which removes the bias of the equation-error iterations under noise.
+paper : bool, default False
+    Run the paper's plain algorithm instead: measured y(t-1) in the switching functions,
+    step 1, no pole reflection, no refinement, and the last iterate is the result.
+warmup : int, default 0
+    Samples at the start left out of every criterion (the record's initial state is unknown).
+min_moving : float, default 0.1
+    Smallest fraction of samples on which the fitted backlash must move (f1 or f2 of
+    eq 12-13); below it the data do not determine the branches.
+restarts : int, optional
+    Levenberg-Marquardt restarts from the result plus N(0, ``perturbation`` ** 2) noise, each
+    kept only if it lowers the simulation error. By default 4 on records of up to 20 000
+    samples after the warm-up and none on longer ones, where they change nothing.
+perturbation : float, default 0.05
+    Standard deviation of the restarts' perturbation.
+seed : int, default 0
+    Seed of the restarts' random generator, so that results are reproducible.
+coarse : int, optional
+    Coarse to fine: the iterations and the Levenberg-Marquardt candidates (and any restarts)
+    run on the first ``coarse`` samples after the warm-up only, and Levenberg-Marquardt then
+    refines the best of them on the whole record (the same optimum, several times faster).
+    By default the segment is max(5000, 200 p) samples for p parameters, used on records at
+    least 10 times as long; 0 fits on the whole record throughout.
+    ``FitResult.coarse_samples`` says which ran; the history is then the segment's."""
+_DATA_DOC = """u : array_like
+    Input u(t), 1-D, finite.
+{y} : array_like
+    Measured output {y}(t), 1-D, finite, as long as ``u``.
+na : int, default 2
+    Input lags of the {block} (a_1..a_na of eq 16).
+nb : int, default 2
+    Output lags of the {block} (b_1..b_nb of eq 16)."""
+_OUTCOME_DOC = """Returns
+-------
+FitResult
+    The model, its parameters under the paper's names with standard errors, the iteration
+    history and how the fit ended.
+
+Raises
+------
+DataError
+    If the data or a setting cannot be used (non-finite samples, too short a record, a bad
+    warm-up, order or option).
+NotIdentifiableError
+    If the data do not determine the parameters (a constant input or output, a
+    rank-deficient regressor, a backlash that hardly moves).
+NotConvergedError
+    If the estimate is unstable, diverges or is no valid model; its ``best`` holds it."""
+_OPTIONS = ("starts", "max_iter", "tol", "refine", "paper", "warmup", "min_moving", "restarts", "perturbation", "seed", "coarse")
+
+
+def _shared_options(function: Callable[..., FitResult]) -> Callable[..., FitResult]:
+    """``function(.., **options)`` with the shared options of :func:`_fit` in its signature
+    (what ``help``, ``inspect`` and Sphinx show), its docstring (``{options}``) and its
+    argument check (an unknown or a missing keyword raises TypeError, as for any function)."""
+    shared = [p for name, p in inspect.signature(_fit).parameters.items() if name in _OPTIONS]
+    own = inspect.signature(function)
+    signature = own.replace(parameters=[p for p in own.parameters.values() if p.kind is not p.VAR_KEYWORD] + shared)
+
+    @functools.wraps(function)
+    def checked(*args: Any, **kwargs: Any) -> FitResult:
+        try:
+            signature.bind(*args, **kwargs)
+        except TypeError as exc:
+            raise TypeError(f"{function.__name__}() {exc}") from None
+        return function(*args, **kwargs)
+
+    checked.__signature__ = signature  # type: ignore[attr-defined]
+    return fill(options=_OPTIONS_DOC, outcome=_OUTCOME_DOC)(checked)
+
+
+@_shared_options
+@fill(data=_DATA_DOC.format(y="y", block="linear block"))
 def fit_cascade(
-    u: ArrayLike,
-    y: ArrayLike,
-    na: int = 2,
-    nb: int = 2,
-    degree: int = 3,
-    *,
+    u: ArrayLike, y: ArrayLike, na: int = 2, nb: int = 2, degree: int = 3, *,
     initial: Start = (1.0, 0.001, 0.001),
-    starts: Sequence[Start] | None = None,
-    max_iter: int = 50,
-    tol: float = 1e-3,
     switching: Switching = "measured",
     step: float = 1.0,
-    refine: bool = True,
-    paper: bool = False,
-    warmup: int = 0,
-    min_moving: float = 0.1,
-    restarts: int | None = None,
-    perturbation: float = 0.05,
-    seed: int = 0,
     feedthrough: bool = False,
-    coarse: int | None = None,
+    **options: Any,
 ) -> FitResult:
     """Identify a cascade u -> linear block (16) -> general backlash (1) -> y (Section 3).
 
-    ``initial = (m_R1, c_L, c_R)`` seeds the switching functions of the first iteration;
-    ``switching`` says which y(t-1) enters f1, f2 (eq 25-26): the "measured" output as the paper
-    reads, or the model's "simulated" one; ``step`` relaxes each update; ``warmup`` samples at
-    the start are left out of every criterion (the record's initial state is unknown).
-    ``paper=True`` runs the paper's plain algorithm (measured y, step 1, no pole reflection, no
-    refinement, the last iterate). By default the best iterate is refined by output-error
-    Levenberg-Marquardt on the free-run simulation error, then ``restarts`` LM runs from the
-    result plus N(0, ``perturbation``^2) noise (random generator seeded by ``seed``, so results
-    are reproducible), each kept only if it lowers the simulation error. By default 4 restarts
-    run on records of up to 20 000 samples (after the warm-up) and none on longer ones,
-    where the cost surface is smooth enough that they change nothing.
+    The paper's iterative algorithm (eq 17-28) runs first, each iteration one call into the
+    Rust core; by default the iterate with the lowest free-run simulation error is then
+    refined by output-error Levenberg-Marquardt with exact sensitivities.
 
-    ``coarse`` (samples): on long records the iterations and the LM candidates (and any
-    restarts) run on the first ``coarse`` samples after the warm-up only, and LM then refines
-    the best of them on the whole record (the same optimum, several times faster). By default (None) the segment
-    is max(5000, 200 p) samples for p parameters, used on records at least 10 times as long;
-    0 fits on the whole record throughout. ``FitResult.coarse_samples`` says which ran; the
-    history is then the segment's.
+    Parameters
+    ----------
+    {data}
+    degree : int, default 3
+        Degree n of the backlash branches (eq 4-5).
+    initial : (float, float, float), default (1.0, 0.001, 0.001)
+        (m_R1, c_L, c_R) that seed the switching functions of the first iteration.
+    switching : {'measured', 'simulated'}, default 'measured'
+        Which y(t-1) enters f1, f2 (eq 25-26): the measured output, as the paper reads, or
+        the model's simulated one.
+    step : float, default 1.0
+        Relaxation of each update, in (0, 1].
+    feedthrough : bool, default False
+        Add the lag-0 term a_0 u(t) to the linear block (parameters a0..a_na; the model's
+        block is ``LinearBlock(a, b, feedthrough=True)``).
+    {options}
 
-    ``feedthrough=True`` adds the lag-0 term a_0 u(t) to the linear block (parameters a0..a_na;
-    the model's block is ``LinearBlock(a, b, feedthrough=True)``).
+    {outcome}
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+    >>> result = bid.fit_cascade(data.u, data.noisy, na=2, nb=2, degree=3)
+    >>> round(result.parameters["c_L"], 2), result.converged
+    (0.6, True)
     """
     return _fit(
-        Structure(na, nb, degree, feedthrough=feedthrough), u, y, y_name="y", initial=initial, starts=starts, max_iter=max_iter,
-        tol=tol, switching=switching, step=step, refine=refine, paper=paper, warmup=warmup, min_moving=min_moving,
-        restarts=restarts, perturbation=perturbation, seed=seed, coarse=coarse,
+        Structure(na, nb, degree, feedthrough=feedthrough), u, y, "y", initial=initial, switching=switching, step=step, **options
     )
 
 
+@_shared_options
+@fill(data=_DATA_DOC.format(y="w", block="input block"))
 def fit_sandwich(
-    u: ArrayLike,
-    w: ArrayLike,
-    na: int = 2,
-    nb: int = 2,
-    nr: int = 2,
-    ns: int = 2,
-    degree: int = 3,
-    *,
+    u: ArrayLike, w: ArrayLike, na: int = 2, nb: int = 2, nr: int = 2, ns: int = 2, degree: int = 3, *,
     initial: Start = (1.25, 0.1, 0.1),
-    starts: Sequence[Start] | None = None,
-    max_iter: int = 50,
-    tol: float = 1e-3,
     step: float = 0.5,
-    refine: bool = True,
-    paper: bool = False,
-    warmup: int = 0,
-    min_moving: float = 0.1,
-    restarts: int | None = None,
-    perturbation: float = 0.05,
-    seed: int = 0,
     feedthrough: bool = False,
     output_feedthrough: bool = False,
-    coarse: int | None = None,
+    **options: Any,
 ) -> FitResult:
-    """Identify a sandwich u -> linear (16) -> general backlash (1) -> linear (29) -> w
-    (Section 4). Options as in :func:`fit_cascade`; the default ``step`` is 0.5 and pole
-    reflection is on, since the plain iterations diverge for most noise draws.
-    ``feedthrough`` adds a_0 u(t) to the input block, ``output_feedthrough`` r_0 y(t) to the
-    output block (then r_0 = 1 is the fixed normalisation and r1..r_nr are estimated)."""
-    return _fit(
-        Structure(na, nb, degree, nr, ns, feedthrough=feedthrough, output_feedthrough=output_feedthrough), u, w, y_name="w", initial=initial, starts=starts, max_iter=max_iter,
-        tol=tol, switching="simulated", step=step, refine=refine, paper=paper, warmup=warmup, min_moving=min_moving,
-        restarts=restarts, perturbation=perturbation, seed=seed, coarse=coarse,
-    )
+    """Identify a sandwich u -> linear (16) -> general backlash (1) -> linear (29) -> w (Section 4).
+
+    The paper's iterative algorithm (eq 29-36) with the internal y simulated (eq 35), then by
+    default the output-error refinement, as in :func:`fit_cascade`. The default ``step`` is
+    0.5 and unstable poles are reflected, since the plain iterations diverge for most noise
+    draws.
+
+    Parameters
+    ----------
+    {data}
+    nr : int, default 2
+        Input lags of the output block (r_1..r_nr of eq 29; r_1 = 1 is the normalisation).
+    ns : int, default 2
+        Output lags of the output block (s_1..s_ns of eq 29).
+    degree : int, default 3
+        Degree n of the backlash branches (eq 4-5).
+    initial : (float, float, float), default (1.25, 0.1, 0.1)
+        (m_R1, c_L, c_R) that seed the switching functions of the first iteration.
+    step : float, default 0.5
+        Relaxation of each update, in (0, 1].
+    feedthrough : bool, default False
+        Add a_0 u(t) to the input block.
+    output_feedthrough : bool, default False
+        Add r_0 y(t) to the output block (r_0 = 1 is then the normalisation and r1..r_nr are
+        estimated).
+    {options}
+
+    {outcome}
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> truth = bid.example2()
+    >>> data = bid.example_data(truth, 1500, snr=100, seed=0)
+    >>> result = bid.fit_sandwich(data.u, data.noisy)
+    >>> round(result.parameters["c_R"], 1), result.model.output_linear.nb
+    (0.5, 2)
+    """
+    structure = Structure(na, nb, degree, nr, ns, feedthrough=feedthrough, output_feedthrough=output_feedthrough)
+    return _fit(structure, u, w, "w", initial=initial, switching="simulated", step=step, **options)

@@ -6,53 +6,124 @@
   where the model has it (the backlash memory y(t-1) of the cascade; the output block's past
   w(t-j) of the sandwich). Always smaller; it says little about simulation quality.
 
-``skip`` leaves out an initial transient (records rarely start at rest).
+``warmup`` samples at the start are left out (records rarely start at rest), as in the fits.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_signal
+from .._docstrings import AXES, fill
+from .._validation import as_signal, check_warmup, one_record
 from ..errors import DataError
 from ..models import CascadeModel, Model, SandwichModel
 
 __all__ = ["Metrics", "evaluate", "fit_percent", "nrmse", "one_step_prediction", "rmse"]
 
 
-
-def _pair(y: ArrayLike, y_hat: ArrayLike, skip: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    a, b = as_signal(y, "y").ravel(), as_signal(y_hat, "y_hat").ravel()
-    if a.shape != b.shape:
-        raise DataError(f"y has {a.size} samples and y_hat {b.size}: compare signals of one record")
-    if not 0 <= skip < a.size:
-        raise DataError(f"skip = {skip}: give 0 <= skip < {a.size} (the record length)")
-    return a[skip:], b[skip:]
+def _pair(y: ArrayLike, y_hat: ArrayLike, warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    a, b = one_record(y, y_hat, ("y", "y_hat"), flatten=True)
+    warmup = check_warmup(warmup, a.size)
+    return a[warmup:], b[warmup:]
 
 
-def rmse(y: ArrayLike, y_hat: ArrayLike, *, skip: int = 0) -> float:
-    """Root mean square of y - y_hat over the samples from ``skip`` on."""
-    a, b = _pair(y, y_hat, skip)
+_PAIR_DOC = """Parameters
+----------
+y : array_like
+    Measured output, 1-D (flattened otherwise).
+y_hat : array_like
+    The model's output for the same samples.
+warmup : int, default 0
+    Samples at the start left out."""
+
+
+@fill(pair=_PAIR_DOC)
+def rmse(y: ArrayLike, y_hat: ArrayLike, *, warmup: int = 0) -> float:
+    """Root mean square of y - y_hat over the samples from ``warmup`` on.
+
+    {pair}
+
+    Returns
+    -------
+    float
+        The root mean square error.
+
+    Raises
+    ------
+    DataError
+        If the signals differ in length or ``warmup`` is not inside the record.
+
+    Examples
+    --------
+    >>> from backlashid.identify import rmse
+    >>> rmse([0.0, 1.0, 2.0], [0.0, 1.0, 3.0])  # doctest: +ELLIPSIS
+    0.577...
+    """
+    a, b = _pair(y, y_hat, warmup)
     return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
-def nrmse(y: ArrayLike, y_hat: ArrayLike, *, skip: int = 0) -> float:
-    """RMSE divided by the standard deviation of y (both from ``skip`` on): 0 is perfect, 1
-    is no better than the mean."""
-    a, b = _pair(y, y_hat, skip)
+@fill(pair=_PAIR_DOC)
+def nrmse(y: ArrayLike, y_hat: ArrayLike, *, warmup: int = 0) -> float:
+    """The RMSE divided by the standard deviation of y (both from ``warmup`` on).
+
+    0 is perfect, 1 is no better than the mean.
+
+    {pair}
+
+    Returns
+    -------
+    float
+        The normalised root mean square error.
+
+    Raises
+    ------
+    DataError
+        If the signals differ in length, ``warmup`` is not inside the record, or y is
+        constant over the evaluated samples.
+
+    Examples
+    --------
+    >>> from backlashid.identify import nrmse
+    >>> nrmse([1.0, -1.0, 1.0, -1.0], [0.5, -0.5, 0.5, -0.5])
+    0.5
+    """
+    a, b = _pair(y, y_hat, warmup)
     std = float(np.std(a))
     if std == 0.0:
         raise DataError("y is constant over the evaluated samples: NRMSE is undefined")
     return float(np.sqrt(np.mean((a - b) ** 2))) / std
 
 
-def fit_percent(y: ArrayLike, y_hat: ArrayLike, *, skip: int = 0) -> float:
-    """100 (1 - ||y - y_hat|| / ||y - mean(y)||), as MATLAB's compare reports it; equals
-    100 (1 - NRMSE)."""
-    return 100.0 * (1.0 - nrmse(y, y_hat, skip=skip))
+@fill(pair=_PAIR_DOC)
+def fit_percent(y: ArrayLike, y_hat: ArrayLike, *, warmup: int = 0) -> float:
+    """100 (1 - ``norm(y - y_hat)`` / ``norm(y - mean(y))``), as MATLAB's compare reports it.
+
+    Equals 100 (1 - NRMSE): 100 is perfect, 0 is no better than the mean.
+
+    {pair}
+
+    Returns
+    -------
+    float
+        The fit in percent.
+
+    Raises
+    ------
+    DataError
+        As :func:`nrmse`.
+
+    Examples
+    --------
+    >>> from backlashid.identify import fit_percent
+    >>> fit_percent([1.0, -1.0, 1.0, -1.0], [0.5, -0.5, 0.5, -0.5])
+    50.0
+    """
+    return 100.0 * (1.0 - nrmse(y, y_hat, warmup=warmup))
 
 
 def one_step_prediction(model: Model, u: ArrayLike, y: ArrayLike) -> NDArray[np.float64]:
@@ -61,10 +132,35 @@ def one_step_prediction(model: Model, u: ArrayLike, y: ArrayLike) -> NDArray[np.
     Cascade: y(t) = B(x(t), y_meas(t-1)), x from the linear block driven by u (x is not
     measured), B one step of eq (1). Sandwich: w(t) = sum_i r_i y(t-i) - sum_j s_j w_meas(t-j),
     with the backlash output y simulated (it is not measured). Before the record: zero.
+
+    Parameters
+    ----------
+    model : CascadeModel or SandwichModel
+        The model.
+    u : array_like
+        Input u(t).
+    y : array_like
+        Measured output (w for a sandwich), as long as ``u``.
+
+    Returns
+    -------
+    numpy.ndarray
+        The one-step-ahead prediction of every sample.
+
+    Raises
+    ------
+    DataError
+        If u and y differ in length or ``model`` is not a model.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> model = bid.example1()
+    >>> u = [0.0, 0.9, 0.4, -0.8]
+    >>> bool(abs(bid.identify.one_step_prediction(model, u, model.simulate(u)) - model.simulate(u)).max() < 1e-12)
+    True
     """
-    u_arr, y_arr = as_signal(u, "u").ravel(), as_signal(y, "y").ravel()
-    if u_arr.shape != y_arr.shape:
-        raise DataError(f"u has {u_arr.size} samples and y {y_arr.size}: give one record")
+    u_arr, y_arr = one_record(u, y, flatten=True)
     past = lambda s, k: np.concatenate([np.zeros(k), s[:-k]]) if k else s  # noqa: E731
     if isinstance(model, CascadeModel):
         x = model.linear.simulate(u_arr)
@@ -84,33 +180,131 @@ def one_step_prediction(model: Model, u: ArrayLike, y: ArrayLike) -> NDArray[np.
 
 @dataclass(frozen=True)
 class Metrics:
-    """Free-run simulation and one-step prediction errors of a model on one record."""
+    """Free-run simulation and one-step prediction errors of a model on one record.
+
+    Attributes
+    ----------
+    simulation_rmse : float
+        RMSE of the free-run simulation.
+    simulation_nrmse : float
+        That RMSE divided by the standard deviation of the measured output.
+    simulation_fit_percent : float
+        100 (1 - NRMSE).
+    prediction_rmse : float
+        RMSE of the one-step-ahead prediction.
+    samples : int
+        Samples evaluated (after the warm-up).
+    warmup : int
+        Samples at the start left out.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+    >>> metrics = bid.evaluate(bid.example1(), data.u, data.noisy, warmup=10)
+    >>> metrics.samples, round(metrics.simulation_fit_percent)
+    (1490, 96)
+    """
 
     simulation_rmse: float
     simulation_nrmse: float
     simulation_fit_percent: float
     prediction_rmse: float
     samples: int
-    skip: int
+    warmup: int
 
-    def __str__(self) -> str:
+    def summary(self) -> str:
+        """The metrics as one line of text.
+
+        Returns
+        -------
+        str
+            Each metric labelled by what it measures.
+        """
         return (
             f"free-run simulation: RMSE {self.simulation_rmse:.6g}, NRMSE {self.simulation_nrmse:.4f}, "
             f"fit {self.simulation_fit_percent:.2f} %; one-step prediction: RMSE {self.prediction_rmse:.6g} "
-            f"({self.samples} samples after skipping {self.skip})"
+            f"({self.samples} samples after a warm-up of {self.warmup})"
         )
 
+    __str__ = summary
 
-def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, skip: int = 0) -> Metrics:
-    """Both kinds of error of ``model`` on the record (u, y), from sample ``skip`` on."""
+    def to_dict(self) -> dict[str, float | int]:
+        """The metrics as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+            The fields by name.
+        """
+        return {k: (int(v) if k in ("samples", "warmup") else float(v)) for k, v in asdict(self).items()}
+
+    @fill(axes=AXES)
+    def plot(self, y: ArrayLike, y_sim: ArrayLike, *, ax: Any = None, title: str | None = None) -> Any:
+        """Plot the measured output against the free-run simulation these metrics describe,
+        the warm-up shaded; :func:`backlashid.app.plot_simulation`.
+
+        Parameters
+        ----------
+        y : array_like
+            The measured output the metrics were computed on.
+        y_sim : array_like
+            The model's free-run simulation of it.
+        {axes}
+
+        Raises
+        ------
+        DataError
+            If y does not have ``samples + warmup`` samples.
+        """
+        from ..app import plot_simulation
+
+        ys = as_signal(y, "y").ravel()
+        if ys.size != self.samples + self.warmup:
+            raise DataError(f"y has {ys.size} samples, the metrics were computed on {self.samples + self.warmup}: give that record")
+        return plot_simulation(ys, y_sim, skip=self.warmup, ax=ax, title=title)
+
+
+def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0) -> Metrics:
+    """Both kinds of error of ``model`` on the record (u, y), from sample ``warmup`` on.
+
+    Parameters
+    ----------
+    model : CascadeModel or SandwichModel
+        The model to judge, best on data not used to fit it.
+    u : array_like
+        Input u(t).
+    y : array_like
+        Measured output (w for a sandwich), as long as ``u``.
+    warmup : int, default 0
+        Samples at the start left out (the record's initial state is unknown).
+
+    Returns
+    -------
+    Metrics
+        The free-run simulation RMSE, NRMSE and fit % and the one-step prediction RMSE.
+
+    Raises
+    ------
+    DataError
+        If the record cannot be used or ``warmup`` is not inside it.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> truth = bid.example1()
+    >>> data = bid.example_data(truth, 1500, snr=None, seed=0)
+    >>> bid.evaluate(truth, data.u, data.noisy).simulation_rmse
+    0.0
+    """
     u_arr, y_arr = as_signal(u, "u").ravel(), as_signal(y, "y").ravel()
     simulated = model.simulate(u_arr)
     predicted = one_step_prediction(model, u_arr, y_arr)
     return Metrics(
-        simulation_rmse=rmse(y_arr, simulated, skip=skip),
-        simulation_nrmse=nrmse(y_arr, simulated, skip=skip),
-        simulation_fit_percent=fit_percent(y_arr, simulated, skip=skip),
-        prediction_rmse=rmse(y_arr, predicted, skip=skip),
-        samples=y_arr.size - skip,
-        skip=skip,
+        simulation_rmse=rmse(y_arr, simulated, warmup=warmup),
+        simulation_nrmse=nrmse(y_arr, simulated, warmup=warmup),
+        simulation_fit_percent=fit_percent(y_arr, simulated, warmup=warmup),
+        prediction_rmse=rmse(y_arr, predicted, warmup=warmup),
+        samples=y_arr.size - warmup,
+        warmup=warmup,
     )

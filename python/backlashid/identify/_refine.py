@@ -36,7 +36,7 @@ class OutputErrorFit:
 
 def spectral_radius(den: NDArray[np.float64]) -> float:
     """Largest root modulus of z^n + d_1 z^(n-1) + ... (0 for an empty denominator, inf for a
-    non-finite one); the core's companion-matrix roots, as ``LinearBlock.spectral_radius``."""
+    non-finite one); the core's companion-matrix roots, as ``LinearBlock.spectral_radius()``."""
     return _core.spectral_radius([float(v) for v in den])
 
 

@@ -23,14 +23,41 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._docstrings import fill
+from .._validation import check_whole
 from ..errors import DataError
 from ..models import CascadeModel, GeneralBacklash, LinearBlock, Model, SandwichModel
+
+_THETA_DOC = """Parameters
+----------
+theta : numpy.ndarray
+    A physical vector, in the order of :attr:`names`."""
 
 
 @dataclass(frozen=True)
 class Estimate:
-    """A parameter vector unpacked into the arguments of the core's estimate functions
-    (r and s are empty for a cascade)."""
+    """A parameter vector unpacked into the arguments of the core's estimate functions,
+    with the fixed m_L1 = 1 (and r_1 = 1) put back.
+
+    Attributes
+    ----------
+    a : list of float
+        The (input) linear block's a.
+    b : list of float
+        Its b.
+    c_left : float
+        c_L.
+    c_right : float
+        c_R.
+    m_left : list of float
+        m_L1..m_Ln.
+    m_right : list of float
+        m_R1..m_Rn.
+    r : list of float
+        The sandwich's output block's r; empty for a cascade.
+    s : list of float
+        Its s; empty for a cascade.
+    """
 
     a: list[float]
     b: list[float]
@@ -42,27 +69,63 @@ class Estimate:
     s: list[float]
 
     def chain(self) -> tuple[list[float], list[float], float, float, list[float], list[float]]:
-        """(a, b, c_L, c_R, m_L, m_R): the input block and the backlash."""
+        """The input block and the backlash as the core takes them.
+
+        Returns
+        -------
+        tuple
+            (a, b, c_L, c_R, m_L, m_R).
+        """
         return self.a, self.b, self.c_left, self.c_right, self.m_left, self.m_right
 
 
 @dataclass(frozen=True)
 class Structure:
-    """na, nb of the (input) linear block, branch degree n, and nr, ns of the sandwich's
-    output block (nr = 0 for a cascade)."""
+    """The structure of an identification: orders, degree and the parameter vector's layout
+    under the paper's names (eq 19 / eq 31).
+
+    Attributes
+    ----------
+    na : int
+        Input lags of the (input) linear block, >= 1.
+    nb : int
+        Its output lags, >= 0.
+    degree : int
+        Degree n of the backlash branches, >= 1.
+    nr : int, default 0
+        Input lags of the sandwich's output block (0 for a cascade).
+    ns : int, default 0
+        Its output lags.
+    feedthrough : bool, default False
+        a_0 u(t) in the input block.
+    output_feedthrough : bool, default False
+        r_0 y(t) in the sandwich's output block.
+
+    Raises
+    ------
+    DataError
+        If an order or the degree is not a whole number in range.
+
+    Examples
+    --------
+    >>> from backlashid.identify import Structure
+    >>> Structure(2, 2, 3).names
+    ['a1', 'a2', 'b1', 'b2', 'c_L', 'm_L2', 'm_L3', 'm_R1', 'c_R', 'm_R2', 'm_R3']
+    >>> Structure(2, 2, 3, 2, 2).size
+    14
+    """
 
     na: int
     nb: int
     degree: int
     nr: int = 0
     ns: int = 0
-    feedthrough: bool = False  # a_0 u(t) in the input block
-    output_feedthrough: bool = False  # r_0 y(t) in the sandwich's output block
+    feedthrough: bool = False
+    output_feedthrough: bool = False
 
     def __post_init__(self) -> None:
         for name, value, least in (("na", self.na, 1), ("nb", self.nb, 0), ("degree", self.degree, 1)):
-            if not isinstance(value, (int, np.integer)) or value < least:
-                raise DataError(f"{name} = {value!r}: give a whole number >= {least}")
+            check_whole(value, name, least)
         if self.is_sandwich and (self.nr < 1 or self.ns < 0):
             raise DataError(f"nr = {self.nr}, ns = {self.ns}: the output block needs nr >= 1, ns >= 0")
         if self.output_feedthrough and not self.is_sandwich:
@@ -85,10 +148,12 @@ class Structure:
 
     @property
     def is_sandwich(self) -> bool:
+        """True for a sandwich (nr > 0)."""
         return self.nr > 0
 
     @property
     def names(self) -> list[str]:
+        """The parameter names, in the order of the physical vector."""
         n = self.degree
         first = 0 if self.feedthrough else 1
         names = [f"a{i}" for i in range(first, self.na + 1)] + [f"b{j}" for j in range(1, self.nb + 1)]
@@ -106,6 +171,7 @@ class Structure:
 
     @property
     def size(self) -> int:
+        """The number of parameters p."""
         return len(self.names)
 
     def _slices(self) -> dict[str, Any]:
@@ -121,8 +187,17 @@ class Structure:
         out["s"] = slice(out["r"].stop, out["r"].stop + self.ns)
         return out
 
+    @fill(theta=_THETA_DOC)
     def unpack(self, theta: NDArray[np.float64]) -> Estimate:
-        """The estimate of a physical vector, with m_L1 = 1 and r_1 = 1 put back."""
+        """The estimate of a physical vector, with m_L1 = 1 and r_1 = 1 put back.
+
+        {theta}
+
+        Returns
+        -------
+        Estimate
+            Its blocks' coefficients.
+        """
         sl = self._slices()
         t = np.asarray(theta, dtype=np.float64)
         return Estimate(
@@ -137,7 +212,30 @@ class Structure:
         )
 
     def pack(self, model: Model) -> NDArray[np.float64]:
-        """Physical vector of a model (normalised so that m_L1 = 1 and r_1 = 1)."""
+        """The physical vector of a model, normalised so that m_L1 = 1 and r_1 = 1.
+
+        Parameters
+        ----------
+        model : CascadeModel or SandwichModel
+            A model of this structure (a lower branch degree embeds exactly).
+
+        Returns
+        -------
+        numpy.ndarray
+            Its parameters, in the order of :attr:`names`.
+
+        Raises
+        ------
+        DataError
+            If the model has other orders, another feedthrough or a higher degree.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> from backlashid.identify import Structure
+        >>> Structure(2, 2, 3).pack(bid.example1())[:4].tolist()
+        [0.7, 0.5, -0.2, 0.35]
+        """
         model = normalise(model)
         lin = model.input_linear if isinstance(model, SandwichModel) else model.linear
         bl = model.backlash
@@ -163,15 +261,47 @@ class Structure:
         return np.concatenate([np.asarray(p, dtype=np.float64) for p in parts])
 
     def physical_from_ls(self, theta_ls: NDArray[np.float64]) -> NDArray[np.float64]:
-        """c_L = c_1, c_R = c_2 / m_R1 (eq 20, 32)."""
+        """The physical vector of a least-squares vector: c_L = c_1, c_R = c_2 / m_R1 (eq 20, 32).
+
+        Parameters
+        ----------
+        theta_ls : numpy.ndarray
+            A least-squares vector of eq (19) / (31), in the order of :attr:`ls_names`.
+
+        Returns
+        -------
+        numpy.ndarray
+            The physical vector.
+        """
         sl = self._slices()
         t = np.array(theta_ls, dtype=np.float64)
         t[sl["c_R"]] = t[sl["c_R"]] / t[sl["m_R1"]]
         return t
 
+    @fill(theta=_THETA_DOC)
     def model(self, theta: NDArray[np.float64]) -> Model:
-        """The validated model of a physical vector (raises ModelError if it is not a valid
-        backlash, e.g. branches that fall across the dead band)."""
+        """The validated model of a physical vector.
+
+        {theta}
+
+        Returns
+        -------
+        CascadeModel or SandwichModel
+            The model of ``theta``.
+
+        Raises
+        ------
+        ModelError
+            If it is not a valid model (e.g. branches that fall across the dead band).
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> from backlashid.identify import Structure
+        >>> structure = Structure(2, 2, 3)
+        >>> structure.model(structure.pack(bid.example1())) == bid.example1()
+        True
+        """
         p = self.unpack(theta)
         lin = LinearBlock(p.a, p.b, feedthrough=self.feedthrough)
         bl = GeneralBacklash(p.c_left, p.c_right, p.m_left, p.m_right)
@@ -187,10 +317,30 @@ class Structure:
 
 
 def normalise(model: Model) -> Model:
-    """The same input/output behaviour with m_L1 = 1 (and r_1 = 1 for the sandwich).
+    """The model with the same input/output behaviour and m_L1 = 1 (and r_1 = 1 for the
+    sandwich), the normalisation the fits estimate under.
 
     Scaling y by g (m -> g m, r -> r / g) leaves w unchanged; then scaling x by k
-    (a -> k a, c -> k c, m_i -> m_i / k^i) leaves y unchanged."""
+    (a -> k a, c -> k c, m_i -> m_i / k^i) leaves y unchanged.
+
+    Parameters
+    ----------
+    model : CascadeModel or SandwichModel
+        Any model.
+
+    Returns
+    -------
+    CascadeModel or SandwichModel
+        The normalised model.
+
+    Examples
+    --------
+    >>> from backlashid import CascadeModel, GeneralBacklash, LinearBlock
+    >>> from backlashid.identify import normalise
+    >>> model = CascadeModel(LinearBlock([1.0]), GeneralBacklash(0.5, 0.5, [2.0], [2.0]))
+    >>> normalise(model).linear.a.tolist(), normalise(model).backlash.c_left
+    ([2.0], 1.0)
+    """
     lin = model.input_linear if isinstance(model, SandwichModel) else model.linear
     bl = model.backlash
     g = float(model.r[0]) if isinstance(model, SandwichModel) else 1.0

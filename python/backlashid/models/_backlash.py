@@ -9,10 +9,27 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
+from .._docstrings import fill
 from .._validation import as_coefficients, as_scalar, as_signal, format_list, frozen
 from ..errors import DataError
 
 __all__ = ["GeneralBacklash", "BranchCheck", "SwitchingSignals"]
+
+_SIGNAL_DOC = """Parameters
+----------
+x : array_like
+    The backlash's input x(1), x(2), ...
+y0 : float, default 0.0
+    The memory y(0)."""
+_X_DOC = """Parameters
+----------
+x : array_like
+    Values of the backlash's input x (a scalar is taken as one value).
+
+Returns
+-------
+numpy.ndarray
+    {branch} at each value."""
 
 
 def _finite_range(lo: Any, hi: Any) -> tuple[float, float]:
@@ -25,7 +42,30 @@ def _finite_range(lo: Any, hi: Any) -> tuple[float, float]:
 @dataclass(frozen=True)
 class BranchCheck:
     """Where, on [x_min, x_max], the paper's assumption fails: a branch that does not increase,
-    or L(x) <= R(x) (the branches cross at the ends of each interval)."""
+    or L(x) <= R(x) (the branches cross at the ends of each interval).
+
+    Returned by :meth:`GeneralBacklash.check_branches`; ``str()`` says it in words.
+
+    Attributes
+    ----------
+    x_min : float
+        Start of the range checked.
+    x_max : float
+        End of the range checked.
+    left_not_increasing : list of (float, float)
+        Intervals where L does not increase.
+    right_not_increasing : list of (float, float)
+        Intervals where R does not increase.
+    crossed : list of (float, float)
+        Intervals where L(x) <= R(x).
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> check = bid.example1().backlash.check_branches(-1.0, 1.0)
+    >>> check.is_valid, check.crossings
+    (True, [])
+    """
 
     x_min: float
     x_max: float
@@ -35,6 +75,7 @@ class BranchCheck:
 
     @property
     def is_valid(self) -> bool:
+        """True when no interval was found: both branches increase and do not cross."""
         return not (self.left_not_increasing or self.right_not_increasing or self.crossed)
 
     @property
@@ -59,24 +100,62 @@ class BranchCheck:
 
 @dataclass(frozen=True)
 class SwitchingSignals:
-    """Internal signals of the switching-function form, eq (9)-(15)."""
+    """The internal signals of the switching-function form, eq (9)-(15).
 
-    xi1: NDArray[np.float64]  # x(t) + c_L, eq (9)
-    xi2: NDArray[np.float64]  # x(t) - c_R, eq (10)
-    f1: NDArray[np.bool_]  # eq (12)
-    f2: NDArray[np.bool_]  # eq (13), exclusive of f1 (case order of eq 1)
-    y: NDArray[np.float64]  # eq (15)
+    Returned by :meth:`GeneralBacklash.switching`.
+
+    Attributes
+    ----------
+    xi1 : numpy.ndarray
+        x(t) + c_L, eq (9).
+    xi2 : numpy.ndarray
+        x(t) - c_R, eq (10).
+    f1 : numpy.ndarray of bool
+        The left branch is active, eq (12).
+    f2 : numpy.ndarray of bool
+        The right branch is active, eq (13); exclusive of f1 (the case order of eq 1).
+    y : numpy.ndarray
+        The output, eq (15).
+    """
+
+    xi1: NDArray[np.float64]
+    xi2: NDArray[np.float64]
+    f1: NDArray[np.bool_]
+    f2: NDArray[np.bool_]
+    y: NDArray[np.float64]
 
 
 class GeneralBacklash:
-    """General backlash (eq 1): y(t) = L(x) if x <= z_L, R(x) if x >= z_R, else y(t-1), with
+    """The general backlash of eq (1): y(t) = L(x) if x <= z_L, R(x) if x >= z_R, else y(t-1).
 
-        L(x) = sum_{i=1}^n m_Li (x + c_L)^i   (eq 4),    R(x) = sum_{i=1}^n m_Ri (x - c_R)^i   (eq 5).
+    The branches are L(x) = sum_{i=1}^n m_Li (x + c_L)^i (eq 4) and
+    R(x) = sum_{i=1}^n m_Ri (x - c_R)^i (eq 5); degree 1 is the classic straight backlash.
+    Both branches must increase across the dead band [-c_L, c_R]; use
+    :meth:`check_branches` for the range your data cover. The parameters are also available
+    under the paper's symbols ``c_L``, ``c_R``, ``m_L``, ``m_R``.
 
-    ``m_left = [m_L1, .., m_Ln]``, ``m_right = [m_R1, .., m_Rn]``; degree 1 is the classic
-    straight backlash. Widths c_L, c_R >= 0 (0 gives a static, possibly different, pair of
-    curves). Both branches must increase across the dead band [-c_L, c_R]; use
-    :meth:`check_branches` for the range your data covers.
+    Parameters
+    ----------
+    c_left : float
+        Width c_L >= 0 (0 gives a static, possibly different, pair of curves).
+    c_right : float
+        Width c_R >= 0.
+    m_left : array_like
+        Coefficients m_L1..m_Ln of L.
+    m_right : array_like
+        Coefficients m_R1..m_Rn of R.
+
+    Raises
+    ------
+    ModelError
+        If a width is negative or a branch does not increase across the dead band.
+
+    Examples
+    --------
+    >>> from backlashid import GeneralBacklash
+    >>> play = GeneralBacklash(0.5, 0.5, [1.0], [1.0])
+    >>> play.simulate([0.0, 1.0, 0.8, 0.0, -1.0]).tolist()
+    [0.0, 0.5, 0.5, 0.5, -0.5]
     """
 
     __slots__ = ("_c_left", "_c_right", "_m_left", "_m_right", "_native")
@@ -93,18 +172,22 @@ class GeneralBacklash:
     # -- parameters, under the paper's symbols too ------------------------------------------
     @property
     def c_left(self) -> float:
+        """Width c_L of the left branch's offset (alias ``c_L``)."""
         return self._c_left
 
     @property
     def c_right(self) -> float:
+        """Width c_R of the right branch's offset (alias ``c_R``)."""
         return self._c_right
 
     @property
     def m_left(self) -> NDArray[np.float64]:
+        """Coefficients m_L1..m_Ln of L, read-only (alias ``m_L``)."""
         return self._m_left
 
     @property
     def m_right(self) -> NDArray[np.float64]:
+        """Coefficients m_R1..m_Rn of R, read-only (alias ``m_R``)."""
         return self._m_right
 
     c_L = c_left
@@ -118,34 +201,94 @@ class GeneralBacklash:
         return max(len(self._m_left), len(self._m_right))
 
     # -- evaluation ----------------------------------------------------------------------------
+    @fill(x=_X_DOC.format(branch="L(x)"))
     def left(self, x: ArrayLike) -> NDArray[np.float64]:
-        """L(x), eq (4)."""
+        """The left branch L(x), eq (4).
+
+        {x}
+        """
         return self._native.left(np.atleast_1d(as_signal(x, "x")))
 
+    @fill(x=_X_DOC.format(branch="R(x)"))
     def right(self, x: ArrayLike) -> NDArray[np.float64]:
-        """R(x), eq (5)."""
+        """The right branch R(x), eq (5).
+
+        {x}
+        """
         return self._native.right(np.atleast_1d(as_signal(x, "x")))
 
+    @fill(signal=_SIGNAL_DOC)
     def simulate(
         self, x: ArrayLike, *, y0: float = 0.0, form: Literal["eq1", "breakpoints"] = "eq1"
     ) -> NDArray[np.float64]:
-        """The output y for the internal signal x, from memory y(0) = y0.
+        """The output y for the internal signal x, from the memory y(0) = y0.
 
-        ``form="eq1"`` compares branch values with y(t-1) (fast); ``"breakpoints"`` follows
-        eq (1) literally through z_L and z_R of eq (2)-(3) (a root search per sample).
+        {signal}
+        form : {'eq1', 'breakpoints'}, default 'eq1'
+            ``"eq1"`` compares branch values with y(t-1) (fast); ``"breakpoints"`` follows
+            eq (1) literally through z_L and z_R of eq (2)-(3) (a root search per sample).
+
+        Returns
+        -------
+        numpy.ndarray
+            y(1), y(2), ...
+
+        Raises
+        ------
+        DataError
+            If x or y0 is not finite, or ``form`` is unknown.
         """
         if form not in ("eq1", "breakpoints"):
             raise DataError(f"form = {form!r}: use 'eq1' or 'breakpoints'")
         return self._native.simulate(as_signal(x, "x"), as_scalar(y0, "y0", DataError), form)
 
+    @fill(signal=_SIGNAL_DOC)
     def switching(self, x: ArrayLike, *, y0: float = 0.0) -> SwitchingSignals:
-        """The switching-function form, eq (9)-(15), with the case order of eq (1)."""
+        """The switching-function form, eq (9)-(15), with the case order of eq (1).
+
+        {signal}
+
+        Returns
+        -------
+        SwitchingSignals
+            xi1, xi2, f1, f2 and y.
+
+        Examples
+        --------
+        >>> from backlashid import GeneralBacklash
+        >>> signals = GeneralBacklash(0.5, 0.5, [1.0], [1.0]).switching([1.0, 0.8])
+        >>> signals.f2.tolist(), signals.y.tolist()
+        ([True, False], [0.5, 0.5])
+        """
         xi1, xi2, f1, f2, y = self._native.switching(as_signal(x, "x"), as_scalar(y0, "y0", DataError))
         return SwitchingSignals(xi1=xi1, xi2=xi2, f1=f1, f2=f2, y=y)
 
     def breakpoints(self, y_prev: float, x_range: tuple[float, float]) -> tuple[float, float]:
-        """z_L, z_R of eq (2)-(3): where L and R reach y_prev, searched on ``x_range``
-        (-inf or +inf when the branch does not reach y_prev there)."""
+        """The breakpoints z_L, z_R of eq (2)-(3): where L and R reach ``y_prev``.
+
+        Parameters
+        ----------
+        y_prev : float
+            The previous output y(t-1).
+        x_range : (float, float)
+            The finite range searched.
+
+        Returns
+        -------
+        (float, float)
+            z_L and z_R; -inf or +inf when the branch does not reach ``y_prev`` there.
+
+        Raises
+        ------
+        DataError
+            If ``y_prev`` or the range is not finite.
+
+        Examples
+        --------
+        >>> from backlashid import GeneralBacklash
+        >>> GeneralBacklash(0.5, 0.5, [1.0], [1.0]).breakpoints(0.0, (-2.0, 2.0))
+        (-0.5, 0.5)
+        """
         lo, hi = _finite_range(x_range[0], x_range[1])
         y = as_scalar(y_prev, "y_prev", DataError)
         if not np.isfinite(y):
@@ -153,17 +296,57 @@ class GeneralBacklash:
         return self._native.breakpoints(y, lo, hi)
 
     def check_branches(self, x_min: float, x_max: float) -> BranchCheck:
-        """Check on [x_min, x_max] that both branches increase and do not cross."""
+        """Check on [x_min, x_max] that both branches increase and do not cross.
+
+        Parameters
+        ----------
+        x_min : float
+            Start of the range, e.g. the smallest x the data drive.
+        x_max : float
+            End of the range.
+
+        Returns
+        -------
+        BranchCheck
+            Where the paper's assumption fails, if anywhere.
+
+        Raises
+        ------
+        DataError
+            If the range is not finite.
+        """
         d: Any = self._native.check_branches(*_finite_range(x_min, x_max))
         return BranchCheck(**d)
 
     def characteristic(self, x_min: float, x_max: float, num: int = 400) -> tuple[NDArray[np.float64], ...]:
-        """(x, L(x), R(x)) on a grid, for plotting the characteristic (Fig. 1, 4, 7)."""
+        """The characteristic (x, L(x), R(x)) on a grid, for plotting (Figs 1, 4, 7).
+
+        Parameters
+        ----------
+        x_min : float
+            Start of the grid.
+        x_max : float
+            End of the grid.
+        num : int, default 400
+            Grid points.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            x, L(x) and R(x).
+        """
         x = np.linspace(x_min, x_max, num)
         return x, self.left(x), self.right(x)
 
     # -- serialisation -------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
+        """The backlash as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+            ``c_left``, ``c_right``, ``m_left`` and ``m_right``.
+        """
         return {
             "c_left": self._c_left,
             "c_right": self._c_right,
@@ -173,6 +356,18 @@ class GeneralBacklash:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> GeneralBacklash:
+        """The backlash of a :meth:`to_dict` dict.
+
+        Parameters
+        ----------
+        data : dict
+            With the keys c_left, c_right, m_left and m_right.
+
+        Returns
+        -------
+        GeneralBacklash
+            The backlash (validated).
+        """
         return cls(data["c_left"], data["c_right"], data["m_left"], data["m_right"])
 
     def __reduce__(self) -> tuple[Any, ...]:

@@ -13,64 +13,105 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
-from .._validation import as_scalar, as_signal
+from .._docstrings import fill
+from .._validation import as_signal, check_instance
 from ..errors import DataError
 from ._backlash import GeneralBacklash
-from ._chain import FORMAT_VERSION, _check_state, _check_type, _ModelIO, _moving_fraction, _values
+from ._chain import DOCS, FORMAT_VERSION, _ModelIO, _moving_fraction, _Simulation, _State
 from ._linear import LinearBlock
 
 __all__ = ["CascadeModel", "CascadeSimulation", "CascadeState"]
 
 
 @dataclass(frozen=True)
-class CascadeState:
-    """Before the first sample: ``u_past = [u(0), u(-1), ..]`` (na values),
-    ``x_past = [x(0), ..]`` (nb values), most recent first, and the backlash memory y(0)."""
+class CascadeState(_State):
+    """The state of a cascade before the first sample, most recent values first (a value
+    that is not a finite number raises DataError).
+
+    Attributes
+    ----------
+    u_past : tuple of float
+        ``[u(0), u(-1), ..]``, na values.
+    x_past : tuple of float
+        ``[x(0), x(-1), ..]``, nb values.
+    y_prev : float, default 0.0
+        The backlash memory y(0).
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> bid.example1().rest_state()
+    CascadeState(u_past=(0.0, 0.0), x_past=(0.0, 0.0), y_prev=0.0)
+    """
 
     u_past: tuple[float, ...]
     x_past: tuple[float, ...]
     y_prev: float = 0.0
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "u_past", _values(self.u_past, "u_past"))
-        object.__setattr__(self, "x_past", _values(self.x_past, "x_past"))
-        object.__setattr__(self, "y_prev", as_scalar(self.y_prev, "y_prev", DataError))
-
 
 @dataclass(frozen=True)
-class CascadeSimulation:
-    """A cascade simulation with its internal signals (eq 16, eq 12-13)."""
+@fill(outputs=DOCS.outputs.format(output="y", block="linear block"), signals=DOCS.signals.format(state="CascadeState"))
+class CascadeSimulation(_Simulation):
+    """A cascade simulation with its internal signals (eq 16, eq 12-13).
 
-    output: NDArray[np.float64]  # y
+    {outputs}
+    {signals}
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> sim = bid.example1().simulate([0.0, 0.9, 0.4, -0.8], internals=True)
+    >>> sim.moving_fraction(), sim.final_state.u_past
+    (0.5, (-0.8, 0.4))
+    """
+
+    output: NDArray[np.float64]
     x: NDArray[np.float64]
     f1: NDArray[np.bool_]
     f2: NDArray[np.bool_]
     final_state: CascadeState
 
-    @property
-    def moving_fraction(self) -> float:
-        """Fraction of samples where the backlash output moved along a branch (f1 or f2)."""
-        return float(np.mean(self.f1 | self.f2))
-
 
 @dataclass(frozen=True, eq=True)
+@fill(model=DOCS.model)
 class CascadeModel(_ModelIO):
-    """Linear block (16) followed by a general backlash (1): u -> x -> y."""
+    """The cascade of Section 3 (Fig. 2): a linear block (16) followed by a general
+    backlash (1), u -> x -> y.
+
+    {model}
+    linear : LinearBlock
+        The linear block, u -> x.
+    backlash : GeneralBacklash
+        The backlash, x -> y.
+
+    Examples
+    --------
+    >>> from backlashid import CascadeModel, GeneralBacklash, LinearBlock
+    >>> model = CascadeModel(LinearBlock([1.0]), GeneralBacklash(0.5, 0.5, [1.0], [1.0]))
+    >>> model.simulate([0.0, 2.0, 1.0, 0.0]).tolist()
+    [0.0, 0.0, 1.5, 1.5]
+    """
 
     linear: LinearBlock
     backlash: GeneralBacklash
     _native: Any = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        _check_type(self.linear, LinearBlock, "linear")
-        _check_type(self.backlash, GeneralBacklash, "backlash")
+        check_instance(self.linear, LinearBlock, "linear")
+        check_instance(self.backlash, GeneralBacklash, "backlash")
         object.__setattr__(self, "_native", _core.CascadeModel(self.linear._native, self.backlash._native))
 
     def __reduce__(self) -> tuple[Any, ...]:
         return (CascadeModel, (self.linear, self.backlash))
 
     def rest_state(self) -> CascadeState:
-        """The paper's start: every past signal zero, y(0) = 0."""
+        """The paper's start: every past signal zero, y(0) = 0.
+
+        Returns
+        -------
+        CascadeState
+            The state at rest.
+        """
         return CascadeState((0.0,) * self.linear.na, (0.0,) * self.linear.nb, 0.0)
 
     @overload
@@ -83,13 +124,28 @@ class CascadeModel(_ModelIO):
         self, u: ArrayLike, *, initial_state: CascadeState | None = ..., internals: Literal[True]
     ) -> CascadeSimulation: ...
 
+    @fill(simulate=DOCS.simulate.format(state="CascadeState"), raises=DOCS.simulate_raises.format(state="CascadeState"))
     def simulate(
         self, u: ArrayLike, *, initial_state: CascadeState | None = None, internals: bool = False
     ) -> NDArray[np.float64] | CascadeSimulation:
-        """The output y for input u; with ``internals=True`` a :class:`CascadeSimulation`
-        that also holds x, f1, f2 and the final state."""
+        """The output y for the input u.
+
+        Parameters
+        ----------
+        {simulate}
+        internals : bool, default False
+            Return a :class:`CascadeSimulation` that also holds x, f1, f2 and the final
+            state.
+
+        Returns
+        -------
+        numpy.ndarray or CascadeSimulation
+            y(1), y(2), ..., or the simulation with its internal signals.
+
+        {raises}
+        """
         s = initial_state if initial_state is not None else self.rest_state()
-        _check_state(s, CascadeState)
+        check_instance(s, CascadeState, "initial_state", DataError)
         u = as_signal(u, "u")
         if not internals:
             return self._native.simulate(u, list(s.u_past), list(s.x_past), s.y_prev)
@@ -98,14 +154,33 @@ class CascadeModel(_ModelIO):
         )
         return CascadeSimulation(y, x, f1, f2, CascadeState(u_past, x_past, y_prev))
 
+    @fill(simulate=DOCS.simulate.format(state="CascadeState"), moving=DOCS.moving)
     def moving_fraction(self, u: ArrayLike, *, initial_state: CascadeState | None = None, warmup: int = 0) -> float:
-        """The fraction of samples after ``warmup`` on which the backlash moves (f1 or f2 of
-        eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
+        """How often the backlash moves on the input u.
+
+        Parameters
+        ----------
+        {simulate}
+        {moving}
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> bid.example1().moving_fraction([0.0, 0.9, 0.4, -0.8], warmup=2)
+        1.0
+        """
         s = initial_state if initial_state is not None else self.rest_state()
-        _check_state(s, CascadeState)
+        check_instance(s, CascadeState, "initial_state", DataError)
         return _moving_fraction(self._native, u, (list(s.u_past), list(s.x_past), s.y_prev), warmup)
 
     def to_dict(self) -> dict[str, Any]:
+        """The cascade as a plain, JSON-safe dict.
+
+        Returns
+        -------
+        dict
+            ``{"model": "cascade", "format_version": 1, "linear": .., "backlash": ..}``.
+        """
         return {
             "model": "cascade",
             "format_version": FORMAT_VERSION,

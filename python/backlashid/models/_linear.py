@@ -15,15 +15,38 @@ __all__ = ["LinearBlock"]
 
 
 class LinearBlock:
-    """x(t) = sum_{i=1}^{na} a_i u(t-i) - sum_{j=1}^{nb} b_j x(t-j)   (eq 16).
+    """The linear dynamic block x(t) = sum_{i=1}^{na} a_i u(t-i) - sum_{j=1}^{nb} b_j x(t-j)
+    (eq 16).
 
-    ``a`` needs at least one coefficient; ``b`` may be empty (an FIR block). In a sandwich the
-    output block (eq 29) is a LinearBlock with ``a = r`` and ``b = s``.
-
+    In a sandwich the output block (eq 29) is a LinearBlock with ``a = r`` and ``b = s``.
     ``feedthrough=True`` adds the lag-0 term (not in the paper; sampled real systems often
-    respond within the sample): x(t) = a_0 u(t) + sum_{i=1}^{na} a_i u(t-i) - ..., and then
-    ``a = [a_0, a_1, .., a_na]`` starts at lag 0, with na >= 1 (give a_1 = 0 for a block with
-    a_0 alone). ``na`` is always the largest input lag (the length of ``u_past``).
+    respond within the sample): x(t) = a_0 u(t) + sum_{i=1}^{na} a_i u(t-i) - .., and then
+    ``a = [a_0, a_1, .., a_na]`` starts at lag 0. ``na`` is always the largest input lag (the
+    length of ``u_past``). Frozen: the coefficients are read-only.
+
+    Parameters
+    ----------
+    a : array_like
+        Input coefficients a_1..a_na (at least one), or a_0..a_na with feedthrough (at least
+        a_0 and a_1; give a_1 = 0 for a block with a_0 alone).
+    b : array_like, default ()
+        Output coefficients b_1..b_nb; empty for an FIR block.
+    feedthrough : bool, default False
+        ``a`` starts at lag 0.
+
+    Raises
+    ------
+    ModelError
+        If a coefficient list is empty (``a``), not a flat list of real numbers, or not finite.
+
+    Examples
+    --------
+    >>> from backlashid import LinearBlock
+    >>> block = LinearBlock([0.7, 0.5], [-0.2, 0.35])
+    >>> block.equation()
+    'x(t) = 0.7 u(t-1) + 0.5 u(t-2) + 0.2 x(t-1) - 0.35 x(t-2)'
+    >>> block.simulate([1.0, 0.0, 0.0]).tolist()
+    [0.0, 0.7, 0.64]
     """
 
     __slots__ = ("_a", "_b", "_feedthrough", "_native")
@@ -73,26 +96,67 @@ class LinearBlock:
 
     @property
     def nb(self) -> int:
+        """Number of output coefficients b_1..b_nb."""
         return len(self._b)
 
     def poles(self) -> NDArray[np.complex128]:
-        """Roots of z^nb + b_1 z^(nb-1) + ... + b_nb, sorted by decreasing modulus."""
+        """The poles: roots of z^nb + b_1 z^(nb-1) + ... + b_nb.
+
+        Returns
+        -------
+        numpy.ndarray
+            Complex poles sorted by decreasing modulus (empty for an FIR block).
+
+        Examples
+        --------
+        >>> from backlashid import LinearBlock
+        >>> LinearBlock([1.0], [-0.5]).poles()
+        array([0.5+0.j])
+        """
         p = np.array([complex(re, im) for re, im in self._native.poles()], dtype=np.complex128)
         return p[np.argsort(-np.abs(p), kind="stable")]
 
-    @property
     def spectral_radius(self) -> float:
-        """Largest pole modulus (0 for an FIR block)."""
+        """The largest pole modulus.
+
+        Returns
+        -------
+        float
+            max ``abs(poles())``, 0 for an FIR block.
+
+        Examples
+        --------
+        >>> from backlashid import LinearBlock
+        >>> LinearBlock([1.0], [0.0, 0.25]).spectral_radius()
+        0.5
+        """
         p = self.poles()
         return float(np.abs(p).max()) if p.size else 0.0
 
     def is_stable(self) -> bool:
-        """True when every pole lies strictly inside the unit circle."""
-        return self.spectral_radius < 1.0
+        """Whether every pole lies strictly inside the unit circle.
 
-    @property
+        Returns
+        -------
+        bool
+            ``spectral_radius() < 1``.
+        """
+        return self.spectral_radius() < 1.0
+
     def static_gain(self) -> float:
-        """Steady-state gain sum(a) / (1 + sum(b)); inf at a pole z = 1."""
+        """The steady-state gain sum(a) / (1 + sum(b)).
+
+        Returns
+        -------
+        float
+            The gain, inf for a pole at z = 1.
+
+        Examples
+        --------
+        >>> from backlashid import LinearBlock
+        >>> LinearBlock([0.5, 0.5], [-0.5]).static_gain()
+        2.0
+        """
         den = 1.0 + float(self._b.sum())
         return float(self._a.sum()) / den if den != 0.0 else float("inf")
 
@@ -103,8 +167,35 @@ class LinearBlock:
         u_past: ArrayLike | None = None,
         x_past: ArrayLike | None = None,
     ) -> NDArray[np.float64]:
-        """x for the input u; ``u_past = [u(0), u(-1), ..]`` and ``x_past = [x(0), ..]``
-        (most recent first) give the state before the record, zero by default."""
+        """The block's output x for the input u.
+
+        Parameters
+        ----------
+        u : array_like
+            Input u(1), u(2), ...
+        u_past : array_like, optional
+            ``[u(0), u(-1), ..]``, na values, most recent first (default zeros).
+        x_past : array_like, optional
+            ``[x(0), x(-1), ..]``, nb values, most recent first (default zeros).
+
+        Returns
+        -------
+        numpy.ndarray
+            x(1), x(2), ...
+
+        Raises
+        ------
+        DataError
+            If u or a past is not finite, or a past has the wrong length.
+        ModelError
+            If the output overflows (an unstable block).
+
+        Examples
+        --------
+        >>> from backlashid import LinearBlock
+        >>> LinearBlock([1.0]).simulate([2.0, 3.0], u_past=[1.0]).tolist()
+        [1.0, 2.0]
+        """
         return self._native.simulate(as_signal(u, "u"), *self._past(u_past, x_past))
 
     def _past(self, u_past: ArrayLike | None, x_past: ArrayLike | None) -> tuple[list[float], list[float]]:
@@ -119,7 +210,26 @@ class LinearBlock:
         return one(u_past, self.na, "u_past"), one(x_past, self.nb, "x_past")
 
     def equation(self, input: str = "u", output: str = "x") -> str:
-        """The difference equation as text, e.g. 'x(t) = 0.7 u(t-1) + 0.2 x(t-1)'."""
+        """The difference equation as text.
+
+        Parameters
+        ----------
+        input : str, default 'u'
+            Name of the input signal.
+        output : str, default 'x'
+            Name of the output signal.
+
+        Returns
+        -------
+        str
+            E.g. ``'x(t) = 0.7 u(t-1) + 0.2 x(t-1)'``.
+
+        Examples
+        --------
+        >>> from backlashid import LinearBlock
+        >>> LinearBlock([1.0], [0.5]).equation("y", "w")
+        'w(t) = 1 y(t-1) - 0.5 w(t-1)'
+        """
         terms = [(float(c), f"{input}(t-{i})" if i else f"{input}(t)") for i, c in zip(self.lags, self._a)]
         terms += [(-float(c), f"{output}(t-{j})") for j, c in enumerate(self._b, 1)]
         text = ""
@@ -131,8 +241,15 @@ class LinearBlock:
         return f"{output}(t) = {text}"
 
     def to_dict(self) -> dict[str, Any]:
-        """{"a": .., "b": ..}, plus "feedthrough": true when a starts at lag 0 (dicts
-        without the key, e.g. from earlier versions, load as blocks without feedthrough)."""
+        """The block as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+            ``{"a": [..], "b": [..]}``, plus ``"feedthrough": True`` when ``a`` starts at lag
+            0 (dicts without the key, e.g. from earlier versions, load as blocks without
+            feedthrough).
+        """
         out: dict[str, Any] = {"a": self._a.tolist(), "b": self._b.tolist()}
         if self._feedthrough:
             out["feedthrough"] = True
@@ -140,6 +257,18 @@ class LinearBlock:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> LinearBlock:
+        """The block of a :meth:`to_dict` dict.
+
+        Parameters
+        ----------
+        data : dict
+            With the keys "a", optionally "b" and "feedthrough".
+
+        Returns
+        -------
+        LinearBlock
+            The block.
+        """
         return cls(data["a"], data.get("b", ()), feedthrough=bool(data.get("feedthrough", False)))
 
     def __reduce__(self) -> tuple[Any, ...]:

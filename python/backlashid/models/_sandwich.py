@@ -14,51 +14,80 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
-from .._validation import as_signal, format_list
+from .._docstrings import fill
+from .._validation import as_signal, check_instance, format_list
+from ..errors import DataError
 from ._backlash import GeneralBacklash
-from ._chain import FORMAT_VERSION, _check_state, _check_type, _ModelIO, _moving_fraction, _values
+from ._chain import DOCS, FORMAT_VERSION, _ModelIO, _moving_fraction, _Simulation, _State
 from ._linear import LinearBlock
 
 __all__ = ["SandwichModel", "SandwichSimulation", "SandwichState"]
 
 
 @dataclass(frozen=True)
-class SandwichState:
-    """Before the first sample: the input block's ``u_past``, ``x_past`` and the output
-    block's ``y_past = [y(0), y(-1), ..]`` (nr values; y(0) is also the backlash memory) and
-    ``w_past = [w(0), ..]`` (ns values), most recent first."""
+class SandwichState(_State):
+    """The state of a sandwich before the first sample, most recent values first (a value
+    that is not a finite number raises DataError).
+
+    Attributes
+    ----------
+    u_past : tuple of float
+        The input block's ``[u(0), u(-1), ..]``, na values.
+    x_past : tuple of float
+        The input block's ``[x(0), x(-1), ..]``, nb values.
+    y_past : tuple of float
+        The output block's ``[y(0), y(-1), ..]``, nr values; y(0) is also the backlash memory.
+    w_past : tuple of float
+        The output block's ``[w(0), w(-1), ..]``, ns values.
+    """
 
     u_past: tuple[float, ...]
     x_past: tuple[float, ...]
     y_past: tuple[float, ...]
     w_past: tuple[float, ...]
 
-    def __post_init__(self) -> None:
-        for name in ("u_past", "x_past", "y_past", "w_past"):
-            object.__setattr__(self, name, _values(getattr(self, name), name))
-
 
 @dataclass(frozen=True)
-class SandwichSimulation:
-    """A sandwich simulation with its internal signals."""
+@fill(outputs=DOCS.outputs.format(output="w", block="input block"), signals=DOCS.signals.format(state="SandwichState"))
+class SandwichSimulation(_Simulation):
+    """A sandwich simulation with its internal signals.
 
-    output: NDArray[np.float64]  # w
+    {outputs}
+    y : numpy.ndarray
+        The backlash's output, the output block's input.
+    {signals}
+    """
+
+    output: NDArray[np.float64]
     x: NDArray[np.float64]
     y: NDArray[np.float64]
     f1: NDArray[np.bool_]
     f2: NDArray[np.bool_]
     final_state: SandwichState
 
-    @property
-    def moving_fraction(self) -> float:
-        return float(np.mean(self.f1 | self.f2))
-
 
 @dataclass(frozen=True, eq=True)
+@fill(model=DOCS.model)
 class SandwichModel(_ModelIO):
-    """Input block (16), general backlash (1), output block (29): u -> x -> y -> w.
+    """The sandwich of Section 4 (Fig. 3): input block (16), general backlash (1), output
+    block (29), u -> x -> y -> w.
 
     The output block is a :class:`LinearBlock` with a = r and b = s of eq (29).
+
+    {model}
+    input_linear : LinearBlock
+        The input block, u -> x.
+    backlash : GeneralBacklash
+        The backlash, x -> y.
+    output_linear : LinearBlock
+        The output block, y -> w.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> model = bid.example2()
+    >>> model.r.tolist(), model.output_linear.equation("y", "w")
+    ([1.0, 0.15], 'w(t) = 1 y(t-1) + 0.15 y(t-2) + 0.2 w(t-1) - 0.35 w(t-2)')
     """
 
     input_linear: LinearBlock
@@ -67,9 +96,9 @@ class SandwichModel(_ModelIO):
     _native: Any = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        _check_type(self.input_linear, LinearBlock, "input_linear")
-        _check_type(self.backlash, GeneralBacklash, "backlash")
-        _check_type(self.output_linear, LinearBlock, "output_linear")
+        check_instance(self.input_linear, LinearBlock, "input_linear")
+        check_instance(self.backlash, GeneralBacklash, "backlash")
+        check_instance(self.output_linear, LinearBlock, "output_linear")
         object.__setattr__(
             self,
             "_native",
@@ -81,13 +110,22 @@ class SandwichModel(_ModelIO):
 
     @property
     def r(self) -> NDArray[np.float64]:
+        """The output block's input coefficients r of eq (29)."""
         return self.output_linear.a
 
     @property
     def s(self) -> NDArray[np.float64]:
+        """The output block's output coefficients s of eq (29)."""
         return self.output_linear.b
 
     def rest_state(self) -> SandwichState:
+        """The paper's start: every past signal zero.
+
+        Returns
+        -------
+        SandwichState
+            The state at rest.
+        """
         return SandwichState(
             (0.0,) * self.input_linear.na,
             (0.0,) * self.input_linear.nb,
@@ -105,13 +143,28 @@ class SandwichModel(_ModelIO):
         self, u: ArrayLike, *, initial_state: SandwichState | None = ..., internals: Literal[True]
     ) -> SandwichSimulation: ...
 
+    @fill(simulate=DOCS.simulate.format(state="SandwichState"), raises=DOCS.simulate_raises.format(state="SandwichState"))
     def simulate(
         self, u: ArrayLike, *, initial_state: SandwichState | None = None, internals: bool = False
     ) -> NDArray[np.float64] | SandwichSimulation:
-        """The output w for input u; with ``internals=True`` a :class:`SandwichSimulation`
-        that also holds x, y, f1, f2 and the final state."""
+        """The output w for the input u.
+
+        Parameters
+        ----------
+        {simulate}
+        internals : bool, default False
+            Return a :class:`SandwichSimulation` that also holds x, y, f1, f2 and the final
+            state.
+
+        Returns
+        -------
+        numpy.ndarray or SandwichSimulation
+            w(1), w(2), ..., or the simulation with its internal signals.
+
+        {raises}
+        """
         s = initial_state if initial_state is not None else self.rest_state()
-        _check_state(s, SandwichState)
+        check_instance(s, SandwichState, "initial_state", DataError)
         u = as_signal(u, "u")
         args = (list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past))
         if not internals:
@@ -119,15 +172,29 @@ class SandwichModel(_ModelIO):
         x, y, w, f1, f2, final = self._native.simulate_internals(u, *args)
         return SandwichSimulation(w, x, y, f1, f2, SandwichState(*final))
 
+    @fill(simulate=DOCS.simulate.format(state="SandwichState"), moving=DOCS.moving)
     def moving_fraction(self, u: ArrayLike, *, initial_state: SandwichState | None = None, warmup: int = 0) -> float:
-        """The fraction of samples after ``warmup`` on which the backlash moves (f1 or f2 of
-        eq 12-13): ``simulate(u, internals=True)``'s flags, counted in the core."""
+        """How often the backlash moves on the input u.
+
+        Parameters
+        ----------
+        {simulate}
+        {moving}
+        """
         s = initial_state if initial_state is not None else self.rest_state()
-        _check_state(s, SandwichState)
+        check_instance(s, SandwichState, "initial_state", DataError)
         state = (list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past))
         return _moving_fraction(self._native, u, state, warmup)
 
     def to_dict(self) -> dict[str, Any]:
+        """The sandwich as a plain, JSON-safe dict.
+
+        Returns
+        -------
+        dict
+            ``{"model": "sandwich", "format_version": 1, "input_linear": .., "backlash": ..,
+            "output_linear": ..}``.
+        """
         return {
             "model": "sandwich",
             "format_version": FORMAT_VERSION,

@@ -18,7 +18,29 @@ Model = Union[CascadeModel, SandwichModel]
 
 
 def model_from_dict(data: dict[str, Any]) -> Model:
-    """Rebuild a model from :meth:`CascadeModel.to_dict` / :meth:`SandwichModel.to_dict`."""
+    """Rebuild a model from its dict (``to_dict()`` of either model kind).
+
+    Parameters
+    ----------
+    data : dict
+        A dict from :meth:`CascadeModel.to_dict` or :meth:`SandwichModel.to_dict`.
+
+    Returns
+    -------
+    CascadeModel or SandwichModel
+        The model its "model" key names.
+
+    Raises
+    ------
+    ModelError
+        If ``data`` describes no model or an unknown kind, or its parameters are invalid.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> bid.model_from_dict(bid.example2().to_dict()) == bid.example2()
+    True
+    """
     try:
         kind = data["model"]
         if kind == "cascade":
@@ -35,5 +57,27 @@ def model_from_dict(data: dict[str, Any]) -> Model:
 
 
 def model_from_json(text: str) -> Model:
-    """Rebuild a model from :meth:`to_json` text."""
+    """Rebuild a model from its JSON text (``to_json()`` of either model kind).
+
+    Parameters
+    ----------
+    text : str
+        JSON text from :meth:`CascadeModel.to_json` or :meth:`SandwichModel.to_json`.
+
+    Returns
+    -------
+    CascadeModel or SandwichModel
+        The model.
+
+    Raises
+    ------
+    ModelError
+        If ``text`` is not JSON of a model.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> type(bid.model_from_json(bid.example1().to_json())).__name__
+    'CascadeModel'
+    """
     return model_from_dict(_parse_json(text))

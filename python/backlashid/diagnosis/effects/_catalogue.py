@@ -116,7 +116,7 @@ def _effect_kwargs(effect: str, p: dict[str, float]) -> dict[str, Any]:
 
 def held_x(block: LinearBlock, u0: float) -> float:
     """x of the linear block (16) at rest after the input was held at u0: static gain x u0."""
-    gain = block.static_gain
+    gain = block.static_gain()
     if not np.isfinite(gain):
         raise ModelError(
             f"the linear block {block.a.tolist()}, {block.b.tolist()} has a pole at z = 1, so no equilibrium "
