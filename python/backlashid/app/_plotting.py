@@ -126,13 +126,13 @@ def plot_simulation(
     y: ArrayLike,
     y_sim: ArrayLike,
     *,
-    skip: int = 0,
+    warmup: int = 0,
     dt: float = 1.0,
     ylabel: str = "output",
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
-    """Measured output against the free-run simulation, with the fit % (from sample ``skip``
+    """Measured output against the free-run simulation, with the fit % (from sample ``warmup``
     on; the skipped transient is shaded). ``dt`` scales the time axis. Returns the axes."""
     from ..identify import fit_percent, rmse
 
@@ -141,12 +141,12 @@ def plot_simulation(
         _, ax = plt.subplots(figsize=(10, 3.8))
     ys, sims = as_signal(y, "y").ravel(), as_signal(y_sim, "y_sim").ravel()
     t = np.arange(len(ys)) * dt
-    fit = fit_percent(ys, sims, warmup=skip)
-    err = rmse(ys, sims, warmup=skip)
+    fit = fit_percent(ys, sims, warmup=warmup)
+    err = rmse(ys, sims, warmup=warmup)
     ax.plot(t, ys, color="0.3", lw=1, label="measured")
     ax.plot(t, sims, color="C3", lw=1, label=f"simulated (free run): fit {fit:.1f} %, RMSE {err:.4g}")
-    if skip:
-        ax.axvspan(t[0], t[skip - 1], color="0.9", zorder=0, label=f"skipped transient ({skip} samples)")
+    if warmup:
+        ax.axvspan(t[0], t[warmup - 1], color="0.9", zorder=0, label=f"skipped transient ({warmup} samples)")
     ax.set_xlabel("time" if dt != 1.0 else "sample")
     ax.set_ylabel(ylabel)
     ax.set_title(title or "Measured and simulated output")
