@@ -12,7 +12,18 @@ The layers, each a subpackage whose ``__init__`` is its public contract:
 - :mod:`backlashid.benchmarks`: the paper's examples and the withheld-effect cases;
 - :mod:`backlashid.app`: record files, figures, fleets on Dask and the command line.
 
-The main names of every layer are re-exported here (``import backlashid as bid``).
+The main names of every layer are re-exported here (``import backlashid as bid``); the numerics
+run in the compiled Rust core, ``backlashid._core``.
+
+Examples
+--------
+Simulate the paper's Example 1 and identify it from its noisy output:
+
+>>> import backlashid as bid
+>>> data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+>>> result = bid.fit_cascade(data.u, data.noisy, na=2, nb=2, degree=3)
+>>> result.converged, sorted(result.parameters)[:4]
+(True, ['a1', 'a2', 'b1', 'b2'])
 """
 
 from __future__ import annotations

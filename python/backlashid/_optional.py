@@ -8,7 +8,18 @@ from .errors import BacklashIdError
 
 
 def pyplot() -> Any:
-    """``matplotlib.pyplot``, or a :class:`BacklashIdError` naming the ``plot`` extra."""
+    """Import ``matplotlib.pyplot``, with a message naming the ``plot`` extra if it is missing.
+
+    Returns
+    -------
+    module
+        ``matplotlib.pyplot``.
+
+    Raises
+    ------
+    BacklashIdError
+        If matplotlib is not installed.
+    """
     try:
         import matplotlib.pyplot as plt
     except ImportError:

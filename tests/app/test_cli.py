@@ -50,6 +50,7 @@ def test_fit_recovers_example1_and_writes_json_and_figures(tmp_path, csv_file):
     assert val["simulation_fit_percent"] > 90 and val["samples"] == 750 - 10 and val["warmup"] == 10
     assert val["prediction_rmse"] < val["simulation_rmse"] * 1.5
     assert "free-run" in payload["metric_labels"]["simulation_rmse"] and "one-step" in payload["metric_labels"]["prediction_rmse"]
+    assert set(payload["metric_labels"]) == set(val)  # every metric labelled, under its own name
     assert payload["data"]["estimation_samples"] == 750 and payload["scaling"]["input_scale"] == 1.0
     assert bx.model_from_dict(payload["model"]) is not None
     for name in ("characteristic", "iterations", "simulation", "residuals"):
@@ -75,7 +76,7 @@ def test_fit_in_measured_units_with_scaling_then_simulate(tmp_path, example):
     # RMSE in measured units: about 10 x the noise std of the unscaled example
     assert payload["metrics"]["validation"]["simulation_rmse"] == pytest.approx(10 * example.noise_std, rel=0.25)
     sim_csv = tmp_path / "sim.csv"
-    r = run("simulate", model_json, data, "-i", "drive", "-o", "pos", "--range", "1000:", "--skip", "20", "--out", sim_csv)
+    r = run("simulate", model_json, data, "-i", "drive", "-o", "pos", "--range", "1000:", "--warmup", "20", "--out", sim_csv)
     assert r.exit_code == 0, r.output
     table = np.genfromtxt(sim_csv, delimiter=",", names=True)
     assert table.dtype.names == ("u", "y_sim", "y", "residual")
@@ -254,7 +255,7 @@ def test_documented_friction_damper_diagnosis(tmp_path):
 def test_documented_coupled_drives_commands(tmp_path):
     # docs/cli.md: the benchmark's split of DATAUNIF.csv, then the model simulated on the test part
     data = SHARED / "coupled_electric_drives" / "DATAUNIF.csv"
-    r = run("fit", data, "-i", "u11", "-o", "z11", "--estimation", "0:400", "--validation", "400:500", "--skip", "4",
+    r = run("fit", data, "-i", "u11", "-o", "z11", "--estimation", "0:400", "--validation", "400:500", "--metrics-warmup", "4",
             "--degree", "1", "--scale", "auto", "--json", tmp_path / "ced.json")
     assert r.exit_code == 0, r.output
     val = json.loads((tmp_path / "ced.json").read_text())["metrics"]["validation"]
@@ -271,7 +272,7 @@ def test_fit_wiener_hammerstein_from_the_command_line(tmp_path):
     # docs/cli.md runs the full benchmark split (0.53 mV at degree 25); here a 20 000-sample slice
     data = SHARED / "wiener_hammerstein_2009" / "wh2009.npz"
     r = run("fit", data, "-i", "u", "-o", "y", "--estimation", "5200:25200", "--validation", "105200:125200",
-            "--model", "wiener-hammerstein", "--nb", "3", "--ns", "3", "--degree", "8", "--warmup", "100", "--skip", "50",
+            "--model", "wiener-hammerstein", "--nb", "3", "--ns", "3", "--degree", "8", "--warmup", "100", "--metrics-warmup", "50",
             "--json", tmp_path / "wh.json", "--plots", tmp_path / "figs")
     assert r.exit_code == 0, r.output
     payload = json.loads((tmp_path / "wh.json").read_text())
@@ -280,3 +281,10 @@ def test_fit_wiener_hammerstein_from_the_command_line(tmp_path):
     assert val["simulation_rmse"] < 0.01
     assert payload["standard_errors"] is None and "output_linear" in payload["model"]
     assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == ["characteristic.png", "residuals.png", "simulation.png"]
+
+
+def test_one_name_for_the_samples_left_out_at_the_start():
+    # warmup everywhere (issue 15): simulate --warmup, fit --warmup and --metrics-warmup; no --skip
+    for command, names in (("fit", {"--warmup", "--metrics-warmup"}), ("simulate", {"--warmup"}), ("diagnose", {"--warmup"})):
+        options = {opt for p in main.commands[command].params for opt in p.opts}
+        assert names <= options and "--skip" not in options, (command, sorted(options))

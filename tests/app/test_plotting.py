@@ -26,7 +26,7 @@ def close_figures():
 def test_simulation_plot_states_the_fit_percent(ex1):
     d = bx.example_data(ex1, 600, snr=10, seed=2)
     y_sim = ex1.simulate(d.u)
-    ax = plot_simulation(d.noisy, y_sim, skip=50)
+    ax = plot_simulation(d.noisy, y_sim, warmup=50)
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     expected = fit_percent(d.noisy, y_sim, warmup=50)
     assert any(f"fit {expected:.1f} %" in label for label in labels)

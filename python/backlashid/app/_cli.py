@@ -31,7 +31,7 @@ METRIC_LABELS = {
     "simulation_fit_percent": "free-run simulation fit % = 100 (1 - NRMSE)",
     "prediction_rmse": "one-step prediction RMSE: the measured output fed back where the model has it (measured output units)",
     "samples": "samples evaluated",
-    "skip": "initial samples left out (transient)",
+    "warmup": "initial samples left out (transient, unknown initial state)",
 }
 
 
@@ -162,7 +162,7 @@ def _model_options(command: F) -> F:
 @main.command()
 @_data_options
 @_model_options
-@click.option("--skip", type=click.IntRange(min=0), help="Initial samples left out of the fit metrics of each record [default: --warmup].")
+@click.option("--metrics-warmup", type=click.IntRange(min=0), help="Initial samples left out of the metrics of each record [default: --warmup].")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write model, parameters, standard errors and metrics here.")
 @click.option("--plots", "plots_dir", type=click.Path(file_okay=False, path_type=Path), help="Folder for the figures (PNG; needs matplotlib).")
 @_clean_errors
@@ -170,7 +170,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
         input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
         kind: str, feedthrough: bool, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
-        coarse: int | None, skip: int | None, json_path: Path | None, plots_dir: Path | None) -> None:
+        coarse: int | None, metrics_warmup: int | None, json_path: Path | None, plots_dir: Path | None) -> None:
     """Identify a cascade or sandwich model from logged input/output data.
 
     \b
@@ -189,14 +189,14 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         stage(f"fitting the {kind}")
         result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse)
         stage("computing metrics")
-        skip = warmup if skip is None else skip
-        metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, warmup=max(skip, warmup))}
+        metrics_warmup = warmup if metrics_warmup is None else metrics_warmup
+        metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, warmup=max(metrics_warmup, warmup))}
         if sel.validation is not None:
-            metrics["validation"] = evaluate_scaled(result.model, scaling, sel.validation.u, sel.validation.y, warmup=skip)
+            metrics["validation"] = evaluate_scaled(result.model, scaling, sel.validation.u, sel.validation.y, warmup=metrics_warmup)
         figures: list[Path] = []
         if plots_dir:
             stage("writing figures")
-            figures = _fit_figures(plots_dir, result, scaling, sel, skip)
+            figures = _fit_figures(plots_dir, result, scaling, sel, metrics_warmup)
     click.echo(f"data: {sel.description['estimation']} ({len(sel.estimation)} samples) for estimation"
                + (f", {sel.description['validation']} ({len(sel.validation)} samples) for validation" if sel.validation is not None else ", no validation record"))
     if not scaling.is_identity:
@@ -213,7 +213,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
             "standard_errors": getattr(result, "standard_errors", None),  # none for wiener-hammerstein
             "metrics": {name: _metrics_dict(m) for name, m in metrics.items()},
             "metric_labels": METRIC_LABELS,
-            "data": {**sel.description, "skip": skip},
+            "data": {**sel.description, "metrics_warmup": metrics_warmup},
             "fit": result.to_dict(),
         }
         _write_json(json_path, payload)
@@ -222,7 +222,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         click.echo(f"wrote {p}")
 
 
-def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, skip: int) -> list[Path]:
+def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup: int) -> list[Path]:
     from .._optional import pyplot
     from ..identify import simulate_scaled
     from ._plotting import plot_characteristic, plot_residuals, plot_simulation, plot_trajectories
@@ -252,11 +252,11 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, skip: int) -> l
             plot_trajectories(result.history, names, shown, final=result.parameters, ax=ax, title=f"{title}; stars: final estimate")
         paths.append(_save(plt, fig, out / "iterations.png"))
     record, which = (sel.validation, "validation") if sel.validation is not None else (sel.estimation, "estimation")
-    skip_here = skip if which == "validation" else max(skip, result.warmup)
+    warmup_here = metrics_warmup if which == "validation" else max(metrics_warmup, result.warmup)
     y_sim = simulate_scaled(result.model, scaling, record.u)
-    ax = plot_simulation(record.y, y_sim, skip=skip_here, ylabel=sel.description["output"], title=f"Measured and simulated output, {which} record")
+    ax = plot_simulation(record.y, y_sim, warmup=warmup_here, ylabel=sel.description["output"], title=f"Measured and simulated output, {which} record")
     paths.append(_save(plt, ax.figure, out / "simulation.png"))
-    fig = plot_residuals((record.y - y_sim)[skip_here:], record.u[skip_here:],
+    fig = plot_residuals((record.y - y_sim)[warmup_here:], record.u[warmup_here:],
                          title=f"Residual diagnostics, free-run simulation error on the {which} record")
     paths.append(_save(plt, fig, out / "residuals.png"))
     return paths
@@ -289,10 +289,10 @@ def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:
 @click.option("--output", "-o", "output", help="Measured output, to compare with and report metrics.")
 @click.option("--range", "range_", help="Samples a:b of DATA to simulate (0-based, b excluded).")
 @click.option("--decimate", "decimate_by", type=click.IntRange(min=1), help="As in fit [default: the fit's value stored in MODEL_FILE].")
-@click.option("--skip", default=0, show_default=True, type=click.IntRange(min=0), help="Initial samples left out of the metrics.")
+@click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="Initial samples left out of the metrics (unknown initial state).")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="CSV to write: u, y_sim (and y, residual with --output).")
 @_clean_errors
-def simulate(model_file: Path, data: Path, input_: str, output: str | None, range_: str | None, decimate_by: int | None, skip: int, out: Path) -> None:
+def simulate(model_file: Path, data: Path, input_: str, output: str | None, range_: str | None, decimate_by: int | None, warmup: int, out: Path) -> None:
     """Simulate a model (JSON from fit --json, or a model's to_json) on an input record."""
     from ..identify import evaluate_scaled, simulate_scaled
     from ._io import Record, decimate, parse_range, read_signals
@@ -315,7 +315,7 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
     np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
     click.echo(f"simulated {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else ""))
     if output:
-        click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, warmup=skip)))
+        click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, warmup=warmup)))
     click.echo(f"wrote {out}")
 
 

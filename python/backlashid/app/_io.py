@@ -44,7 +44,23 @@ _SELECTOR = re.compile(r"^(?P<name>.*?)\[(?P<index>-?\d+)\]$")
 
 @dataclass(frozen=True)
 class Record:
-    """Input u and output y of one record, and where they came from."""
+    """Input u and output y of one record, and where they came from.
+
+    Attributes
+    ----------
+    u : ndarray of float64
+        Input u(t), 1-D.
+    y : ndarray of float64
+        Measured output y(t), as long as u.
+    source : str
+        Where the samples came from: the file, and the range or decimation applied.
+
+    Examples
+    --------
+    >>> record = bid.app.Record(np.zeros(5), np.ones(5), "bench")
+    >>> len(record), record.slice(slice(1, 3), "--range").source
+    (5, 'bench[1:3]')
+    """
 
     u: NDArray[np.float64]
     y: NDArray[np.float64]
@@ -54,7 +70,25 @@ class Record:
         return len(self.u)
 
     def slice(self, part: slice, label: str) -> Record:
-        """Samples ``part`` of the record (copies, so the record itself cannot change)."""
+        """Samples ``part`` of the record (copies, so the record itself cannot change).
+
+        Parameters
+        ----------
+        part : slice
+            The samples kept, as in ``u[part]``.
+        label : str
+            What chose the range (``"--range"``, say), named in the error message.
+
+        Returns
+        -------
+        Record
+            The selected samples; its source names the range.
+
+        Raises
+        ------
+        DataError
+            If ``part`` selects no samples.
+        """
         u, y = self.u[part].copy(), self.y[part].copy()
         if len(u) == 0:
             raise DataError(f"{label} selects no samples of {self.source} ({len(self)} samples): widen the range")
@@ -62,7 +96,35 @@ class Record:
 
 
 def read_signals(path: str | Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]]:
-    """The signals ``names`` of the file at ``path`` as float64 vectors of one length."""
+    """Read the signals ``names`` of one file as float64 vectors of one length.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.csv`` (or ``.txt``), ``.npz`` or MATLAB ``.mat`` file.
+    names : sequence of str
+        The signals, each ``NAME``, ``NAME[K]`` or a column number ``K`` (see the module
+        description).
+
+    Returns
+    -------
+    dict of str to ndarray
+        Each selector of ``names`` to its samples.
+
+    Raises
+    ------
+    DataError
+        If the file is missing or unreadable, a signal is absent, not numeric or not finite,
+        or the signals differ in length; the message names the file and what to change.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "log.csv"
+    >>> _ = path.write_text("t,u,y\\n0,0.5,0.0\\n1,-0.25,0.5\\n")
+    >>> bid.app.read_signals(path, ["u", "2"])
+    {'u': array([ 0.5 , -0.25]), '2': array([0. , 0.5])}
+    """
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: no such file")
@@ -86,13 +148,68 @@ def read_signals(path: str | Path, names: Sequence[str]) -> dict[str, NDArray[np
 
 
 def load_record(path: str | Path, input: str, output: str) -> Record:
-    """The input and output signals of one file as a :class:`Record`."""
+    """Read the input and output signals of one file as a :class:`Record`.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.csv``, ``.npz`` or ``.mat`` file.
+    input : str
+        The input signal, selected as in :func:`read_signals`.
+    output : str
+        The output signal, selected likewise.
+
+    Returns
+    -------
+    Record
+        The two signals; the source is ``path``.
+
+    Raises
+    ------
+    DataError
+        As :func:`read_signals`.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "log.npz"
+    >>> np.savez(path, drive=np.arange(4.0), pos=np.zeros(4))
+    >>> record = bid.app.load_record(path, "drive", "pos")
+    >>> len(record), record.u.tolist()
+    (4, [0.0, 1.0, 2.0, 3.0])
+    """
     signals = read_signals(path, [input, output])
     return Record(signals[input], signals[output], str(path))
 
 
 def concatenate(records: Sequence[Record]) -> Record:
-    """Records one after the other (the joins are jumps: mind the warm-up of each part)."""
+    """Join records one after the other.
+
+    The joins are jumps in the signals: mind the warm-up of each part.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        The records, in order.
+
+    Returns
+    -------
+    Record
+        The samples of all of them; the source lists theirs (one record is returned as it is).
+
+    Raises
+    ------
+    DataError
+        If ``records`` is empty.
+
+    Examples
+    --------
+    >>> a = bid.app.Record(np.zeros(3), np.zeros(3), "a.csv")
+    >>> b = bid.app.Record(np.ones(2), np.ones(2), "b.csv")
+    >>> joined = bid.app.concatenate([a, b])
+    >>> len(joined), joined.source
+    (5, 'a.csv + b.csv')
+    """
     if not records:
         raise DataError("no records to join")
     if len(records) == 1:
@@ -105,7 +222,34 @@ def concatenate(records: Sequence[Record]) -> Record:
 
 
 def parse_range(text: str, n: int, label: str) -> slice:
-    """``"a:b"`` as a slice of a record of n samples, checked to select at least one sample."""
+    """Read a sample range ``"a:b"`` as a slice of a record of n samples.
+
+    Parameters
+    ----------
+    text : str
+        ``a:b``, 0-based, b excluded; a or b may be empty, negative values count from the end.
+    n : int
+        Samples in the record.
+    label : str
+        The option that gave the range, named in the error message.
+
+    Returns
+    -------
+    slice
+        With start and stop inside ``0..n``.
+
+    Raises
+    ------
+    DataError
+        If ``text`` is not ``a:b`` with whole numbers, or selects no sample.
+
+    Examples
+    --------
+    >>> bid.app.parse_range("100:", 1500, "--validation")
+    slice(100, 1500, None)
+    >>> bid.app.parse_range(":-500", 1500, "--estimation")
+    slice(0, 1000, None)
+    """
     parts = text.split(":")
     if len(parts) != 2:
         raise DataError(f"{label} {text!r}: write a sample range as a:b (0-based, b excluded; a or b may be empty)")
@@ -121,7 +265,30 @@ def parse_range(text: str, n: int, label: str) -> slice:
 
 
 def split_fraction(fraction: float, n: int) -> tuple[slice, slice]:
-    """The first ``fraction`` of n samples for estimation, the rest for validation."""
+    """Split n samples: the first ``fraction`` for estimation, the rest for validation.
+
+    Parameters
+    ----------
+    fraction : float
+        The estimation share, strictly between 0 and 1.
+    n : int
+        Samples in the record.
+
+    Returns
+    -------
+    tuple of slice
+        (estimation, validation).
+
+    Raises
+    ------
+    DataError
+        If ``fraction`` is outside (0, 1) or leaves one part empty.
+
+    Examples
+    --------
+    >>> bid.app.split_fraction(0.6, 1500)
+    (slice(0, 900, None), slice(900, 1500, None))
+    """
     if not 0.0 < fraction < 1.0:
         raise DataError(f"split {fraction}: give the estimation fraction strictly between 0 and 1")
     cut = int(round(fraction * n))
@@ -261,8 +428,34 @@ def _read_arrays(path: Path, arrays: dict[str, NDArray], names: Sequence[str], k
 
 
 def decimate(record: Record, factor: int) -> Record:
-    """Every ``factor``-th sample after a zero-phase FIR anti-alias low-pass filter
-    (``scipy.signal.decimate``); ``factor`` 1 returns the record unchanged."""
+    """Keep every ``factor``-th sample after an anti-alias filter.
+
+    The filter is a zero-phase FIR low-pass (``scipy.signal.decimate``).
+
+    Parameters
+    ----------
+    record : Record
+        The record to decimate.
+    factor : int
+        Keep every factor-th sample; 1 returns the record unchanged.
+
+    Returns
+    -------
+    Record
+        The decimated record; its source says by how much.
+
+    Raises
+    ------
+    DataError
+        If ``factor`` is below 1, or the record is too short for the filter.
+
+    Examples
+    --------
+    >>> record = bid.app.Record(np.sin(np.arange(1000) / 50), np.zeros(1000), "x")
+    >>> short = bid.app.decimate(record, 4)
+    >>> len(short), short.source
+    (250, 'x decimated by 4')
+    """
     if factor == 1:
         return record
     if factor < 1:
@@ -281,7 +474,18 @@ def decimate(record: Record, factor: int) -> Record:
 
 @dataclass(frozen=True)
 class Selection:
-    """Estimation and (optional) validation records chosen from files, and how."""
+    """Estimation and (optional) validation records chosen from files, and how.
+
+    Attributes
+    ----------
+    estimation : Record
+        The record to fit on.
+    validation : Record or None
+        The record to judge on, if any.
+    description : dict
+        The input and output selectors, the sources and sample counts of both records and the
+        decimation (written into the JSON of ``backlashid fit``).
+    """
 
     estimation: Record
     validation: Record | None
@@ -300,13 +504,55 @@ def select_records(
     validation: str | None = None,
     decimate_by: int = 1,
 ) -> Selection:
-    """The estimation and validation records of a command line.
+    """Choose the estimation and validation records as the command line does.
 
     Either one file ``data`` split by ``split`` (estimation fraction) or by the sample ranges
-    ``estimation`` and ``validation`` (``a:b``; the whole record is for estimation when none is
-    given), or ``estimation_files`` joined one after the other (``estimation`` then selects a
-    range of each file) with ``validation_files`` (or ``data``, with ``validation`` as its range)
-    for validation. Ranges count samples of the files; ``decimate_by`` applies afterwards.
+    ``estimation`` and ``validation`` (the whole record is for estimation when none is given),
+    or ``estimation_files`` joined one after the other (``estimation`` then selects a range of
+    each file) with ``validation_files`` (or ``data``, with ``validation`` as its range) for
+    validation. Ranges count samples of the files; the decimation applies afterwards.
+
+    Parameters
+    ----------
+    data : str, Path or None
+        The record file, or None when ``estimation_files`` are given.
+    input : str
+        The input signal, selected as in :func:`read_signals`.
+    output : str
+        The output signal.
+    estimation_files : sequence of str or Path, default ()
+        Files joined into the estimation record.
+    validation_files : sequence of str or Path, default ()
+        Files joined into the validation record.
+    split : float, optional
+        Estimation fraction of ``data``; the rest validates.
+    estimation : str, optional
+        Estimation samples ``a:b`` of ``data`` (or of each estimation file).
+    validation : str, optional
+        Validation samples ``c:d`` of ``data`` (or of the joined validation files).
+    decimate_by : int, default 1
+        Keep every N-th sample of each record (see :func:`decimate`).
+
+    Returns
+    -------
+    Selection
+        The records and their description.
+
+    Raises
+    ------
+    DataError
+        If the choices contradict each other (``split`` with ranges, say), select nothing, or a
+        file cannot be read.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "log.csv"
+    >>> d = bid.example_data(bid.example1(), 200, seed=0)
+    >>> np.savetxt(path, np.column_stack([d.u, d.noisy]), delimiter=",", header="u,y", comments="")
+    >>> sel = bid.app.select_records(path, "u", "y", split=0.75)
+    >>> len(sel.estimation), len(sel.validation)
+    (150, 50)
     """
     if split is not None and (estimation or validation):
         raise DataError("give either --split or --estimation/--validation ranges, not both")

@@ -123,21 +123,57 @@ def fit_many(
 ) -> list[FitResult | BacklashIdError]:
     """Identify every record of ``datasets`` on Dask distributed; results in input order.
 
-    ``datasets``: (u, y) pairs, or dicts with keys ``u`` and ``y`` (or ``w`` for a sandwich).
-    ``kind``: "cascade" (:func:`fit_cascade`) or "sandwich" (:func:`fit_sandwich`);
-    ``fit_options`` (na, nb, degree, restarts, seed, ...) pass through to that function.
+    Where it runs: ``client`` (used, not closed); else the scheduler at ``address``; else an
+    embedded ``LocalCluster`` of ``n_workers`` single-threaded worker processes (no dashboard,
+    quiet logs), closed on return. Worker processes are spawned, so a script that calls this
+    needs the ``if __name__ == "__main__":`` guard. Each result equals (bit for bit) the one of
+    a call of the fit on that record alone.
 
-    Where it runs: ``client``, a ``distributed.Client`` (used, not closed); else ``address``, a
-    running scheduler ("tcp://host:8786"); else an embedded ``LocalCluster`` of ``n_workers``
-    single-threaded worker processes (default: one per core, at most one per record; no
-    dashboard, quiet logs), closed on return. Worker processes are spawned, so a script that
-    calls this needs the ``if __name__ == "__main__":`` guard. ``progress`` shows a progress
-    bar (tqdm) on stderr.
+    Parameters
+    ----------
+    datasets : sequence
+        The records: (u, y) pairs, or dicts with keys ``u`` and ``y`` (or ``w`` for a
+        sandwich).
+    kind : {"cascade", "sandwich"}, default "cascade"
+        The fit: :func:`~backlashid.fit_cascade` or :func:`~backlashid.fit_sandwich`.
+    client : distributed.Client, optional
+        A client of a running cluster.
+    address : str, optional
+        A running scheduler, ``"tcp://host:8786"``.
+    n_workers : int, optional
+        Worker processes of the embedded cluster [default: one per core, at most one per
+        record].
+    progress : bool, default True
+        Show a progress bar (tqdm) on stderr.
+    **fit_options
+        Options of the fit (na, nb, degree, warmup, restarts, seed, ...), passed through.
 
-    A record whose fit raises a :class:`BacklashIdError` (bad data, not identifiable, not
-    converged) gets that exception object in its slot instead of a :class:`FitResult`; other
-    exceptions (bugs) are raised. Unknown ``kind`` or options raise :class:`DataError`, a
-    missing Dask a :class:`BacklashIdError`.
+    Returns
+    -------
+    list of FitResult or BacklashIdError
+        One per record, in input order. A record whose fit raises a
+        :class:`~backlashid.BacklashIdError` (bad data, not identifiable, not converged) holds
+        that exception instead of a :class:`~backlashid.FitResult`; other exceptions (bugs)
+        are raised.
+
+    Raises
+    ------
+    DataError
+        If ``kind`` or an option is unknown, or ``client``, ``address`` and ``n_workers``
+        contradict each other.
+    BacklashIdError
+        If Dask distributed is not installed (the ``dask`` extra).
+
+    Examples
+    --------
+    A malformed record gets its error in its slot (no cluster is started for it):
+
+    >>> out = bid.fit_many([(np.zeros(10), np.zeros(10), np.zeros(10))], na=2, nb=2, degree=3)
+    >>> type(out[0]).__name__
+    'DataError'
+
+    In a script, ``bid.fit_many([(d.u, d.noisy) for d in records], "cascade", na=2, nb=2,
+    degree=3)`` fits every record on the cores of this machine.
     """
     fit = _FITS.get(kind) if isinstance(kind, str) else None
     if fit is None:
@@ -220,15 +256,49 @@ def diagnose_many(
     progress: bool = True,
     **options: Any,
 ) -> list[Any]:
-    """:func:`~backlashid.diagnose` every case on Dask distributed, as :func:`fit_many` fits:
-    results in input order, equal to diagnosing one by one (the diagnosis is deterministic).
+    """Diagnose every case on Dask distributed, as :func:`fit_many` fits.
 
-    ``cases``: (model, (u_est, y_est), (u_val, y_val)) triples, or dicts with keys ``model``,
-    ``estimation`` and ``validation``; ``options`` (candidates, noise_std, warmup,
-    initial_state, seed) pass through to ``diagnose``. ``client``, ``address``, ``n_workers``
-    and ``progress`` as in :func:`fit_many`. A case whose diagnosis raises a
-    :class:`BacklashIdError` gets that exception in its slot instead of a
-    :class:`~backlashid.DiagnosisReport`.
+    Results come in input order, equal to those of :func:`~backlashid.diagnose` one case at a
+    time (the diagnosis is deterministic).
+
+    Parameters
+    ----------
+    cases : sequence
+        (model, (u_est, y_est), (u_val, y_val)) triples, or dicts with keys ``model``,
+        ``estimation`` and ``validation``.
+    client : distributed.Client, optional
+        A client of a running cluster.
+    address : str, optional
+        A running scheduler, ``"tcp://host:8786"``.
+    n_workers : int, optional
+        Worker processes of the embedded cluster [default: one per core, at most one per
+        case].
+    progress : bool, default True
+        Show a progress bar (tqdm) on stderr.
+    **options
+        Options of :func:`~backlashid.diagnose` (candidates, noise_std, warmup,
+        initial_state, seed), passed through.
+
+    Returns
+    -------
+    list of DiagnosisReport or BacklashIdError
+        One per case, in input order; a case whose diagnosis raises a
+        :class:`~backlashid.BacklashIdError` holds that exception instead of a
+        :class:`~backlashid.DiagnosisReport`.
+
+    Raises
+    ------
+    DataError
+        If an option is unknown, or ``client``, ``address`` and ``n_workers`` contradict each
+        other.
+    BacklashIdError
+        If Dask distributed is not installed (the ``dask`` extra).
+
+    Examples
+    --------
+    >>> out = bid.diagnose_many([{"model": bid.example1()}])
+    >>> type(out[0]).__name__
+    'DataError'
     """
     from ..diagnosis import diagnose
 

@@ -30,8 +30,44 @@ def plot_characteristic(
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
-    """Draw the branches L(x), R(x) of a general backlash (as in the paper's Figs 1, 4, 7),
-    over the path (x(t), y(t)) of a simulation when x and y are given. Returns the axes."""
+    """Draw the branches L(x), R(x) of a general backlash, as in the paper's Figs 1, 4 and 7.
+
+    When x and y are given, the path (x(t), y(t)) of a simulation is drawn under the branches
+    and the axes are limited to its range.
+
+    Parameters
+    ----------
+    backlash : GeneralBacklash
+        The backlash whose left branch L(x) and right branch R(x) (eq 4-5) are drawn.
+    x : array_like, optional
+        Input of the backlash over time (the internal signal x(t) of a cascade, eq 16).
+    y : array_like, optional
+        Its output y(t), as long as x.
+    x_range : tuple of float, optional
+        (low, high) of the x axis [default: the range of x, else around the dead band].
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on [default: a new figure].
+    title : str, optional
+        Title [default: the dead-band widths c_L and c_R].
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes drawn on.
+
+    Raises
+    ------
+    BacklashIdError
+        If matplotlib is not installed (the ``plot`` extra).
+
+    Examples
+    --------
+    >>> model = bid.example1()
+    >>> sim = model.simulate(np.sin(np.arange(200) / 10), internals=True)
+    >>> ax = bid.app.plot_characteristic(model.backlash, sim.x, sim.output)
+    >>> [line.get_label() for line in ax.lines[:2]]
+    ['L(x)', 'R(x)']
+    """
     plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 5))
@@ -68,7 +104,38 @@ def plot_branches_comparison(
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
-    """True and estimated branches on one plot (the paper's Figs 4 and 7)."""
+    """Draw true and estimated branches on one plot, as in the paper's Figs 4 and 7.
+
+    Parameters
+    ----------
+    true_backlash : GeneralBacklash
+        The true backlash (solid lines).
+    estimated : GeneralBacklash
+        The estimate (dashed lines).
+    x_range : tuple of float
+        (low, high) of the backlash input x shown.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on [default: a new figure].
+    title : str, optional
+        Title of the axes.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes drawn on.
+
+    Raises
+    ------
+    BacklashIdError
+        If matplotlib is not installed.
+
+    Examples
+    --------
+    >>> truth = bid.example1().backlash
+    >>> ax = bid.app.plot_branches_comparison(truth, truth, (-2.0, 2.0))
+    >>> len(ax.lines)  # L and R, true and estimated, and the two axis lines
+    6
+    """
     plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 5))
@@ -96,9 +163,45 @@ def plot_trajectories(
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
-    """Parameter estimates over the iterations (the paper's Figs 5, 6, 8-10); dotted lines
-    mark the true values when given, stars the ``final`` estimates (after the refinement) one
-    step after the last iteration."""
+    """Draw parameter estimates over the iterations, as in the paper's Figs 5, 6 and 8-10.
+
+    Dotted lines mark the true values when given, stars the final estimates (after the
+    refinement) one step after the last iteration.
+
+    Parameters
+    ----------
+    history : array_like
+        Estimates, one row per iteration, one column per parameter (``FitResult.history``).
+    names : list of str
+        The parameter names of the columns (``FitResult.names``: a1.., b1.., c_L, m_L2.., ...).
+    shown : list of str
+        The parameters to draw.
+    truth : dict of str to float, optional
+        True values by name.
+    final : dict of str to float, optional
+        Final estimates by name (``FitResult.parameters``).
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on [default: a new figure].
+    title : str, optional
+        Title of the axes.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes drawn on.
+
+    Raises
+    ------
+    BacklashIdError
+        If matplotlib is not installed.
+
+    Examples
+    --------
+    >>> history = np.array([[0.5, 0.1], [0.65, 0.3], [0.7, 0.34]])
+    >>> ax = bid.app.plot_trajectories(history, ["a1", "c_L"], ["a1"], truth={"a1": 0.7})
+    >>> ax.lines[0].get_ydata().tolist()
+    [0.5, 0.65, 0.7]
+    """
     plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 4))
@@ -126,14 +229,50 @@ def plot_simulation(
     y: ArrayLike,
     y_sim: ArrayLike,
     *,
-    skip: int = 0,
+    warmup: int = 0,
     dt: float = 1.0,
     ylabel: str = "output",
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
-    """Measured output against the free-run simulation, with the fit % (from sample ``skip``
-    on; the skipped transient is shaded). ``dt`` scales the time axis. Returns the axes."""
+    """Draw the measured output against the free-run simulation, with the fit %.
+
+    The fit % and RMSE count the samples from ``warmup`` on; the warm-up is shaded.
+
+    Parameters
+    ----------
+    y : array_like
+        Measured output.
+    y_sim : array_like
+        Free-run simulated output, as long as y.
+    warmup : int, default 0
+        Samples at the start left out of the fit % and RMSE (an unknown initial state).
+    dt : float, default 1.0
+        Sampling period: the time axis is in its units (in samples when 1).
+    ylabel : str, default "output"
+        Label of the output axis.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on [default: a new figure].
+    title : str, optional
+        Title of the axes.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes drawn on.
+
+    Raises
+    ------
+    BacklashIdError
+        If matplotlib is not installed.
+
+    Examples
+    --------
+    >>> d = bid.example_data(bid.example1(), 300, seed=0)
+    >>> ax = bid.app.plot_simulation(d.noisy, d.clean, warmup=20)
+    >>> ax.lines[1].get_label()  # doctest: +ELLIPSIS
+    'simulated (free run): fit 9... %, RMSE ...'
+    """
     from ..identify import fit_percent, rmse
 
     plt = pyplot()
@@ -141,12 +280,12 @@ def plot_simulation(
         _, ax = plt.subplots(figsize=(10, 3.8))
     ys, sims = as_signal(y, "y").ravel(), as_signal(y_sim, "y_sim").ravel()
     t = np.arange(len(ys)) * dt
-    fit = fit_percent(ys, sims, warmup=skip)
-    err = rmse(ys, sims, warmup=skip)
+    fit = fit_percent(ys, sims, warmup=warmup)
+    err = rmse(ys, sims, warmup=warmup)
     ax.plot(t, ys, color="0.3", lw=1, label="measured")
     ax.plot(t, sims, color="C3", lw=1, label=f"simulated (free run): fit {fit:.1f} %, RMSE {err:.4g}")
-    if skip:
-        ax.axvspan(t[0], t[skip - 1], color="0.9", zorder=0, label=f"skipped transient ({skip} samples)")
+    if warmup:
+        ax.axvspan(t[0], t[warmup - 1], color="0.9", zorder=0, label=f"skipped transient ({warmup} samples)")
     ax.set_xlabel("time" if dt != 1.0 else "sample")
     ax.set_ylabel(ylabel)
     ax.set_title(title or "Measured and simulated output")
@@ -172,9 +311,44 @@ def plot_residuals(
     fig: Any = None,
     title: str | None = None,
 ) -> Any:
-    """Residual diagnostics: the residual over time, its histogram, its autocorrelation and
-    its cross-correlation with the input, with the 95 % bounds +-1.96/sqrt(N) of a white
-    residual independent of the input. Returns the figure."""
+    """Draw residual diagnostics: the residual, its histogram and its correlations.
+
+    Four panels: the residual over time, its histogram, its autocorrelation and its
+    cross-correlation with the input, with the 95 % bounds ``1.96 / sqrt(N)`` of a white
+    residual independent of the input.
+
+    Parameters
+    ----------
+    residual : array_like
+        Measured minus simulated output (the free-run simulation error).
+    u : array_like
+        The input over the same samples.
+    max_lag : int, default 40
+        Largest lag of the correlations.
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw on [default: a new one].
+    title : str, optional
+        Title of the figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure drawn on.
+
+    Raises
+    ------
+    DataError
+        If residual and u differ in length.
+    BacklashIdError
+        If matplotlib is not installed.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> fig = bid.app.plot_residuals(rng.standard_normal(500), rng.uniform(-1, 1, 500), max_lag=10)
+    >>> len(fig.axes)
+    4
+    """
     plt = pyplot()
     e, us = as_signal(residual, "residual").ravel(), as_signal(u, "u").ravel()
     if e.shape != us.shape:

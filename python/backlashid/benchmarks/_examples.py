@@ -25,10 +25,38 @@ WORKPLACE_DATA = Path("/work/shared/data")
 
 
 def shared_data_folder(start: str | Path | None = None) -> Path:
-    """The folder of measured benchmark records (friction_damper_backlash/, wiener_hammerstein_2009/,
-    ...), read in place, never copied: ``$BACKLASHID_DATA`` if set, else ``shared/data`` in
-    ``start`` (default: the working directory) or one of its parents, else the workplace's
-    /work/shared/data. Raises DataError if none exists."""
+    """Find the folder of measured benchmark records.
+
+    The records (``friction_damper_backlash/``, ``wiener_hammerstein_2009/``, ...) are read in
+    place, never copied: the folder is ``$BACKLASHID_DATA`` if set, else ``shared/data`` in
+    ``start`` or one of its parents, else the workplace's ``/work/shared/data``.
+
+    Parameters
+    ----------
+    start : str or Path, optional
+        Where the search for ``shared/data`` begins [default: the working directory].
+
+    Returns
+    -------
+    Path
+        The folder.
+
+    Raises
+    ------
+    DataError
+        If ``$BACKLASHID_DATA`` is not a folder, or no folder is found.
+
+    Examples
+    --------
+    A folder named by the environment variable comes first:
+
+    >>> import os, pathlib, tempfile
+    >>> saved = os.environ.get("BACKLASHID_DATA")
+    >>> os.environ["BACKLASHID_DATA"] = records = tempfile.mkdtemp()
+    >>> bid.shared_data_folder() == pathlib.Path(records)
+    True
+    >>> _ = os.environ.pop("BACKLASHID_DATA") if saved is None else os.environ.update(BACKLASHID_DATA=saved)
+    """
     if DATA_VARIABLE in os.environ:
         folder = Path(os.environ[DATA_VARIABLE])
         if not folder.is_dir():
@@ -44,8 +72,23 @@ def shared_data_folder(start: str | Path | None = None) -> Path:
 
 
 def example1() -> CascadeModel:
-    """Example 1: x(t) = 0.7u(t-1) + 0.5u(t-2) + 0.2x(t-1) - 0.35x(t-2), followed by the
-    backlash m_L2 = -0.3, m_L3 = 0.3, c_L = 0.6, m_R1 = 1.5, m_R2 = 0.4, m_R3 = 0.2, c_R = 0.5."""
+    """Build the paper's Example 1, a cascade (Section 5).
+
+    The linear block x(t) = 0.7u(t-1) + 0.5u(t-2) + 0.2x(t-1) - 0.35x(t-2) (eq 16), followed
+    by the general backlash m_L2 = -0.3, m_L3 = 0.3, c_L = 0.6, m_R1 = 1.5, m_R2 = 0.4,
+    m_R3 = 0.2, c_R = 0.5 (eq 1-5, m_L1 = 1).
+
+    Returns
+    -------
+    CascadeModel
+        The true model of Example 1.
+
+    Examples
+    --------
+    >>> model = bid.example1()
+    >>> model.linear.na, model.backlash.c_left, model.backlash.c_right
+    (2, 0.6, 0.5)
+    """
     return CascadeModel(
         LinearBlock(a=[0.7, 0.5], b=[-0.2, 0.35]),
         GeneralBacklash(c_left=0.6, c_right=0.5, m_left=[1.0, -0.3, 0.3], m_right=[1.5, 0.4, 0.2]),
@@ -53,9 +96,23 @@ def example1() -> CascadeModel:
 
 
 def example2() -> SandwichModel:
-    """Example 2: x(t) = 0.8u(t-1) + 0.2u(t-2) - 0.2x(t-1) + 0.2x(t-2); backlash m_L2 = 0.1,
-    m_L3 = 0.3, c_L = 0.4, m_R1 = 0.75, m_R2 = 0.2, m_R3 = 0.6, c_R = 0.5; then
-    w(t) = y(t-1) + 0.15y(t-2) + 0.2w(t-1) - 0.35w(t-2)."""
+    """Build the paper's Example 2, a sandwich (Section 5).
+
+    The input block x(t) = 0.8u(t-1) + 0.2u(t-2) - 0.2x(t-1) + 0.2x(t-2) (eq 16), the general
+    backlash m_L2 = 0.1, m_L3 = 0.3, c_L = 0.4, m_R1 = 0.75, m_R2 = 0.2, m_R3 = 0.6, c_R = 0.5,
+    then the output block w(t) = y(t-1) + 0.15y(t-2) + 0.2w(t-1) - 0.35w(t-2) (eq 29).
+
+    Returns
+    -------
+    SandwichModel
+        The true model of Example 2.
+
+    Examples
+    --------
+    >>> model = bid.example2()
+    >>> model.output_linear.a.tolist(), model.backlash.c_left
+    ([1.0, 0.15], 0.4)
+    """
     return SandwichModel(
         LinearBlock(a=[0.8, 0.2], b=[0.2, -0.2]),
         GeneralBacklash(c_left=0.4, c_right=0.5, m_left=[1.0, 0.1, 0.3], m_right=[0.75, 0.2, 0.6]),
@@ -65,7 +122,21 @@ def example2() -> SandwichModel:
 
 @dataclass(frozen=True)
 class ExampleData:
-    """A simulated record: input, clean and noisy output, and the true model."""
+    """A simulated record: input, clean and noisy output, and the true model.
+
+    Attributes
+    ----------
+    u : ndarray of float64
+        The input, uniform on (-amplitude, amplitude).
+    clean : ndarray of float64
+        The model's output without noise.
+    noisy : ndarray of float64
+        The output with white Gaussian noise added.
+    noise_std : float
+        The standard deviation of that noise (0 for clean data).
+    model : CascadeModel or SandwichModel
+        The model simulated.
+    """
 
     u: NDArray[np.float64]
     clean: NDArray[np.float64]
@@ -82,8 +153,41 @@ def example_data(
     amplitude: float = 1.0,
     seed: int = 0,
 ) -> ExampleData:
-    """Simulate ``model`` for n uniform random inputs |u| < amplitude, with output noise at
-    the given SNR (sqrt of the output-to-noise variance ratio; None for no noise)."""
+    """Simulate a model on uniform random inputs, with output noise at a given SNR.
+
+    The data convention of the paper's Section 5: u uniform on (-amplitude, amplitude), the
+    model starts at rest, and the noise std is std(clean output) / snr.
+
+    Parameters
+    ----------
+    model : CascadeModel or SandwichModel
+        The model to simulate (:func:`example1`, :func:`example2` or any other).
+    n : int, default 1500
+        Samples (the paper's N).
+    snr : float or None, default 25.0
+        Signal-to-noise ratio, the square root of the output-to-noise variance ratio; None
+        for clean data.
+    amplitude : float, default 1.0
+        Bound of ``abs(u)``.
+    seed : int, default 0
+        Seed of the input and the noise.
+
+    Returns
+    -------
+    ExampleData
+        Input, clean and noisy output, noise std and the model.
+
+    Raises
+    ------
+    DataError
+        If n < 1 or snr is not positive.
+
+    Examples
+    --------
+    >>> d = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+    >>> d.u.shape, round(float(np.std(d.clean) / d.noise_std), 6)
+    ((1500,), 25.0)
+    """
     if n < 1:
         raise DataError(f"n = {n}: ask for at least one sample")
     if snr is not None and not snr > 0:

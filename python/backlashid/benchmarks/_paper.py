@@ -20,6 +20,24 @@ ITERATIONS_SHOWN = (1, 2, 5, 10, 15, 20)
 
 @dataclass(frozen=True)
 class ExampleSetting:
+    """How the paper's Section 5 runs one example.
+
+    Attributes
+    ----------
+    number : int
+        1 (the cascade) or 2 (the sandwich).
+    make : callable
+        Builds the true model (:func:`example1` or :func:`example2`).
+    fit : callable
+        The identification (:func:`~backlashid.fit_cascade` or :func:`~backlashid.fit_sandwich`).
+    snr : float
+        Output signal-to-noise ratio (25 and 100 in the paper).
+    initial : tuple of float
+        The paper's initial values (m_R1, c_L, c_R).
+    figures : dict of str to list of str
+        Figure name to the parameters it plots, in the paper's order (Figs 5-6, 8-10).
+    """
+
     number: int
     make: Callable[[], Model]
     fit: Callable[..., FitResult]
@@ -49,6 +67,26 @@ SETTINGS = {
 
 @dataclass(frozen=True)
 class ExampleRun:
+    """One run of an example: the paper's algorithm beside the default fit.
+
+    Attributes
+    ----------
+    setting : ExampleSetting
+        The example's settings.
+    structure : Structure
+        The parameter vector's layout (names in the paper's notation).
+    truth : dict of str to float
+        The true parameters by name.
+    paper_history : ndarray of float64
+        The paper's algorithm's estimates over 20 iterations, one row per iteration.
+    paper_outcome : str
+        How the paper's algorithm ended (its simulation RMSE, or that it diverged).
+    default : FitResult
+        The default fit (iterations with step control, then the output-error refinement).
+    x_range : tuple of float
+        The range of the true internal signal x, for the figures of the branches.
+    """
+
     setting: ExampleSetting
     structure: Structure
     truth: dict[str, float]
@@ -59,8 +97,32 @@ class ExampleRun:
 
 
 def run_example(number: int, *, seed: int = 0, n: int = 1500) -> ExampleRun:
-    """Simulate Example ``number`` (N samples, |u| < 1, the paper's SNR) and identify it with
-    the paper's algorithm (20 iterations, its initial values) and with the default."""
+    """Simulate one of the paper's examples and identify it with both algorithms.
+
+    The data are N samples with ``abs(u) < 1`` at the paper's SNR; the paper's algorithm runs
+    20 iterations from its initial values (eq 17-28 for Example 1, eq 29-36 for Example 2), the
+    default fit from the same initial values.
+
+    Parameters
+    ----------
+    number : int
+        1 (cascade, SNR 25) or 2 (sandwich, SNR 100).
+    seed : int, default 0
+        Seed of the input and the noise.
+    n : int, default 1500
+        Samples (the paper's N).
+
+    Returns
+    -------
+    ExampleRun
+        Both runs, the truth and the structure.
+
+    Examples
+    --------
+    >>> run = bid.benchmarks.run_example(1, n=1500)
+    >>> run.paper_history.shape, run.default.converged
+    ((20, 11), True)
+    """
     st = SETTINGS[number]
     model = st.make()
     data = example_data(model, n, snr=st.snr, seed=seed)
@@ -78,8 +140,34 @@ def run_example(number: int, *, seed: int = 0, n: int = 1500) -> ExampleRun:
 
 
 def iteration_table(names: list[str], truth: dict[str, float], history: NDArray[np.float64], final: NDArray[np.float64] | None = None) -> str:
-    """Estimates at iterations 1, 2, 5, 10, 15, 20 beside the true values (an iteration past
-    the end of the history shows the last iterate)."""
+    """Tabulate the estimates at iterations 1, 2, 5, 10, 15 and 20 beside the true values.
+
+    An iteration past the end of the history shows the last iterate.
+
+    Parameters
+    ----------
+    names : list of str
+        Parameter names, in the order of the history's columns.
+    truth : dict of str to float
+        True values by name.
+    history : ndarray of float64
+        Estimates, one row per iteration.
+    final : ndarray of float64, optional
+        Final estimates (after the refinement), shown in a last column.
+
+    Returns
+    -------
+    str
+        The table, one parameter per line.
+
+    Examples
+    --------
+    >>> history = np.array([[0.5, 0.1], [0.7, 0.3]])
+    >>> print(bid.benchmarks.iteration_table(["a1", "c_L"], {"a1": 0.7, "c_L": 0.6}, history))
+    param       true      it 1      it 2      it 5     it 10     it 15     it 20
+    a1        0.7000    0.5000    0.7000    0.7000    0.7000    0.7000    0.7000
+    c_L       0.6000    0.1000    0.3000    0.3000    0.3000    0.3000    0.3000
+    """
     head = f"{'param':<7}{'true':>9}" + "".join(f"{'it ' + str(i):>10}" for i in ITERATIONS_SHOWN)
     head += f"{'final':>10}" if final is not None else ""
     lines = [head]
@@ -95,6 +183,18 @@ def iteration_table(names: list[str], truth: dict[str, float], history: NDArray[
 
 
 def paper_report(run: ExampleRun) -> str:
+    """Report one example run as the paper's tables: both algorithms' estimates per iteration.
+
+    Parameters
+    ----------
+    run : ExampleRun
+        The run of :func:`run_example`.
+
+    Returns
+    -------
+    str
+        The settings, how each algorithm ended and its iteration table.
+    """
     st, names = run.setting, run.structure.names
     kind = "sandwich" if run.structure.is_sandwich else "cascade"
     d = run.default
@@ -119,7 +219,25 @@ def paper_report(run: ExampleRun) -> str:
 
 
 def write_figures(run: ExampleRun, out_dir: Path) -> list[Path]:
-    """Figs 4-6 (Example 1) or 7-10 (Example 2) as PNG files in out_dir."""
+    """Write the paper's Figs 4-6 (Example 1) or 7-10 (Example 2) as PNG files.
+
+    Parameters
+    ----------
+    run : ExampleRun
+        The run of :func:`run_example`.
+    out_dir : Path
+        Folder for the figures (created if missing).
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    BacklashIdError
+        If matplotlib is not installed.
+    """
     from .._optional import pyplot
     from ..app import plot_branches_comparison, plot_trajectories
 

@@ -262,7 +262,7 @@ class Metrics:
         ys = as_signal(y, "y").ravel()
         if ys.size != self.samples + self.warmup:
             raise DataError(f"y has {ys.size} samples, the metrics were computed on {self.samples + self.warmup}: give that record")
-        return plot_simulation(ys, y_sim, skip=self.warmup, ax=ax, title=title)
+        return plot_simulation(ys, y_sim, warmup=self.warmup, ax=ax, title=title)
 
 
 def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0) -> Metrics:

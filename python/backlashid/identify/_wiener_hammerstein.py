@@ -185,7 +185,7 @@ class LinearBaseline:
         """
         from ..app import plot_simulation
 
-        return plot_simulation(y, self.simulate(u), skip=warmup, ax=ax, title=title or "Measured output and linear baseline")
+        return plot_simulation(y, self.simulate(u), warmup=warmup, ax=ax, title=title or "Measured output and linear baseline")
 
 
 @dataclass(frozen=True)
