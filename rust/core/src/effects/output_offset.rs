@@ -1,0 +1,48 @@
+//! Output offset and drift: y += o_0 + o_1 tau.
+
+use super::{arity, finite, Effect, Sample, Stage};
+use crate::error::Result;
+
+/// Name in the catalogue.
+pub const NAME: &str = "output_offset";
+
+/// Offset o_0 and its drift rate o_1 per time unit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputOffset {
+    /// o_0.
+    pub offset: f64,
+    /// o_1.
+    pub rate: f64,
+}
+
+/// From [o_0, o_1].
+pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
+    arity(NAME, p, "o_0, o_1", 2)?;
+    Ok(Box::new(OutputOffset {
+        offset: p[0],
+        rate: p[1],
+    }))
+}
+
+impl Effect for OutputOffset {
+    fn name(&self) -> &'static str {
+        NAME
+    }
+    fn stage(&self) -> Stage {
+        Stage::Output
+    }
+    fn order(&self) -> u32 {
+        6
+    }
+    fn check(&self) -> Result<()> {
+        finite("o_0", self.offset, "give a finite offset")?;
+        finite("o_1", self.rate, "give a finite offset drift")
+    }
+    fn start(&self, _x0: f64, _y0: f64) -> Box<dyn Effect> {
+        Box::new(self.clone())
+    }
+    #[inline]
+    fn output(&mut self, out: f64, s: &Sample) -> f64 {
+        out + (self.offset + self.rate * s.tau)
+    }
+}
