@@ -202,9 +202,8 @@ mod tests {
             // from a non-rest state too
             let s = m.simulate_internals(&u[..300], &m.rest_state()).unwrap();
             let nominal = m.simulate(&u[300..], &s.final_state).unwrap();
-            let aug =
-                simulate_augmented(&m, &fx(zero), &u[300..], 0.0, TIME_SCALE, &s.final_state)
-                    .unwrap();
+            let aug = simulate_augmented(&m, &fx(zero), &u[300..], 0.0, TIME_SCALE, &s.final_state)
+                .unwrap();
             assert!(max_diff(&aug, &nominal) < 1e-12);
         }
     }
@@ -293,7 +292,13 @@ mod tests {
             LinearBlock::new(vec![1.0], vec![]).unwrap(),
             GeneralBacklash::new(0.0, 0.0, vec![1.0], vec![1.0]).unwrap(),
         );
-        let y = sim(&m, &[("compliance", &[1.0, 0.3, 0.05])], &[1.0; 2000], 0.0, TIME_SCALE);
+        let y = sim(
+            &m,
+            &[("compliance", &[1.0, 0.3, 0.05])],
+            &[1.0; 2000],
+            0.0,
+            TIME_SCALE,
+        );
         assert!((y[1999] - 1.0).abs() < 1e-9);
         let peak = y.iter().cloned().fold(f64::MIN, f64::max);
         assert!(
@@ -310,7 +315,13 @@ mod tests {
         );
         // x = u(t-1): 0, 1, 0.5, -1; play r = 0.25: 0, 0.75, 0.75, -0.75
         let u = [1.0, 0.5, -1.0, 0.0];
-        let y = sim(&m, &[("hysteresis_memory", &[0.25, 2.0])], &u, 0.0, TIME_SCALE);
+        let y = sim(
+            &m,
+            &[("hysteresis_memory", &[0.25, 2.0])],
+            &u,
+            0.0,
+            TIME_SCALE,
+        );
         assert!(max_diff(&y, &[0.0, 2.5, 2.0, -2.5]) < 1e-15);
         let y = sim(&m, &[("output_offset", &[0.1, 1.0])], &u, 10.0, 10.0);
         assert!(max_diff(&y, &[1.1, 2.2, 1.8, 0.4]) < 1e-12);
@@ -333,7 +344,10 @@ mod tests {
             ("gremlins", &[]),
         ];
         for (name, p) in bad {
-            assert!(matches!(from_parameters(name, p), Err(Error::Model(_))), "{name}");
+            assert!(
+                matches!(from_parameters(name, p), Err(Error::Model(_))),
+                "{name}"
+            );
         }
         assert!(simulate_augmented(&m, &[], &u, 0.0, 0.0, &m.rest_state()).is_err());
         assert!(matches!(
