@@ -27,7 +27,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
-from ._residual_tests import checked_record, json_float, snap_constant
+from ..._json import json_float
+from ..._validation import check_signals
+from .._statistics import snap_constant
 
 __all__ = ["ChangePoint", "TimeAnalysis", "time_analysis"]
 
@@ -205,7 +207,7 @@ def _segment_values(e: NDArray[np.float64], cuts: list[int]) -> list[NDArray[np.
 def time_analysis(residual: ArrayLike) -> TimeAnalysis:
     """Trends and change points of ``residual`` over its record (pass the samples after the
     warm-up). A constant residual has no drift and no change point."""
-    e = snap_constant(checked_record(residual, "residual", min_length=MIN_SAMPLES, what="a drift analysis"))
+    e = snap_constant(check_signals(("residual", residual), min_length=MIN_SAMPLES, what="a drift analysis")[0])
     n = e.size
     min_segment = max(30, n // 50)
 

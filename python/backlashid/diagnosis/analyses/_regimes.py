@@ -31,9 +31,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..._json import json_float
+from ..._validation import check_signals
 from ...errors import DataError
 from ...models import CascadeModel, CascadeState, SandwichModel, SandwichState
-from ._residual_tests import checked_record, holm, json_float, same_length, snap_constant
+from .._statistics import holm, same_length, snap_constant
 
 __all__ = ["REGIMES", "RegimeShare", "RegimeShares", "regime_masks", "regime_shares"]
 
@@ -284,8 +286,8 @@ def regime_shares(
     if not isinstance(warmup, (int, np.integer)) or isinstance(warmup, bool) or warmup < 0:
         raise DataError(f"warmup = {warmup!r}: give a non-negative integer number of samples")
     warmup = int(warmup)
-    e = checked_record(residual, "residual", min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")
-    u_arr = checked_record(u, "u", min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")
+    e = check_signals(("residual", residual), min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")[0]
+    u_arr = check_signals(("u", u), min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")[0]
     same_length(e.size, u=u_arr)
     sim, x_before = _simulate(model, u_arr, initial_state)
     evaluated = np.arange(e.size) >= warmup

@@ -42,10 +42,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import linalg, stats
 
-from ..._validation import as_signal
+from ..._validation import check_signals
 from ...errors import DataError
+from .._statistics import holm, same_length, snap_constant
 
-__all__ = ["CorrelationTest", "ResidualTests", "TEST_NAMES", "residual_tests", "holm"]
+__all__ = ["CorrelationTest", "ResidualTests", "TEST_NAMES", "residual_tests"]
 
 TEST_NAMES = ("acf", "ccf_u", "ccf_x", "e_eu", "u2_e", "u2_e2", "e_e2", "e2_e2")
 MAX_AR_ORDER = 10  # prewhitening noise model: AR(p), p <= this, chosen by AIC
@@ -61,63 +62,6 @@ _DESCRIPTIONS = {
     "e_e2": "e(t) vs e^2'(t-k) (Billings-Zhu)",
     "e2_e2": "autocorrelation of e^2' (McLeod-Li)",
 }
-
-
-# --------------------------------------------------------------------------- shared helpers
-def checked_record(values: Any, name: str, *, min_length: int, what: str) -> NDArray[np.float64]:
-    """A finite 1-D float copy of a signal of at least ``min_length`` samples (``what`` says
-    which analysis needs them); DataError otherwise, saying what to do."""
-    arr = as_signal(values, name)
-    if arr.ndim != 1:
-        if arr.ndim == 2 and 1 in arr.shape:
-            arr = arr.ravel()
-        else:
-            raise DataError(f"{name} has shape {arr.shape}: pass a 1-D signal (one record)")
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        raise DataError(
-            f"{name} has {bad.size} NaN or infinite values (first at sample {bad[0]}): "
-            "cut the record before them or interpolate them first"
-        )
-    if arr.size < min_length:
-        raise DataError(f"{name} has {arr.size} samples; {what} needs at least {min_length}: give a longer record")
-    return arr.copy()
-
-
-def snap_constant(e: NDArray[np.float64], *, centre: bool = False) -> NDArray[np.float64]:
-    """e, made exactly constant when it varies only by rounding (relative spread < 1e-12), so
-    that no analysis reads structure into rounding errors; ``centre`` also removes the mean
-    (a constant becomes exactly zero)."""
-    scale = float(np.abs(e).max()) if e.size else 0.0
-    if float(np.ptp(e)) <= 1e-12 * scale:
-        return np.zeros_like(e) if centre else np.full_like(e, e[0])
-    return e - e.mean() if centre else e
-
-
-def same_length(n: int, **signals: NDArray[np.float64]) -> None:
-    for name, s in signals.items():
-        if s.size != n:
-            raise DataError(f"{name} has {s.size} samples and the residual {n}: pass signals of one record, aligned")
-
-
-def holm(p_values: ArrayLike) -> NDArray[np.float64]:
-    """Holm's step-down adjustment of a family of p-values (NaN entries are left out)."""
-    p = np.asarray(p_values, dtype=np.float64)
-    out = np.full_like(p, np.nan)
-    ok = np.flatnonzero(np.isfinite(p))
-    if ok.size == 0:
-        return out
-    order = ok[np.argsort(p[ok], kind="stable")]
-    m = ok.size
-    adjusted = np.minimum(1.0, np.maximum.accumulate(p[order] * (m - np.arange(m))))
-    out[order] = adjusted
-    return out
-
-
-def json_float(v: Any) -> float | None:
-    """A float for JSON (NaN and inf become None)."""
-    f = float(v)
-    return f if np.isfinite(f) else None
 
 
 def _centered(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -311,13 +255,13 @@ def residual_tests(
     alpha = float(alpha)
     need = max(MIN_SAMPLES_PER_LAG * max_lag, 50)
     what = f"testing {max_lag} lags"
-    e = snap_constant(checked_record(residual, "residual", min_length=need, what=what), centre=True)
+    e = snap_constant(check_signals(("residual", residual), min_length=need, what=what)[0], centre=True)
     n = e.size
-    u_arr = checked_record(u, "u", min_length=need, what=what)
+    u_arr = check_signals(("u", u), min_length=need, what=what)[0]
     same_length(n, u=u_arr)
     x_arr = None
     if x is not None:
-        x_arr = checked_record(x, "x", min_length=need, what=what)
+        x_arr = check_signals(("x", x), min_length=need, what=what)[0]
         same_length(n, x=x_arr)
     if np.ptp(u_arr) == 0.0:
         raise DataError("u is constant: the input carries no excitation to correlate the residual with")

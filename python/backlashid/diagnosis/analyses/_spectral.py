@@ -27,8 +27,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal, stats
 
+from ..._json import json_float
+from ..._validation import check_signals
 from ...errors import DataError
-from ._residual_tests import checked_record, holm, json_float, same_length, snap_constant
+from .._statistics import holm, same_length, snap_constant
 
 __all__ = ["Band", "FrequencyAnalysis", "frequency_analysis"]
 
@@ -191,8 +193,8 @@ def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | 
     """The residual's spectrum by band against the noise floor and its coherence with the
     input ``u`` (pass the samples after the warm-up, of one record). ``noise_std = 0``
     (noise-free data) puts every band with any power above the floor."""
-    e = snap_constant(checked_record(residual, "residual", min_length=MIN_SAMPLES, what="a spectrum by band"), centre=True)
-    u_arr = checked_record(u, "u", min_length=MIN_SAMPLES, what="a spectrum by band")
+    e = snap_constant(check_signals(("residual", residual), min_length=MIN_SAMPLES, what="a spectrum by band")[0], centre=True)
+    u_arr = check_signals(("u", u), min_length=MIN_SAMPLES, what="a spectrum by band")[0]
     same_length(e.size, u=u_arr)
     n = e.size
     if noise_std is not None:
