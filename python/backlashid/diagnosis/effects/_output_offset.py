@@ -1,0 +1,29 @@
+"""output_offset: a constant and a linearly drifting offset on the output."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._base import TIME_SCALE, Array, Effect, Problem, ScreenContext
+
+
+class OutputOffset(Effect):
+    """Output offset o_0 and its drift o_1 per time unit."""
+
+    name = "output_offset"
+    rank = 4
+    parameters = ("o_0", "o_1")
+    zero = (0.0, 0.0)
+    description = f"y + o_0 + o_1 t / {TIME_SCALE:g}"
+    intercept = False  # its first direction is the constant
+
+    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+        """Within +-1000 (std(y) + 1)."""
+        b = np.full(2, 1e3 * (float(np.std(prob.y)) + 1.0))
+        return -b, b
+
+    def directions(self, screen: ScreenContext) -> list[Array]:
+        """The constant and time."""
+        u = screen.u
+        t = np.asarray((screen.t0 + np.arange(u.size)) / TIME_SCALE, dtype=np.float64)
+        return [np.ones(u.size), t]
