@@ -48,17 +48,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize, stats
 
-from .._validation import as_signal
+from .._validation import check_signals
 from ..errors import DataError, ModelError
 from ..models import CascadeModel, CascadeState, LinearBlock
-from ._report import Candidate, DiagnosisReport
-from .analyses._drift import time_analysis
-from .analyses._regimes import regime_shares
-from .analyses._residual_tests import residual_tests
-from .analyses._spectral import frequency_analysis
-from .effects._catalogue import EFFECTS, MAX_DELAY, AugmentedModel, fit_effect, held_x, screen
+from ._report import Candidate, DiagnosisDetails, DiagnosisReport
+from .analyses import frequency_analysis, regime_shares, residual_tests, time_analysis
+from .effects import EFFECTS, AugmentedModel, fit_effect, screen
+from .effects._base import held_x
+from .effects._dead_time import MAX_DELAY
 
-__all__ = ["diagnose", "DiagnosisReport", "Candidate", "ALPHA", "CLOSE_ENOUGH", "estimated_start", "held_state"]
+__all__ = ["diagnose", "ALPHA", "CLOSE_ENOUGH", "default_warmup", "estimated_start", "held_state"]
 
 ALPHA = 0.01  # family-wise significance level of "the validation error improved"
 CLOSE_ENOUGH = 0.5  # a candidate must close at least this fraction of the gap
@@ -77,17 +76,7 @@ Array = NDArray[np.float64]
 def _record(pair: Any, name: str) -> tuple[Array, Array]:
     if not isinstance(pair, (tuple, list)) or len(pair) != 2:
         raise DataError(f"{name} must be a pair (u, y) of 1-D signals, e.g. {name}=(u, y)")
-    u = as_signal(pair[0], f"{name}[0] (u)").ravel()
-    y = as_signal(pair[1], f"{name}[1] (y)").ravel()
-    if u.shape != y.shape:
-        raise DataError(f"{name}: u has {u.size} samples and y {y.size}: give the input and output of one record")
-    for what, s in (("u", u), ("y", y)):
-        bad = np.flatnonzero(~np.isfinite(s))
-        if bad.size:
-            raise DataError(
-                f"{name}: {what} holds {bad.size} non-finite values (first at sample {bad[0]}): "
-                "remove or interpolate NaN/inf samples before diagnosing"
-            )
+    u, y = check_signals((f"{name}[0] (u)", pair[0]), (f"{name}[1] (y)", pair[1]))
     return u, y
 
 
@@ -444,8 +433,8 @@ def diagnose(
 
     noise = math.sqrt(floor)
     residual_full = y_v - ynom_v
-    details = dict(
-        screening=screening,
+    details = DiagnosisDetails(
+        screening=tuple(screening),
         black_box_p_value=p_black_box,
         input_p_value=p_input,
         modulation_p_value=p_modulation,
@@ -456,13 +445,13 @@ def diagnose(
             else "estimated: lowest validation MSE of a cross-validated black-box residual model and the refitted candidates"
         ),
         warmup_rule="given" if warmup_given else "slowest pole's transient to 1e-4 plus the block memory and dead-time search",
-        screened_order=order,
+        screened_order=tuple(order),
         initial_state=(
             f"estimated: linear block at equilibrium with u_val[0], backlash memory y(0) = {y0_nominal:.6g} fitted on the record"
             if estimate_state
             else "from rest"
         ),
-        colored_noise_ruled_out=ruled_out,
+        colored_noise_ruled_out=tuple(ruled_out),
         closing_not_named=not_named,
     )
     x_v = model.linear.simulate(u_v)
