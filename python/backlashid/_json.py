@@ -17,8 +17,10 @@ def json_float(v: Any) -> float | None:
 
 
 def json_number(v: Any) -> Any:
-    """A number for JSON, nested lists kept: numpy and Python integers (not bools) as int,
-    everything else as float (NaN and inf kept, as the benchmark's parameters are finite)."""
+    """Numbers for JSON, nested dicts and lists kept: numpy and Python integers (not bools) as
+    int, everything else as float (NaN and inf kept, as the benchmark's parameters are finite)."""
+    if isinstance(v, dict):
+        return {k: json_number(w) for k, w in v.items()}
     if isinstance(v, (list, tuple, np.ndarray)):
         return [json_number(w) for w in v]
     if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
