@@ -171,7 +171,24 @@ def _nominal_branches(nom: _Nominal) -> tuple[Any, Any, list[float], list[float]
 # ------------------------------------------------------------------------- drawing a case
 @dataclass(frozen=True)
 class CaseSpec:
-    """What identifies a case: ``make_case(*spec)`` rebuilds it."""
+    """What identifies a case: ``make_case(spec.effect, spec.level, spec.seed)`` rebuilds it.
+
+    Attributes
+    ----------
+    effect : str
+        The effect's name.
+    level : float
+        The target effect-to-noise ratio (0 for "none").
+    seed : int
+        The seed the case is reproducible from.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import CaseSpec, make_case
+    >>> spec = CaseSpec("none", 0.0, 3)
+    >>> make_case(spec.effect, spec.level, spec.seed, n_est=300, n_val=300, preroll=50).effect
+    'none'
+    """
 
     effect: str
     level: float
@@ -181,7 +198,64 @@ class CaseSpec:
 @dataclass(frozen=True)
 class Case:
     """One benchmark case. The user sees u_est, y_est, u_val, y_val and the nominal structure
-    (na, nb, degree); the rest is the truth behind them."""
+    (na, nb, degree); the rest is the truth behind them.
+
+    Attributes
+    ----------
+    effect : str
+        The effect's name.
+    level : float
+        Target ENR (0 for "none").
+    seed : int
+        The seed the case is reproducible from.
+    u_est : ndarray
+        Estimation input.
+    y_est : ndarray
+        Estimation output (with the effect and the noise).
+    u_val : ndarray
+        Validation input (directly after the estimation record).
+    y_val : ndarray
+        Validation output.
+    na : int
+        Order of the numerator of the linear block (eq 16).
+    nb : int
+        Order of its denominator.
+    degree : int
+        Degree n of the backlash branches (eq 4-5).
+    nominal : CascadeModel
+        The true nominal cascade (m_L1 = 1).
+    effect_params : dict
+        Physical parameters of the effect (JSON-safe).
+    size : float
+        The scaled size knob of the effect (0 for "none").
+    noise_std : float
+        Standard deviation of the white noise e.
+    enr : float
+        Measured RMS(change) / noise_std over both records.
+    enr_scaled_by : str
+        "size" (noise_std = noise_ratio std(y_nominal)) or "noise" (from the change).
+    y_nominal_est : ndarray
+        Noise-free nominal output of the estimation record.
+    y_nominal_val : ndarray
+        The same of the validation record.
+    change_est : ndarray
+        The effect's change of the estimation output (the coloured noise for colored_noise).
+    change_val : ndarray
+        The same on the validation record.
+    u_preroll : ndarray
+        The dropped pre-roll input (the record starts from rest before it).
+    moving_fraction : float
+        Share of the samples on which the nominal backlash moves, over both records.
+    attempts : int
+        Draws until a usable case.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import make_case
+    >>> c = make_case("output_offset", 2.0, 4, n_est=300, n_val=300, preroll=50)
+    >>> c.structure == (c.na, c.nb, c.degree), c.in_catalogue
+    (True, True)
+    """
 
     effect: str
     level: float  # target ENR (0 for "none")
@@ -229,14 +303,22 @@ class Case:
 
     @property
     def in_catalogue(self) -> bool:
+        """Whether the effect is one of the diagnoser's catalogue."""
         return self.effect in CATALOGUE
 
     @property
     def spec(self) -> CaseSpec:
+        """(effect, level, seed), what rebuilds this case with :func:`make_case`."""
         return CaseSpec(self.effect, self.level, self.seed)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe description without the signals."""
+        """JSON-safe description without the signals.
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "effect": self.effect,
             "level": self.level,
@@ -655,10 +737,46 @@ def make_case(
     noise_ratio: float = 0.03,
     preroll: int = PREROLL,
 ) -> Case:
-    """One case: a random nominal cascade with ``effect`` withheld at ENR ``level`` (ignored for
-    "none"), reproducible from ``seed``. Draws that give no usable case (invalid branches, too
-    little motion, an effect that cannot reach the ENR) are redrawn from seeds derived from
-    ``seed``."""
+    """One benchmark case: a random nominal cascade with one effect withheld.
+
+    Draws that give no usable case (invalid branches, too little motion, an effect that
+    cannot reach the ENR) are redrawn from seeds derived from ``seed``.
+
+    Parameters
+    ----------
+    effect : str
+        "none" or a name from ``ALL_EFFECTS``.
+    level : float
+        Target effect-to-noise ratio (ignored for "none").
+    seed : int
+        The case is reproducible from it.
+    n_est : int, default 4000
+        Samples of the estimation record.
+    n_val : int, default 4000
+        Samples of the validation record.
+    noise_ratio : float, default 0.03
+        Noise std relative to std(y_nominal) when the size is scaled.
+    preroll : int, default 500
+        Samples simulated from rest and dropped before the estimation record.
+
+    Returns
+    -------
+    Case
+        The records the user sees and the truth behind them.
+
+    Raises
+    ------
+    DataError
+        If the effect is unknown, a number is out of range, or no usable case is found in
+        ``MAX_ATTEMPTS`` draws.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import make_case
+    >>> c = make_case("saturation", 3.0, 1, n_est=300, n_val=300, preroll=50)
+    >>> round(c.enr, 6), c.u_est.size
+    (3.0, 300)
+    """
     if effect not in ALL_EFFECTS:
         raise DataError(f"unknown effect {effect!r}: choose one of {', '.join(ALL_EFFECTS)}")
     if effect != "none" and not level > 0:
@@ -697,9 +815,39 @@ def case_specs(
     seed: int = 0,
     effects: Sequence[str] | None = None,
 ) -> list[CaseSpec]:
-    """The benchmark's cases: ``per_effect`` per effect and level (catalogue and out of
-    catalogue), and ``per_effect * len(levels)`` "none" cases. A case's seed depends only on
-    (seed, effect, level, index), so a subset of effects or levels gives the same cases."""
+    """The benchmark's cases: which effect, level and seed each has.
+
+    ``per_effect`` cases per effect and level (catalogue and out of catalogue), and
+    ``per_effect * len(levels)`` "none" cases. A case's seed depends only on (seed, effect,
+    level, index), so a subset of effects or levels gives the same cases.
+
+    Parameters
+    ----------
+    levels : sequence of float, default (3.0, 1.0)
+        The effect-to-noise ratios.
+    per_effect : int, default 5
+        Cases per effect and level.
+    seed : int, default 0
+        Seed of the whole set.
+    effects : sequence of str, optional
+        The effects (default: ``ALL_EFFECTS``).
+
+    Returns
+    -------
+    list of CaseSpec
+        ``make_case(spec.effect, spec.level, spec.seed)`` builds each.
+
+    Raises
+    ------
+    DataError
+        If an effect is unknown or ``per_effect`` < 1.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import case_specs
+    >>> [s.effect for s in case_specs(levels=(1.0,), per_effect=1, effects=["none", "friction"])]
+    ['none', 'friction']
+    """
     chosen = ALL_EFFECTS if effects is None else tuple(effects)
     for e in chosen:
         if e not in ALL_EFFECTS:
@@ -728,6 +876,32 @@ def cases(
     effects: Sequence[str] | None = None,
     **kwargs: Any,
 ) -> Iterator[Case]:
-    """The cases of :func:`case_specs`, built one at a time (``kwargs`` go to :func:`make_case`)."""
+    """The cases of :func:`case_specs`, built one at a time.
+
+    Parameters
+    ----------
+    levels : sequence of float, default (3.0, 1.0)
+        The effect-to-noise ratios.
+    per_effect : int, default 5
+        Cases per effect and level.
+    seed : int, default 0
+        Seed of the whole set.
+    effects : sequence of str, optional
+        The effects (default: ``ALL_EFFECTS``).
+    **kwargs
+        Passed to :func:`make_case` (record lengths, noise ratio, pre-roll).
+
+    Yields
+    ------
+    Case
+        One case after the other.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import cases
+    >>> c = next(cases(levels=(2.0,), per_effect=1, effects=["dead_time"], n_est=300, n_val=300, preroll=50))
+    >>> c.effect, c.enr_scaled_by
+    ('dead_time', 'noise')
+    """
     for spec in case_specs(levels, per_effect, seed, effects):
         yield make_case(spec.effect, spec.level, spec.seed, **kwargs)

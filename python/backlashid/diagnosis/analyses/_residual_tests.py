@@ -101,7 +101,42 @@ def _filter(a_poly: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray[np.f
 # --------------------------------------------------------------------------- results
 @dataclass(frozen=True, eq=False)
 class CorrelationTest:
-    """One correlation test over its lags, with per-lag bounds and a portmanteau p-value."""
+    """One correlation test over its lags, with per-lag bounds and a portmanteau p-value.
+
+    Attributes
+    ----------
+    name : str
+        The name.
+    description : str
+        What it is, in words.
+    lags : ndarray
+        The lags k tested.
+    values : ndarray
+        Normalised correlation at each lag.
+    bound : float
+        Per-lag bound z_(1-alpha/2) / sqrt(N).
+    statistic : float
+        Portmanteau Q.
+    dof : int
+        Degrees of freedom of the portmanteau statistic.
+    p_value : float
+        p-value of this test alone.
+    p_adjusted : float
+        Holm-adjusted over the tests of the family.
+    alpha : float
+        The significance level of the test.
+    prewhitened : bool
+        Whether the residual was prewhitened by the AR noise model.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import residual_tests
+    >>> rng = np.random.default_rng(1)
+    >>> acf = residual_tests(rng.standard_normal(1000), rng.standard_normal(1000), None)["acf"]
+    >>> acf.name, int(acf.lags[0])
+    ('acf', 1)
+    """
 
     name: str
     description: str
@@ -117,6 +152,7 @@ class CorrelationTest:
 
     @property
     def passed(self) -> bool:
+        """The test finds nothing left (adjusted p-value >= alpha)."""
         return not self.p_adjusted < self.alpha
 
     @property
@@ -126,9 +162,17 @@ class CorrelationTest:
 
     @property
     def worst_lag(self) -> int:
+        """The lag of the largest absolute correlation."""
         return int(self.lags[int(np.argmax(np.abs(self.values)))])
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "name": self.name,
             "description": self.description,
@@ -149,7 +193,30 @@ class CorrelationTest:
 @dataclass(frozen=True, eq=False)
 class ResidualTests:
     """The family of residual correlation tests on one residual; ``passed`` when no test fails
-    after Holm's correction, ``p_value`` the smallest adjusted p-value."""
+    after Holm's correction, ``p_value`` the smallest adjusted p-value.
+
+    Attributes
+    ----------
+    n : int
+        Number of evaluated samples.
+    max_lag : int
+        Largest lag K tested.
+    alpha : float
+        The significance level of the test.
+    ar_order : int
+        Order of the prewhitening AR noise model.
+    tests : tuple of CorrelationTest
+        One per name of ``TEST_NAMES``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import residual_tests
+    >>> rng = np.random.default_rng(1)
+    >>> e = np.convolve(rng.standard_normal(1000), [1.0, 0.9])[:1000]
+    >>> "acf" in residual_tests(e, rng.standard_normal(1000), None).failed
+    True
+    """
 
     n: int
     max_lag: int
@@ -159,10 +226,12 @@ class ResidualTests:
 
     @property
     def p_value(self) -> float:
+        """The smallest Holm-adjusted p-value of the tests."""
         return float(min(t.p_adjusted for t in self.tests))
 
     @property
     def passed(self) -> bool:
+        """Every test passes."""
         return all(t.passed for t in self.tests)
 
     @property
@@ -178,6 +247,7 @@ class ResidualTests:
 
     @property
     def names(self) -> tuple[str, ...]:
+        """The tests' names, in order."""
         return tuple(t.name for t in self.tests)
 
     def __getitem__(self, name: str) -> CorrelationTest:
@@ -190,6 +260,13 @@ class ResidualTests:
         return name in self.names
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "n": self.n,
             "max_lag": self.max_lag,
@@ -243,10 +320,45 @@ def _portmanteau(a: NDArray[np.float64], b: NDArray[np.float64], lags: NDArray[n
 def residual_tests(
     residual: ArrayLike, u: ArrayLike, x: ArrayLike | None, *, max_lag: int = 20, alpha: float = 0.05
 ) -> ResidualTests:
-    """The correlation tests of the module doc on ``residual`` (measured minus simulated
-    output), with input ``u`` and the model's internal signal ``x`` (None leaves out
-    ``ccf_x``). Pass the samples after the warm-up, all of one record. A constant residual
-    (a perfect model on noise-free data) leaves nothing to correlate: every test passes."""
+    """Correlation tests of a residual: is anything left that the model should explain?
+
+    The tests of the module doc on ``residual`` (measured minus simulated output) with the
+    input u and the model's internal signal x. A constant residual (a perfect model on
+    noise-free data) leaves nothing to correlate: every test passes.
+
+    Parameters
+    ----------
+    residual : array_like
+        Measured minus simulated output, 1-D, finite: the samples after the warm-up.
+    u : array_like
+        Input of the same samples.
+    x : array_like or None
+        The model's internal signal x of the same samples; None leaves out ``ccf_x``.
+    max_lag : int, default 20
+        Largest lag K of every test.
+    alpha : float, default 0.05
+        Significance level (per-lag bounds and the Holm-corrected verdict).
+
+    Returns
+    -------
+    ResidualTests
+        One CorrelationTest per name of ``TEST_NAMES``.
+
+    Raises
+    ------
+    DataError
+        If a signal is not 1-D, holds NaN, is too short for ``max_lag``, the lengths differ,
+        u is constant, or ``max_lag``, ``alpha`` are out of range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import residual_tests
+    >>> rng = np.random.default_rng(0)
+    >>> tests = residual_tests(rng.standard_normal(2000), rng.standard_normal(2000), None)
+    >>> tests.passed
+    True
+    """
     if not isinstance(max_lag, (int, np.integer)) or isinstance(max_lag, bool) or max_lag < 1:
         raise DataError(f"max_lag = {max_lag!r}: give a positive integer number of lags (e.g. 20)")
     max_lag = int(max_lag)

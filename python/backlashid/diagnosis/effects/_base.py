@@ -430,17 +430,60 @@ class Effect:
         return ((self.name, tuple(float(params[n]) for n in self.parameters)),)
 
     def bounds(self, prob: Problem) -> tuple[Array, Array]:
-        """Lower and upper bounds of the continuous parameters on this record."""
+        """Lower and upper bounds of the continuous parameters on this record.
+
+        Parameters
+        ----------
+        prob : Problem
+            The estimation record and the nominal structure.
+
+        Returns
+        -------
+        lower, upper : ndarray
+            One bound per parameter (default: unbounded).
+        """
         n = len(self.parameters)
         return np.full(n, -np.inf), np.full(n, np.inf)
 
     def starts(self, prob: Problem, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
-        """Starts (continuous values, fixed parameters) of the refit: the zero size."""
+        """Starts of the refit (default: the zero size).
+
+        Parameters
+        ----------
+        prob : Problem
+            The estimation record and the nominal structure.
+        theta0 : ndarray
+            The nominal parameters.
+
+        Returns
+        -------
+        list of (ndarray, dict)
+            Start values of the continuous parameters and the parameters held fixed.
+        """
         return [(np.array(self.zero, dtype=np.float64), {})]
 
     def refit(self, prob: Problem, theta0: Array) -> Fitted:
-        """Refit from :meth:`starts`: one start is refitted to convergence; from several, a
-        short refit from each, then the best one to convergence."""
+        """Output-error refit of the nominal and the effect's parameters from :meth:`starts`.
+
+        One start is refitted to convergence; from several, a short refit from each, then the
+        best one to convergence (Levenberg-Marquardt within :meth:`bounds`).
+
+        Parameters
+        ----------
+        prob : Problem
+            The estimation record and the nominal structure.
+        theta0 : ndarray
+            The nominal parameters.
+
+        Returns
+        -------
+        theta : ndarray
+            The refitted nominal parameters.
+        params : dict of str to float
+            The effect's parameters.
+        cost : float
+            The sum of squared output errors after the warm-up.
+        """
         lb, ub = self.bounds(prob)
         starts = self.starts(prob, theta0)
         if len(starts) == 1:
@@ -449,12 +492,39 @@ class Effect:
         return self._multi_start(prob, theta0, starts, lb, ub)
 
     def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
-        """The refitted augmented model on the record ``prob`` from the nominal ``theta0``."""
+        """The refitted augmented model.
+
+        Parameters
+        ----------
+        prob : Problem
+            The estimation record and the nominal structure.
+        theta0 : ndarray
+            The nominal parameters the refit starts from.
+
+        Returns
+        -------
+        AugmentedModel
+            The nominal model refitted with this effect.
+        """
         theta, params, _ = self.refit(prob, theta0)
         return AugmentedModel(self.name, prob.structure, theta, params, self.core(params), n_extra=len(self.parameters))
 
     def directions(self, screen: ScreenContext) -> list[Array]:
-        """Changes of the output that a small amount of the effect makes."""
+        """Changes of the nominal output that a small amount of the effect makes.
+
+        Finite differences with the augmented simulator; for non-smooth or discrete
+        parameters a finite step.
+
+        Parameters
+        ----------
+        screen : ScreenContext
+            The nominal fit on the estimation record.
+
+        Returns
+        -------
+        list of ndarray
+            One change per direction (default: none).
+        """
         return []
 
     # -- shared refit machinery for subclasses

@@ -122,6 +122,7 @@ def fit_effect(
     Examples
     --------
     >>> import numpy as np, backlashid as bid
+    >>> from backlashid.diagnosis.effects import fit_effect
     >>> m = bid.example1()
     >>> u = np.random.default_rng(0).uniform(-1.5, 1.5, 300)
     >>> fit = fit_effect("output_offset", m, u, m.simulate(u) + 0.2)
@@ -181,10 +182,12 @@ def screen(
     Examples
     --------
     >>> import numpy as np, backlashid as bid
+    >>> from backlashid.diagnosis.effects import screen
     >>> m = bid.example1()
     >>> u = np.random.default_rng(0).uniform(-1.5, 1.5, 300)
-    >>> screen(m, u, m.simulate(u) + 0.2, candidates=("output_offset", "friction"))[0].effect
-    'output_offset'
+    >>> tests = screen(m, u, m.simulate(u) + 0.2, candidates=("output_offset",))
+    >>> tests[0].effect, bool(tests[0].p_value < 1e-6)
+    ('output_offset', True)
     """
     u, y = _check(model, u_est, y_est, warmup)
     structure = _structure_of(model)
