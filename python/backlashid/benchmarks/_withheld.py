@@ -176,7 +176,7 @@ class CaseSpec:
     Attributes
     ----------
     effect : str
-        The effect's name.
+        The withheld effect, or "none".
     level : float
         The target effect-to-noise ratio (0 for "none").
     seed : int
@@ -881,13 +881,13 @@ def cases(
     Parameters
     ----------
     levels : sequence of float, default (3.0, 1.0)
-        The effect-to-noise ratios.
+        Effect-to-noise ratios, as for :func:`case_specs`.
     per_effect : int, default 5
-        Cases per effect and level.
+        How many cases of each effect at each level.
     seed : int, default 0
-        Seed of the whole set.
+        The seed all the cases derive from.
     effects : sequence of str, optional
-        The effects (default: ``ALL_EFFECTS``).
+        Which effects (default: all of ``ALL_EFFECTS``).
     **kwargs
         Passed to :func:`make_case` (record lengths, noise ratio, pre-roll).
 

@@ -67,9 +67,9 @@ class RegimeShare:
     Attributes
     ----------
     name : str
-        The name.
+        The regime, one of ``REGIMES``.
     description : str
-        What it is, in words.
+        The regime in words.
     n_samples : int
         Evaluated samples in the regime.
     sample_share : float
@@ -94,9 +94,9 @@ class RegimeShare:
     >>> import numpy as np, backlashid as bid
     >>> from backlashid.diagnosis.analyses import regime_shares
     >>> rng = np.random.default_rng(0)
-    >>> shares = regime_shares(bid.example1(), rng.uniform(-1.5, 1.5, 1000), rng.standard_normal(1000))
-    >>> shares["dead_band"].name
-    'dead_band'
+    >>> share = regime_shares(bid.example1(), rng.uniform(-1.5, 1.5, 800), rng.standard_normal(800))["dead_band"]
+    >>> share.name, share.significant
+    ('dead_band', False)
     """
 
     name: str

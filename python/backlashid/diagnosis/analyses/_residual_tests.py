@@ -106,9 +106,9 @@ class CorrelationTest:
     Attributes
     ----------
     name : str
-        The name.
+        One of ``TEST_NAMES``.
     description : str
-        What it is, in words.
+        What the test looks for.
     lags : ndarray
         The lags k tested.
     values : ndarray

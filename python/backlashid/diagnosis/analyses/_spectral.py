@@ -289,9 +289,9 @@ def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | 
     Parameters
     ----------
     residual : array_like
-        Measured minus simulated output, 1-D, finite: the samples after the warm-up.
+        The model's output error after the warm-up (1-D, finite).
     u : array_like
-        Input of the same samples.
+        The input over those samples.
     noise_std : float, optional
         The noise standard deviation if known (else estimated from the residual); 0
         (noise-free data) puts every band with any power above the floor.

@@ -363,7 +363,9 @@ def levenberg_marquardt(fun: Callable[[Array], Array], x0: Array, lower: Array, 
 class Effect:
     """One unmodelled effect of the catalogue: an augmentation of the nominal cascade.
 
-    A subclass (one module per effect in this package) sets the class attributes and
+    A subclass (one module per effect in this package) declares its ``augmentation`` (name,
+    parameters, zero values, description) and its ``rank`` as class keywords, e.g.
+    ``class DeadTime(Effect, rank=0, augmentation=Augmentation("dead_time", ...))``, and
     overrides what differs from the defaults: a refit of the nominal parameters together with
     the effect's continuous parameters from ``zero`` within ``bounds`` (:meth:`refit`, from
     :meth:`starts`), and a score-test screening on finite-size changes (:meth:`directions`).
@@ -402,14 +404,24 @@ class Effect:
     description: ClassVar[str] = ""
     simulated: ClassVar[bool] = True
     intercept: ClassVar[bool] = True
+    augmentation: ClassVar[Augmentation]
+
+    def __init_subclass__(
+        cls, *, rank: int = 0, augmentation: Augmentation | None = None, simulated: bool = True, intercept: bool = True, **kw: Any
+    ) -> None:
+        super().__init_subclass__(**kw)
+        cls.rank, cls.simulated, cls.intercept = rank, simulated, intercept
+        if augmentation is not None:
+            cls.augmentation = augmentation
+            cls.name, cls.parameters, cls.zero, cls.description = (
+                augmentation.effect,
+                augmentation.names,
+                augmentation.zero,
+                augmentation.description,
+            )
 
     def __repr__(self) -> str:
         return f"<effect {self.name}>"
-
-    @property
-    def augmentation(self) -> Augmentation:
-        """The effect's parameters, their zero values and description."""
-        return Augmentation(self.name, self.parameters, self.zero, self.description)
 
     def core(self, params: dict[str, float]) -> CoreEffects:
         """The effect as ``_core.simulate_augmented`` takes it.
@@ -435,7 +447,7 @@ class Effect:
         Parameters
         ----------
         prob : Problem
-            The estimation record and the nominal structure.
+            The record the bounds may depend on (e.g. the input's range).
 
         Returns
         -------
@@ -451,9 +463,9 @@ class Effect:
         Parameters
         ----------
         prob : Problem
-            The estimation record and the nominal structure.
+            The estimation record, nominal structure and warm-up.
         theta0 : ndarray
-            The nominal parameters.
+            Nominal parameters to start from.
 
         Returns
         -------
@@ -471,9 +483,9 @@ class Effect:
         Parameters
         ----------
         prob : Problem
-            The estimation record and the nominal structure.
+            Record, structure and warm-up of the output-error criterion.
         theta0 : ndarray
-            The nominal parameters.
+            The nominal fit, where every start begins.
 
         Returns
         -------
@@ -497,9 +509,9 @@ class Effect:
         Parameters
         ----------
         prob : Problem
-            The estimation record and the nominal structure.
+            What the refit runs on.
         theta0 : ndarray
-            The nominal parameters the refit starts from.
+            Nominal parameters (the structure's physical vector).
 
         Returns
         -------
@@ -580,3 +592,39 @@ class ScreenContext:
     def change(self, effects: CoreEffects) -> Array:
         """The augmented simulation minus the nominal one."""
         return simulate(self.structure, self.theta, effects, self.u, self.t0) - self.y_sim
+
+
+class StructureEffect(Effect):
+    """An effect that is a bigger nominal structure whose new terms start at 0: refitted in
+    that structure, screened by the derivatives in its first new terms (a subclass gives
+    :meth:`bigger`, :meth:`first_terms`, ``extra`` and ``n_extra``)."""
+
+    extra: ClassVar[dict[str, float]] = {}  # the effect's reported parameters
+    n_extra: ClassVar[int] = 0  # parameters over the nominal model
+    step: ClassVar[float] = 1e-4  # finite-difference step of the screening
+
+    def bigger(self, s: Structure) -> Structure:
+        """The bigger structure."""
+        raise NotImplementedError
+
+    def first_terms(self, est: Any, h: float) -> list[tuple[list[float], list[float], list[float], list[float]]]:
+        """(a, b, m_L, m_R) of the nominal estimate ``est`` with one new term at ``h``, per direction."""
+        raise NotImplementedError
+
+    def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
+        """Refit in the bigger structure, the new terms from 0."""
+        s, bigger = prob.structure, self.bigger(prob.structure)
+        old = dict(zip(s.names, theta0))
+        start = np.array([old.get(name, 0.0) for name in bigger.names])
+        big = Problem(bigger, prob.u, prob.y, prob.warmup, prob.t0)
+        theta, _, _ = self._refit(big, start, np.zeros(0), np.zeros(0), np.zeros(0), max_iter=40, names=())
+        return AugmentedModel(self.name, bigger, theta, dict(self.extra), n_extra=self.n_extra)
+
+    def directions(self, screen: ScreenContext) -> list[Array]:
+        """Derivatives in the first new terms, by finite differences."""
+        est = screen.structure.unpack(screen.theta)
+        out = []
+        for a, b, m_l, m_r in self.first_terms(est, self.step):
+            y = _core.simulate_augmented(a, b, est.c_left, est.c_right, m_l, m_r, screen.u, t0=screen.t0)
+            out.append((y - screen.y_sim) / self.step)
+        return out

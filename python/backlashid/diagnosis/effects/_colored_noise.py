@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import Array, AugmentedModel, Effect, Problem, ScreenContext, ar_predict
+from ._base import Array, Augmentation, AugmentedModel, Effect, Problem, ScreenContext, ar_predict
 
 MAX_AR = 4  # highest order of the AR model
 
@@ -26,15 +26,13 @@ def fit_ar(prob: Problem, theta0: Array) -> tuple[Array, float]:
     return phi, float(e @ e)
 
 
-class ColoredNoise(Effect):
-    """An AR noise model on the output error."""
+AUGMENTATION = Augmentation(
+    "colored_noise", tuple(f"phi_{k}" for k in range(1, MAX_AR + 1)), (0.0,) * MAX_AR, "AR noise model on the output error"
+)
 
-    name = "colored_noise"
-    rank = 10
-    parameters = tuple(f"phi_{k}" for k in range(1, MAX_AR + 1))
-    zero = (0.0,) * MAX_AR
-    description = "AR noise model on the output error"
-    simulated = False  # a noise model, not a term of the simulation
+
+class ColoredNoise(Effect, rank=10, augmentation=AUGMENTATION, simulated=False):
+    """An AR noise model on the output error."""
 
     def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
         """The AR model of the nominal output error; the nominal parameters are kept."""

@@ -4,17 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import Array, Effect, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, Problem, ScreenContext
+
+AUGMENTATION = Augmentation("compliance", ("k", "omega", "zeta"), (0.0, 0.5, 0.1), "y = (1 - k) f + k H f, H a unit-DC resonance")
 
 
-class Compliance(Effect):
+class Compliance(Effect, rank=7, augmentation=AUGMENTATION):
     """A resonant path of share k after the backlash."""
-
-    name = "compliance"
-    rank = 7
-    parameters = ("k", "omega", "zeta")
-    zero = (0.0, 0.5, 0.1)
-    description = "y = (1 - k) f + k H f, H a unit-DC resonance"
 
     def bounds(self, prob: Problem) -> tuple[Array, Array]:
         """0 <= k <= 1.5, 0.02 <= omega <= 3, 0.005 <= zeta <= 0.9."""

@@ -4,19 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import Array, Effect, Fitted, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
 
 MAX_DELAY = 6  # dead times searched: 1..MAX_DELAY extra samples
 
 
-class DeadTime(Effect):
-    """Extra input delay of d samples (rest before the record)."""
+AUGMENTATION = Augmentation("dead_time", ("d",), (0,), "extra input delay of d samples: u(t - d)")
 
-    name = "dead_time"
-    rank = 0
-    parameters = ("d",)
-    zero = (0,)
-    description = "extra input delay of d samples: u(t - d)"
+
+class DeadTime(Effect, rank=0, augmentation=AUGMENTATION):
+    """Extra input delay of d samples (rest before the record)."""
 
     def refit(self, prob: Problem, theta0: Array) -> Fitted:
         """d is discrete: refit the nominal parameters at each d, keep the best."""

@@ -4,19 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import Array, Effect, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, Problem, ScreenContext
 
 STEP = 1e-4  # relative finite-difference step of the screening
 
 
-class Friction(Effect):
-    """Coulomb and viscous friction on the drive input."""
+AUGMENTATION = Augmentation("friction", ("F_c", "F_v"), (0.0, 0.0), "u - F_c sign(v) - F_v v, v = x(t) - x(t-1)")
 
-    name = "friction"
-    rank = 2
-    parameters = ("F_c", "F_v")
-    zero = (0.0, 0.0)
-    description = "u - F_c sign(v) - F_v v, v = x(t) - x(t-1)"
+
+class Friction(Effect, rank=2, augmentation=AUGMENTATION):
+    """Coulomb and viscous friction on the drive input."""
 
     def bounds(self, prob: Problem) -> tuple[Array, Array]:
         """0 <= F_c <= 2 std(u), 0 <= F_v <= 2."""

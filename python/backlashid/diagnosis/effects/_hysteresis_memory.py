@@ -5,19 +5,21 @@ from __future__ import annotations
 import numpy as np
 
 from ... import _core
-from ._base import Array, Effect, Fitted, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
 
 N_PLAYS = 2  # extra plays
 
 
-class HysteresisMemory(Effect):
-    """Weighted play operators on the internal signal x added to the output."""
+AUGMENTATION = Augmentation(
+    "hysteresis_memory",
+    tuple(n for k in range(1, N_PLAYS + 1) for n in (f"r_{k}", f"w_{k}")),
+    tuple(v for _ in range(N_PLAYS) for v in (0.1, 0.0)),
+    "y + sum_k w_k play_{r_k}(x)",
+)
 
-    name = "hysteresis_memory"
-    rank = 9
-    parameters = tuple(n for k in range(1, N_PLAYS + 1) for n in (f"r_{k}", f"w_{k}"))
-    zero = tuple(v for _ in range(N_PLAYS) for v in (0.1, 0.0))
-    description = "y + sum_k w_k play_{r_k}(x)"
+
+class HysteresisMemory(Effect, rank=9, augmentation=AUGMENTATION):
+    """Weighted play operators on the internal signal x added to the output."""
 
     @staticmethod
     def _x(prob: Problem, theta0: Array) -> Array:

@@ -2,35 +2,24 @@
 
 from __future__ import annotations
 
-from ... import _core
+from typing import Any
+
 from ...identify import Structure
-from ._base import Array, AugmentedModel, Effect, Problem, ScreenContext
-from ._branch_degree import fit_bigger
+from ._base import Augmentation, StructureEffect
 
-STEP = 1e-4  # finite-difference step of the screening
+AUGMENTATION = Augmentation("linear_order", ("extra_order",), (0,), "linear block of orders na + 1, nb + 1")
 
 
-class LinearOrder(Effect):
+class LinearOrder(StructureEffect, rank=6, augmentation=AUGMENTATION, simulated=False):
     """A linear block of one more order in each polynomial."""
 
-    name = "linear_order"
-    rank = 6
-    parameters = ("extra_order",)
-    zero = (0,)
-    description = "linear block of orders na + 1, nb + 1"
-    simulated = False  # a bigger structure, not a term of the simulation
+    extra = {"extra_order": 1.0}
+    n_extra = 2
 
-    def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
-        """Refit in the structure of orders na + 1, nb + 1."""
-        s = prob.structure
-        bigger, theta, _ = fit_bigger(self, prob, theta0, Structure(s.na + 1, s.nb + 1, s.degree))
-        return AugmentedModel(self.name, bigger, theta, {"extra_order": 1.0}, n_extra=2)
+    def bigger(self, s: Structure) -> Structure:
+        """Orders na + 1, nb + 1."""
+        return Structure(s.na + 1, s.nb + 1, s.degree)
 
-    def directions(self, screen: ScreenContext) -> list[Array]:
-        """Derivatives in the next a and the next b coefficient."""
-        est = screen.structure.unpack(screen.theta)
-        out = []
-        for a, b in ((est.a + [STEP], est.b + [0.0]), (est.a + [0.0], est.b + [STEP])):
-            y = _core.simulate_augmented(a, b, est.c_left, est.c_right, est.m_left, est.m_right, screen.u, t0=screen.t0)
-            out.append((y - screen.y_sim) / STEP)
-        return out
+    def first_terms(self, est: Any, h: float) -> list[tuple[list[float], list[float], list[float], list[float]]]:
+        """The next a and the next b coefficient."""
+        return [(est.a + [h], est.b + [0.0], est.m_left, est.m_right), (est.a + [0.0], est.b + [h], est.m_left, est.m_right)]

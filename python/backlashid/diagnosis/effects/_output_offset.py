@@ -4,18 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import TIME_SCALE, Array, Effect, Problem, ScreenContext
+from ._base import TIME_SCALE, Array, Augmentation, Effect, Problem, ScreenContext
+
+AUGMENTATION = Augmentation("output_offset", ("o_0", "o_1"), (0.0, 0.0), f"y + o_0 + o_1 t / {TIME_SCALE:g}")
 
 
-class OutputOffset(Effect):
+class OutputOffset(Effect, rank=4, augmentation=AUGMENTATION, intercept=False):
     """Output offset o_0 and its drift o_1 per time unit."""
-
-    name = "output_offset"
-    rank = 4
-    parameters = ("o_0", "o_1")
-    zero = (0.0, 0.0)
-    description = f"y + o_0 + o_1 t / {TIME_SCALE:g}"
-    intercept = False  # its first direction is the constant
 
     def bounds(self, prob: Problem) -> tuple[Array, Array]:
         """Within +-1000 (std(y) + 1)."""

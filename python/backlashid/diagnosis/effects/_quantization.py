@@ -4,17 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import Array, Effect, Fitted, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
+
+AUGMENTATION = Augmentation("quantization", ("q",), (0.0,), "y quantised to steps of q")
 
 
-class Quantization(Effect):
+class Quantization(Effect, rank=8, augmentation=AUGMENTATION):
     """Output quantised to steps of q."""
-
-    name = "quantization"
-    rank = 8
-    parameters = ("q",)
-    zero = (0.0,)
-    description = "y quantised to steps of q"
 
     def refit(self, prob: Problem, theta0: Array) -> Fitted:
         """A search of q at the nominal parameters.

@@ -76,14 +76,7 @@ def _check(model: CascadeModel, u_est: ArrayLike, y_est: ArrayLike, warmup: int)
 
 
 def fit_effect(
-    effect: str,
-    model: CascadeModel,
-    u_est: ArrayLike,
-    y_est: ArrayLike,
-    *,
-    warmup: int = 0,
-    t0: float = 0.0,
-    seed: int = 0,
+    effect: str, model: CascadeModel, u_est: ArrayLike, y_est: ArrayLike, *, warmup: int = 0, t0: float = 0.0, seed: int = 0
 ) -> AugmentedModel:
     """Refit the nominal cascade together with one effect on the estimation record.
 
@@ -139,13 +132,7 @@ def fit_effect(
 
 
 def screen(
-    model: CascadeModel,
-    u_est: ArrayLike,
-    y_est: ArrayLike,
-    *,
-    warmup: int = 0,
-    t0: float = 0.0,
-    candidates: tuple[str, ...] = EFFECTS,
+    model: CascadeModel, u_est: ArrayLike, y_est: ArrayLike, *, warmup: int = 0, t0: float = 0.0, candidates: tuple[str, ...] = EFFECTS
 ) -> list[Screening]:
     """Score tests of every candidate on the estimation record, most significant first.
 
@@ -155,15 +142,15 @@ def screen(
     Parameters
     ----------
     model : CascadeModel
-        The nominal cascade.
+        The nominal cascade whose residual is tested.
     u_est : array_like
-        Estimation input, 1-D, finite.
+        Input of the estimation record.
     y_est : array_like
-        Estimation output, same length.
+        Its measured output.
     warmup : int, default 0
         Samples at the start left out of the regression.
     t0 : float, default 0.0
-        Time of u_est[0] in the continuous record.
+        Where u_est[0] lies in time (samples).
     candidates : tuple of str, default EFFECTS
         The effects to screen.
 
@@ -177,14 +164,13 @@ def screen(
     DataError
         If the record is unusable.
     ModelError
-        If ``model`` is not a CascadeModel.
+        If ``model`` is not a CascadeModel (fit the nominal model with fit_cascade).
 
     Examples
     --------
     >>> import numpy as np, backlashid as bid
     >>> from backlashid.diagnosis.effects import screen
-    >>> m = bid.example1()
-    >>> u = np.random.default_rng(0).uniform(-1.5, 1.5, 300)
+    >>> m, u = bid.example1(), np.linspace(-1.5, 1.5, 300) ** 3
     >>> tests = screen(m, u, m.simulate(u) + 0.2, candidates=("output_offset",))
     >>> tests[0].effect, bool(tests[0].p_value < 1e-6)
     ('output_offset', True)

@@ -4,17 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import Array, Effect, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, Problem, ScreenContext
+
+AUGMENTATION = Augmentation("saturation", ("lo", "hi"), (-np.inf, np.inf), "drive input clipped to [lo, hi]")
 
 
-class Saturation(Effect):
+class Saturation(Effect, rank=1, augmentation=AUGMENTATION):
     """Drive input clipped to [lo, hi]."""
-
-    name = "saturation"
-    rank = 1
-    parameters = ("lo", "hi")
-    zero = (-np.inf, np.inf)
-    description = "drive input clipped to [lo, hi]"
 
     def bounds(self, prob: Problem) -> tuple[Array, Array]:
         """lo below the median input, hi above it."""

@@ -4,20 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import TIME_SCALE, Array, Effect, Problem, ScreenContext
+from ._base import TIME_SCALE, Array, Augmentation, Effect, Problem, ScreenContext
 
 BOUND = 50.0  # largest drift rate per time unit
 STEP = 1e-4  # finite-difference step of the screening
 
 
-class WidthDrift(Effect):
-    """Dead-band widths drifting linearly in time."""
+AUGMENTATION = Augmentation("width_drift", ("dc_L", "dc_R"), (0.0, 0.0), f"c_L, c_R change by dc per {TIME_SCALE:g} samples")
 
-    name = "width_drift"
-    rank = 3
-    parameters = ("dc_L", "dc_R")
-    zero = (0.0, 0.0)
-    description = f"c_L, c_R change by dc per {TIME_SCALE:g} samples"
+
+class WidthDrift(Effect, rank=3, augmentation=AUGMENTATION):
+    """Dead-band widths drifting linearly in time."""
 
     def bounds(self, prob: Problem) -> tuple[Array, Array]:
         """Rates within +-BOUND."""

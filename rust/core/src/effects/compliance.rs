@@ -50,15 +50,8 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
 }
 
 impl Effect for Compliance {
-    fn name(&self) -> &'static str {
-        NAME
-    }
-    fn stage(&self) -> Stage {
-        Stage::Output
-    }
-    fn order(&self) -> u32 {
-        4 // on the backlash output f itself: first of the output stage
-    }
+    // on the backlash output f itself: first of the output stage
+    place!(Output, 4);
     fn check(&self) -> Result<()> {
         let (k, omega, zeta) = (self.share, self.omega, self.zeta);
         finite("compliance share k", k, "give a finite share (0 for none)")?;

@@ -26,20 +26,10 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
 }
 
 impl Effect for DeadTime {
-    fn name(&self) -> &'static str {
-        NAME
-    }
-    fn stage(&self) -> Stage {
-        Stage::Drive
-    }
-    fn order(&self) -> u32 {
-        0 // the source of the drive input: first
-    }
+    // the source of the drive input: first
+    place!(Drive, 0);
     fn check(&self) -> Result<()> {
         Ok(())
-    }
-    fn start(&self, _x0: f64, _y0: f64) -> Box<dyn Effect> {
-        Box::new(self.clone())
     }
     #[inline]
     fn drive(&mut self, _v: f64, s: &Sample) -> f64 {

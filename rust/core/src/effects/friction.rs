@@ -37,21 +37,11 @@ fn sign(v: f64) -> f64 {
 }
 
 impl Effect for Friction {
-    fn name(&self) -> &'static str {
-        NAME
-    }
-    fn stage(&self) -> Stage {
-        Stage::Drive
-    }
-    fn order(&self) -> u32 {
-        2 // on the delayed, clipped input
-    }
+    // on the delayed, clipped input
+    place!(Drive, 2);
     fn check(&self) -> Result<()> {
         finite("F_c", self.coulomb, "give a finite Coulomb friction")?;
         finite("F_v", self.viscous, "give a finite viscous friction")
-    }
-    fn start(&self, _x0: f64, _y0: f64) -> Box<dyn Effect> {
-        Box::new(self.clone())
     }
     #[inline]
     fn drive(&mut self, v: f64, s: &Sample) -> f64 {

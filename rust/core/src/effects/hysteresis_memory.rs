@@ -30,15 +30,7 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
 }
 
 impl Effect for HysteresisMemory {
-    fn name(&self) -> &'static str {
-        NAME
-    }
-    fn stage(&self) -> Stage {
-        Stage::Output
-    }
-    fn order(&self) -> u32 {
-        5
-    }
+    place!(Output, 5);
     fn check(&self) -> Result<()> {
         for &(r, w) in &self.plays {
             if !(r.is_finite() && r >= 0.0 && w.is_finite()) {

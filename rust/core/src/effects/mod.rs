@@ -39,8 +39,20 @@ pub struct Sample<'a> {
     pub tau: f64,
 }
 
+/// A boxed copy of an effect (what [`Effect::start`] gives for an effect without memory).
+pub trait CloneEffect {
+    /// The copy.
+    fn clone_effect(&self) -> Box<dyn Effect>;
+}
+
+impl<T: Effect + Clone + 'static> CloneEffect for T {
+    fn clone_effect(&self) -> Box<dyn Effect> {
+        Box::new(self.clone())
+    }
+}
+
 /// One effect of the catalogue.
-pub trait Effect: Debug + Send + Sync {
+pub trait Effect: CloneEffect + Debug + Send + Sync {
     /// The effect's name, as in the Python catalogue.
     fn name(&self) -> &'static str;
     /// Its stage in the one-pass simulation.
@@ -50,7 +62,9 @@ pub trait Effect: Debug + Send + Sync {
     /// Every parameter in its domain; the message says which one to fix.
     fn check(&self) -> Result<()>;
     /// A fresh copy for one simulation, its memory at rest on x(0) = `x0` and y(0) = `y0`.
-    fn start(&self, x0: f64, y0: f64) -> Box<dyn Effect>;
+    fn start(&self, _x0: f64, _y0: f64) -> Box<dyn Effect> {
+        self.clone_effect()
+    }
     /// Drive stage: the linear block's input at t, given the value `v` so far.
     fn drive(&mut self, v: f64, _s: &Sample) -> f64 {
         v
@@ -84,6 +98,22 @@ pub(crate) fn arity(effect: &str, p: &[f64], names: &str, n: usize) -> Result<()
             p.len()
         )))
     }
+}
+
+/// `name`, `stage` and `order` of an effect's `impl Effect`: its module's `NAME`, the stage
+/// and its position in the pass.
+macro_rules! place {
+    ($stage:ident, $order:expr) => {
+        fn name(&self) -> &'static str {
+            NAME
+        }
+        fn stage(&self) -> Stage {
+            Stage::$stage
+        }
+        fn order(&self) -> u32 {
+            $order
+        }
+    };
 }
 
 macro_rules! registry {

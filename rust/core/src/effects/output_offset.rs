@@ -25,21 +25,10 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
 }
 
 impl Effect for OutputOffset {
-    fn name(&self) -> &'static str {
-        NAME
-    }
-    fn stage(&self) -> Stage {
-        Stage::Output
-    }
-    fn order(&self) -> u32 {
-        6
-    }
+    place!(Output, 6);
     fn check(&self) -> Result<()> {
         finite("o_0", self.offset, "give a finite offset")?;
         finite("o_1", self.rate, "give a finite offset drift")
-    }
-    fn start(&self, _x0: f64, _y0: f64) -> Box<dyn Effect> {
-        Box::new(self.clone())
     }
     #[inline]
     fn output(&mut self, out: f64, s: &Sample) -> f64 {

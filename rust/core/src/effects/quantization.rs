@@ -20,15 +20,8 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
 }
 
 impl Effect for Quantization {
-    fn name(&self) -> &'static str {
-        NAME
-    }
-    fn stage(&self) -> Stage {
-        Stage::Output
-    }
-    fn order(&self) -> u32 {
-        7 // last: the sensor's resolution
-    }
+    // last: the sensor's resolution
+    place!(Output, 7);
     fn check(&self) -> Result<()> {
         if !(self.quantum.is_finite() && self.quantum >= 0.0) {
             return Err(Error::Model(format!(
@@ -37,9 +30,6 @@ impl Effect for Quantization {
             )));
         }
         Ok(())
-    }
-    fn start(&self, _x0: f64, _y0: f64) -> Box<dyn Effect> {
-        Box::new(self.clone())
     }
     #[inline]
     fn output(&mut self, out: f64, _s: &Sample) -> f64 {

@@ -22,15 +22,7 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
 }
 
 impl Effect for Saturation {
-    fn name(&self) -> &'static str {
-        NAME
-    }
-    fn stage(&self) -> Stage {
-        Stage::Drive
-    }
-    fn order(&self) -> u32 {
-        1
-    }
+    place!(Drive, 1);
     fn check(&self) -> Result<()> {
         let (lo, hi) = (self.lo, self.hi);
         if lo.is_nan() || hi.is_nan() || lo >= hi {
@@ -39,9 +31,6 @@ impl Effect for Saturation {
             )));
         }
         Ok(())
-    }
-    fn start(&self, _x0: f64, _y0: f64) -> Box<dyn Effect> {
-        Box::new(self.clone())
     }
     #[inline]
     fn drive(&mut self, v: f64, _s: &Sample) -> f64 {

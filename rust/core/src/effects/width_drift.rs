@@ -25,21 +25,10 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
 }
 
 impl Effect for WidthDrift {
-    fn name(&self) -> &'static str {
-        NAME
-    }
-    fn stage(&self) -> Stage {
-        Stage::Widths
-    }
-    fn order(&self) -> u32 {
-        3
-    }
+    place!(Widths, 3);
     fn check(&self) -> Result<()> {
         finite("dc_L", self.left, "give a finite drift rate")?;
         finite("dc_R", self.right, "give a finite drift rate")
-    }
-    fn start(&self, _x0: f64, _y0: f64) -> Box<dyn Effect> {
-        Box::new(self.clone())
     }
     #[inline]
     fn widths(&self, c_left: f64, c_right: f64, s: &Sample) -> Option<(f64, f64)> {
