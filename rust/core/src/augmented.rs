@@ -13,7 +13,7 @@
 
 use crate::backlash::{check_memory, GeneralBacklash};
 use crate::cascade::{CascadeModel, CascadeState};
-use crate::effects::{Effect, Sample, Stage};
+use crate::effects::{AnyEffect, Sample, Stage};
 use crate::error::{Error, Result};
 use crate::signal::check_signal;
 
@@ -48,7 +48,7 @@ fn select(l: f64, r: f64, y_prev: f64) -> f64 {
 /// continuous record and `time_scale` the samples per time unit (drifts only).
 pub fn simulate_augmented(
     model: &CascadeModel,
-    effects: &[Box<dyn Effect>],
+    effects: &[AnyEffect],
     u: &[f64],
     t0: f64,
     time_scale: f64,
@@ -76,12 +76,11 @@ pub fn simulate_augmented(
     let (c_l, c_r) = (bl.c_left(), bl.c_right());
     let x0 = state.linear.x_past.first().copied().unwrap_or(0.0);
     // fresh copies with their memories at rest on x(0), y(0), in the order of the pass
-    let mut running: Vec<Box<dyn Effect>> =
-        effects.iter().map(|e| e.start(x0, state.y_prev)).collect();
+    let mut running: Vec<AnyEffect> = effects.iter().map(|e| e.start(x0, state.y_prev)).collect();
     running.sort_by_key(|e| e.order());
-    let mut drive: Vec<Box<dyn Effect>> = Vec::new();
-    let mut widths: Vec<Box<dyn Effect>> = Vec::new();
-    let mut output: Vec<Box<dyn Effect>> = Vec::new();
+    let mut drive: Vec<AnyEffect> = Vec::new();
+    let mut widths: Vec<AnyEffect> = Vec::new();
+    let mut output: Vec<AnyEffect> = Vec::new();
     for e in running {
         match e.stage() {
             Stage::Drive => drive.push(e),
@@ -172,7 +171,7 @@ mod tests {
     }
 
     /// The effects of (name, parameters) pairs.
-    fn fx(list: &[(&str, &[f64])]) -> Vec<Box<dyn Effect>> {
+    fn fx(list: &[(&str, &[f64])]) -> Vec<AnyEffect> {
         list.iter()
             .map(|(name, p)| from_parameters(name, p).unwrap())
             .collect()

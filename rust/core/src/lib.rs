@@ -21,7 +21,7 @@ pub mod streaming;
 pub mod switching;
 
 pub use augmented::simulate_augmented;
-pub use effects::Effect;
+pub use effects::{AnyEffect, Effect};
 pub use backlash::{Branch, BranchCheck, GeneralBacklash};
 pub use cascade::{CascadeModel, CascadeSimulation, CascadeState};
 pub use error::{Error, Result};

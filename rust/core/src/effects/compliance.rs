@@ -24,7 +24,7 @@ pub struct Compliance {
 }
 
 /// From [k, omega, zeta].
-pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
+pub fn from_parameters(p: &[f64]) -> Result<Compliance> {
     arity(NAME, p, "k, omega, zeta", 3)?;
     let (k, omega, zeta) = (p[0], p[1], p[2]);
     // H(q) = g / (1 + d1 q^-1 + d2 q^-2), poles exp(omega (-zeta +- j sqrt(1 - zeta^2))).
@@ -37,7 +37,7 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
     } else {
         (0.0, 0.0)
     };
-    Ok(Box::new(Compliance {
+    Ok(Compliance {
         share: k,
         omega,
         zeta,
@@ -46,7 +46,7 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
         g: 1.0 + d1 + d2,
         h1: 0.0,
         h2: 0.0,
-    }))
+    })
 }
 
 impl Effect for Compliance {
@@ -64,13 +64,13 @@ impl Effect for Compliance {
         }
         Ok(())
     }
-    fn start(&self, _x0: f64, y0: f64) -> Box<dyn Effect> {
+    fn start(&self, _x0: f64, y0: f64) -> Self {
         // the resonance at rest on y(0)
-        Box::new(Compliance {
+        Compliance {
             h1: y0,
             h2: y0,
             ..self.clone()
-        })
+        }
     }
     #[inline]
     fn output(&mut self, out: f64, s: &Sample) -> f64 {

@@ -14,7 +14,7 @@ pub struct DeadTime {
 }
 
 /// From [d] (a whole number >= 0).
-pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
+pub fn from_parameters(p: &[f64]) -> Result<DeadTime> {
     arity(NAME, p, "d", 1)?;
     let d = p[0];
     if !(d.is_finite() && d >= 0.0 && d.fract() == 0.0) {
@@ -22,7 +22,7 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
             "dead time d = {d}: give a whole number of samples >= 0"
         )));
     }
-    Ok(Box::new(DeadTime { delay: d as usize }))
+    Ok(DeadTime { delay: d as usize })
 }
 
 impl Effect for DeadTime {

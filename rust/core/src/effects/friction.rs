@@ -17,12 +17,12 @@ pub struct Friction {
 }
 
 /// From [F_c, F_v].
-pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
+pub fn from_parameters(p: &[f64]) -> Result<Friction> {
     arity(NAME, p, "F_c, F_v", 2)?;
-    Ok(Box::new(Friction {
+    Ok(Friction {
         coulomb: p[0],
         viscous: p[1],
-    }))
+    })
 }
 
 #[inline(always)]

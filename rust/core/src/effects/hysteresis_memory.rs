@@ -15,7 +15,7 @@ pub struct HysteresisMemory {
 }
 
 /// From [r_1, w_1, r_2, w_2, ...] (any number of plays).
-pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
+pub fn from_parameters(p: &[f64]) -> Result<HysteresisMemory> {
     if p.len() % 2 != 0 {
         return Err(Error::Model(format!(
             "{} play parameters: give pairs (r_k, w_k), one weight per play",
@@ -23,10 +23,10 @@ pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
         )));
     }
     let plays: Vec<(f64, f64)> = p.chunks_exact(2).map(|c| (c[0], c[1])).collect();
-    Ok(Box::new(HysteresisMemory {
+    Ok(HysteresisMemory {
         state: vec![0.0; plays.len()],
         plays,
-    }))
+    })
 }
 
 impl Effect for HysteresisMemory {
@@ -41,12 +41,12 @@ impl Effect for HysteresisMemory {
         }
         Ok(())
     }
-    fn start(&self, x0: f64, _y0: f64) -> Box<dyn Effect> {
+    fn start(&self, x0: f64, _y0: f64) -> Self {
         // each play at rest on x(0)
-        Box::new(HysteresisMemory {
+        HysteresisMemory {
             plays: self.plays.clone(),
             state: vec![x0; self.plays.len()],
-        })
+        }
     }
     #[inline]
     fn output(&mut self, mut out: f64, s: &Sample) -> f64 {

@@ -4,7 +4,7 @@
 //! check, and the hooks by which it enters the fused one-pass simulation of
 //! [`crate::augmented::simulate_augmented`]. Each gives exactly the nominal model at zero size.
 //! The registry below is the one place that lists them: adding an effect is a new module here
-//! and its name in the `registry!` line (and its Python module in
+//! and its name in the `registry!` list (and its Python module in
 //! `backlashid.diagnosis.effects`).
 
 use std::fmt::Debug;
@@ -39,20 +39,8 @@ pub struct Sample<'a> {
     pub tau: f64,
 }
 
-/// A boxed copy of an effect (what [`Effect::start`] gives for an effect without memory).
-pub trait CloneEffect {
-    /// The copy.
-    fn clone_effect(&self) -> Box<dyn Effect>;
-}
-
-impl<T: Effect + Clone + 'static> CloneEffect for T {
-    fn clone_effect(&self) -> Box<dyn Effect> {
-        Box::new(self.clone())
-    }
-}
-
 /// One effect of the catalogue.
-pub trait Effect: CloneEffect + Debug + Send + Sync {
+pub trait Effect: Clone + Debug + Send + Sync {
     /// The effect's name, as in the Python catalogue.
     fn name(&self) -> &'static str;
     /// Its stage in the one-pass simulation.
@@ -62,8 +50,8 @@ pub trait Effect: CloneEffect + Debug + Send + Sync {
     /// Every parameter in its domain; the message says which one to fix.
     fn check(&self) -> Result<()>;
     /// A fresh copy for one simulation, its memory at rest on x(0) = `x0` and y(0) = `y0`.
-    fn start(&self, _x0: f64, _y0: f64) -> Box<dyn Effect> {
-        self.clone_effect()
+    fn start(&self, _x0: f64, _y0: f64) -> Self {
+        self.clone()
     }
     /// Drive stage: the linear block's input at t, given the value `v` so far.
     fn drive(&mut self, v: f64, _s: &Sample) -> f64 {
@@ -117,19 +105,66 @@ macro_rules! place {
 }
 
 macro_rules! registry {
-    ($($m:ident),* $(,)?) => {
+    ($($m:ident :: $t:ident),* $(,)?) => {
         $(pub mod $m;)*
 
         /// The names of the effects that act on the simulation.
         pub const NAMES: &[&str] = &[$($m::NAME),*];
 
+        /// Any effect of the registry: the simulation's loop dispatches on it statically.
+        #[derive(Debug, Clone)]
+        pub enum AnyEffect {
+            $(
+                #[allow(missing_docs)]
+                $t($m::$t),
+            )*
+        }
+
+        impl AnyEffect {
+            /// [`Effect::name`].
+            pub fn name(&self) -> &'static str {
+                match self { $(AnyEffect::$t(e) => e.name()),* }
+            }
+            /// [`Effect::stage`].
+            pub fn stage(&self) -> Stage {
+                match self { $(AnyEffect::$t(e) => e.stage()),* }
+            }
+            /// [`Effect::order`].
+            pub fn order(&self) -> u32 {
+                match self { $(AnyEffect::$t(e) => e.order()),* }
+            }
+            /// [`Effect::check`].
+            pub fn check(&self) -> Result<()> {
+                match self { $(AnyEffect::$t(e) => e.check()),* }
+            }
+            /// [`Effect::start`].
+            pub fn start(&self, x0: f64, y0: f64) -> AnyEffect {
+                match self { $(AnyEffect::$t(e) => AnyEffect::$t(e.start(x0, y0))),* }
+            }
+            /// [`Effect::drive`].
+            #[inline(always)]
+            pub fn drive(&mut self, v: f64, s: &Sample) -> f64 {
+                match self { $(AnyEffect::$t(e) => e.drive(v, s)),* }
+            }
+            /// [`Effect::widths`].
+            #[inline(always)]
+            pub fn widths(&self, c_left: f64, c_right: f64, s: &Sample) -> Option<(f64, f64)> {
+                match self { $(AnyEffect::$t(e) => e.widths(c_left, c_right, s)),* }
+            }
+            /// [`Effect::output`].
+            #[inline(always)]
+            pub fn output(&mut self, out: f64, s: &Sample) -> f64 {
+                match self { $(AnyEffect::$t(e) => e.output(out, s)),* }
+            }
+        }
+
         /// The effect `name` with its parameters `p` (in the Python catalogue's order).
-        pub fn from_parameters(name: &str, p: &[f64]) -> Result<Box<dyn Effect>> {
+        pub fn from_parameters(name: &str, p: &[f64]) -> Result<AnyEffect> {
             $(
                 if name == $m::NAME {
                     let effect = $m::from_parameters(p)?;
                     effect.check()?;
-                    return Ok(effect);
+                    return Ok(AnyEffect::$t(effect));
                 }
             )*
             Err(Error::Model(format!(
@@ -141,12 +176,12 @@ macro_rules! registry {
 }
 
 registry!(
-    dead_time,
-    saturation,
-    friction,
-    width_drift,
-    compliance,
-    hysteresis_memory,
-    output_offset,
-    quantization,
+    dead_time::DeadTime,
+    saturation::Saturation,
+    friction::Friction,
+    width_drift::WidthDrift,
+    compliance::Compliance,
+    hysteresis_memory::HysteresisMemory,
+    output_offset::OutputOffset,
+    quantization::Quantization,
 );

@@ -16,12 +16,12 @@ pub struct OutputOffset {
 }
 
 /// From [o_0, o_1].
-pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
+pub fn from_parameters(p: &[f64]) -> Result<OutputOffset> {
     arity(NAME, p, "o_0, o_1", 2)?;
-    Ok(Box::new(OutputOffset {
+    Ok(OutputOffset {
         offset: p[0],
         rate: p[1],
-    }))
+    })
 }
 
 impl Effect for OutputOffset {

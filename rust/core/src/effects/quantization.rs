@@ -14,9 +14,9 @@ pub struct Quantization {
 }
 
 /// From [q].
-pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
+pub fn from_parameters(p: &[f64]) -> Result<Quantization> {
     arity(NAME, p, "q", 1)?;
-    Ok(Box::new(Quantization { quantum: p[0] }))
+    Ok(Quantization { quantum: p[0] })
 }
 
 impl Effect for Quantization {

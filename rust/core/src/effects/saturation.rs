@@ -16,9 +16,9 @@ pub struct Saturation {
 }
 
 /// From [lo, hi].
-pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
+pub fn from_parameters(p: &[f64]) -> Result<Saturation> {
     arity(NAME, p, "lo, hi", 2)?;
-    Ok(Box::new(Saturation { lo: p[0], hi: p[1] }))
+    Ok(Saturation { lo: p[0], hi: p[1] })
 }
 
 impl Effect for Saturation {

@@ -16,12 +16,12 @@ pub struct WidthDrift {
 }
 
 /// From [dc_L, dc_R].
-pub fn from_parameters(p: &[f64]) -> Result<Box<dyn Effect>> {
+pub fn from_parameters(p: &[f64]) -> Result<WidthDrift> {
     arity(NAME, p, "dc_L, dc_R", 2)?;
-    Ok(Box::new(WidthDrift {
+    Ok(WidthDrift {
         left: p[0],
         right: p[1],
-    }))
+    })
 }
 
 impl Effect for WidthDrift {
