@@ -42,6 +42,29 @@ def test_catalogue_is_the_contracts() -> None:
     assert set(fx.AUGMENTATIONS) == set(bx.EFFECTS)
 
 
+def test_the_registry_is_one_module_per_effect_in_rank_order() -> None:
+    import pkgutil
+
+    modules = {m.name for m in pkgutil.iter_modules(fx.__path__)} - {"_base", "_registry"}
+    assert modules == {f"_{name}" for name in fx.EFFECTS}
+    assert [fx.REGISTRY[name].rank for name in fx.EFFECTS] == sorted(fx.REGISTRY[name].rank for name in fx.EFFECTS)
+    for name, effect in fx.REGISTRY.items():
+        assert type(effect).__module__.endswith(f"._{name}") and effect.augmentation == fx.AUGMENTATIONS[name]
+
+
+@pytest.mark.parametrize("effect", [e for e in fx.EFFECTS if fx.REGISTRY[e].simulated])
+def test_every_simulated_effect_has_its_rust_counterpart(effect: str, nominal) -> None:
+    aug = fx.AUGMENTATIONS[effect]
+    core = fx.REGISTRY[effect].core(dict(zip(aug.names, aug.zero)))
+    assert core == ((effect, tuple(float(v) for v in aug.zero)),)
+    bl = nominal.backlash
+    args = (list(nominal.linear.a), list(nominal.linear.b), bl.c_left, bl.c_right, list(bl.m_left), list(bl.m_right))
+    u = np.linspace(-1.0, 1.0, 50)
+    np.testing.assert_array_equal(_core.simulate_augmented(*args, u, effects=list(core)), _core.simulate_augmented(*args, u))
+    with pytest.raises(bx.ModelError, match="parameter|pairs"):
+        _core.simulate_augmented(*args, u, effects=[(effect, [0.0] * (len(aug.names) + 1))])
+
+
 @pytest.mark.parametrize("effect", fx.EFFECTS)
 def test_every_augmentation_at_zero_size_is_the_nominal_model(effect: str, nominal, u) -> None:
     aug = fx.AUGMENTATIONS[effect]
