@@ -27,6 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+# the per-sample reference of eq (1) and (4)-(5) has one home, shared with the withheld-effect generator
+from backlashid.benchmarks._reference import backlash as backlash_loop
+from backlashid.benchmarks._reference import branch
+
 Array = NDArray[np.float64]
 
 
@@ -45,14 +49,6 @@ def unpack(theta: Array, na: int, nb: int, degree: int) -> tuple[Array, Array, f
     return a, b, c_l, c_r, m_l, m_r
 
 
-def branch(m: Array, xi: Array) -> Array:
-    """sum_{i=1}^n m_i xi^i by Horner's rule (works on arrays)."""
-    acc = np.zeros_like(xi)
-    for mi in m[::-1]:
-        acc = (acc + mi) * xi
-    return acc
-
-
 def lagged(s: Array, k: int) -> Array:
     """s(t-k), zero before the record."""
     out = np.zeros_like(s)
@@ -69,20 +65,6 @@ def linear_filter(a: Array, b: Array, u: Array) -> Array:
     from scipy.signal import lfilter
 
     return lfilter(np.concatenate([[0.0], a]), np.concatenate([[1.0], b]), u)
-
-
-def backlash_loop(left: Array, right: Array, y0: float = 0.0) -> Array:
-    """Eq (1) in its case order, given L(x(t)) and R(x(t)) for every t: L if L <= y(t-1), else
-    R if R >= y(t-1), else hold."""
-    y = np.empty(len(left))
-    yp = y0
-    for t, (lv, rv) in enumerate(zip(left.tolist(), right.tolist())):
-        if lv <= yp:
-            yp = lv
-        elif rv >= yp:
-            yp = rv
-        y[t] = yp
-    return y
 
 
 def simulate(theta: Array, u: Array, na: int = 2, nb: int = 2, degree: int = 3) -> Array:

@@ -81,10 +81,6 @@ def oe_gradient(
 # is t0 (drifts: tau = (t0 + t) / time_scale). Empty pasts (None) mean rest.
 def simulate_augmented(
     a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
-    u: _F, *, t0: float = 0.0, time_scale: float = 1000.0, delay: int = 0,
-    sat_lo: float = ..., sat_hi: float = ..., f_c: float = 0.0, f_v: float = 0.0,
-    drift_left: float = 0.0, drift_right: float = 0.0, compliance: float = 0.0, omega: float = 0.5,
-    zeta: float = 0.1, play_r: list[float] = ..., play_w: list[float] = ..., offset: float = 0.0,
-    offset_rate: float = 0.0, quantum: float = 0.0, u_past: list[float] | None = None,
-    x_past: list[float] | None = None, y_prev: float = 0.0,
+    u: _F, *, effects: list[tuple[str, list[float]]] = ..., t0: float = 0.0, time_scale: float = 1000.0,
+    u_past: list[float] | None = None, x_past: list[float] | None = None, y_prev: float = 0.0,
 ) -> _F: ...

@@ -124,3 +124,36 @@ def identification_record(
     if np.ptp(u_arr) == 0.0:
         raise constant_input("the input u is constant: the system is not excited; use a varying input")
     return u_arr, y_arr
+
+
+def check_signals(*signals: tuple[str, Any], min_length: int = 0, what: str = "this analysis") -> list[NDArray[np.float64]]:
+    """Finite 1-D float copies of one record's signals, given as (name, values) pairs.
+
+    Each signal must be 1-D (a column or row vector is flattened), finite, of at least
+    ``min_length`` samples (``what`` says what needs them), and all as long as the first.
+    DataError otherwise, saying what to do.
+    """
+    out: list[NDArray[np.float64]] = []
+    for name, values in signals:
+        arr = as_signal(values, name)
+        if arr.ndim != 1:
+            if arr.ndim == 2 and 1 in arr.shape:
+                arr = arr.ravel()
+            else:
+                raise DataError(f"{name} has shape {arr.shape}: pass a 1-D signal (one record)")
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise DataError(
+                f"{name} has {bad.size} NaN or infinite (non-finite) values (first at sample {bad[0]}): "
+                "cut the record before them or interpolate them first"
+            )
+        if arr.size < min_length:
+            raise DataError(f"{name} has {arr.size} samples; {what} needs at least {min_length}: give a longer record")
+        if out and arr.size != out[0].size:
+            first = signals[0][0]
+            raise DataError(
+                f"{name} has {arr.size} samples and {first} {out[0].size}: pass the signals of one record "
+                "(same length), aligned"
+            )
+        out.append(arr.copy())
+    return out

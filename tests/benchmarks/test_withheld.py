@@ -65,6 +65,8 @@ def test_default_set_has_every_effect_at_every_level():
     assert len({s.seed for s in specs}) == len(specs)
     assert "output_gain_drift" in W.OUT_OF_CATALOGUE and not set(W.OUT_OF_CATALOGUE) & set(W.CATALOGUE)
     assert len(W.CATALOGUE) == 11
+    assert W.CATALOGUE == bid.EFFECTS  # the diagnoser's names, each with its own generator here
+    assert set(W.CATALOGUE + W.OUT_OF_CATALOGUE) == set(W._GENERATORS)
 
 
 def test_bad_requests_are_refused():

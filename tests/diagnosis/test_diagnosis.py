@@ -8,20 +8,22 @@ import numpy as np
 import pytest
 
 import backlashid as bx
-from backlashid.diagnosis.effects import _catalogue as fx
+from backlashid.diagnosis import effects as fx
+from backlashid.diagnosis.effects import _base
 from backlashid.identify import Structure
 
 N = 3000
 
 
-def _records(kwargs: dict, noise: float, seed: int) -> tuple[tuple, tuple]:
+def _records(planted: dict, noise: float, seed: int) -> tuple[tuple, tuple]:
     """One continuous record of example 1 with a planted effect (the augmented simulator),
     split into estimation and validation halves; neither starts at rest for the second."""
     m = bx.example1()
     rng = np.random.default_rng(seed)
     u = rng.uniform(-1.5, 1.5, 2 * N)
     s = Structure(2, 2, 3)
-    y = fx._simulate(s, s.pack(m), kwargs, u, 0.0) + noise * rng.standard_normal(2 * N)
+    core = tuple(c for effect, params in planted.items() for c in fx.REGISTRY[effect].core(params))
+    y = _base.simulate(s, s.pack(m), core, u, 0.0) + noise * rng.standard_normal(2 * N)
     return (u[:N], y[:N]), (u[N:], y[N:])
 
 
@@ -41,7 +43,7 @@ def test_clean_nominal_record_is_none(clean) -> None:
 
 
 def test_planted_dead_time_is_named() -> None:
-    est, val = _records({"delay": 2}, 0.05, seed=12)
+    est, val = _records({"dead_time": {"d": 2}}, 0.05, seed=12)
     model = bx.fit_cascade(*est, 2, 2, 3, warmup=50).model
     report = bx.diagnose(model, est, val)
     assert report.best_effect == "dead_time"
@@ -52,7 +54,7 @@ def test_planted_dead_time_is_named() -> None:
 
 
 def test_known_noise_and_candidate_subset() -> None:
-    est, val = _records({"sat_lo": -1.0, "sat_hi": 1.1}, 0.03, seed=13)
+    est, val = _records({"saturation": {"lo": -1.0, "hi": 1.1}}, 0.03, seed=13)
     model = bx.fit_cascade(*est, 2, 2, 3, warmup=50).model
     report = bx.diagnose(model, est, val, candidates=["saturation", "friction"], noise_std=0.03)
     assert not report.noise_std_estimated and report.noise_std == 0.03
@@ -146,7 +148,7 @@ def test_a_validation_record_that_starts_holding_a_force_is_not_a_gap() -> None:
     estimated = bx.diagnose(model, est, val, noise_std=noise)
     assert estimated.best_effect == "none"
     assert estimated.nominal_validation_rmse < 1.2 * noise
-    assert "estimated" in estimated.details["initial_state"]
+    assert "estimated" in estimated.details.initial_state
     from_rest = bx.diagnose(model, est, val, noise_std=noise, initial_state="rest")
     assert from_rest.best_effect != "none" and from_rest.nominal_validation_rmse > 2 * noise
     with pytest.raises(bx.DataError, match="initial_state"):

@@ -10,7 +10,8 @@ import pytest
 
 import backlashid as bx
 from backlashid import _core
-from backlashid.diagnosis.effects import _catalogue as fx
+from backlashid.diagnosis import effects as fx
+from backlashid.diagnosis.effects import _base
 from backlashid.identify import Structure
 
 N = 2000
@@ -27,9 +28,9 @@ def u() -> np.ndarray:
     return np.random.default_rng(7).uniform(-1.5, 1.5, N)
 
 
-def _plant(model: bx.CascadeModel, u: np.ndarray, seed: int = 3, **kwargs) -> np.ndarray:
+def _plant(model: bx.CascadeModel, u: np.ndarray, effect: str, params: dict, seed: int = 3) -> np.ndarray:
     s = Structure(model.linear.na, model.linear.nb, model.backlash.degree)
-    y = fx._simulate(s, s.pack(model), kwargs, u, 0.0)
+    y = _base.simulate(s, s.pack(model), fx.REGISTRY[effect].core(params), u, 0.0)
     return y + NOISE * np.random.default_rng(seed).standard_normal(u.size)
 
 
@@ -39,6 +40,29 @@ def test_catalogue_is_the_contracts() -> None:
         "linear_order", "compliance", "quantization", "hysteresis_memory", "colored_noise",
     )  # fmt: skip
     assert set(fx.AUGMENTATIONS) == set(bx.EFFECTS)
+
+
+def test_the_registry_is_one_module_per_effect_in_rank_order() -> None:
+    import pkgutil
+
+    modules = {m.name for m in pkgutil.iter_modules(fx.__path__)} - {"_base", "_registry"}
+    assert modules == {f"_{name}" for name in fx.EFFECTS}
+    assert [fx.REGISTRY[name].rank for name in fx.EFFECTS] == sorted(fx.REGISTRY[name].rank for name in fx.EFFECTS)
+    for name, effect in fx.REGISTRY.items():
+        assert type(effect).__module__.endswith(f"._{name}") and effect.augmentation == fx.AUGMENTATIONS[name]
+
+
+@pytest.mark.parametrize("effect", [e for e in fx.EFFECTS if fx.REGISTRY[e].simulated])
+def test_every_simulated_effect_has_its_rust_counterpart(effect: str, nominal) -> None:
+    aug = fx.AUGMENTATIONS[effect]
+    core = fx.REGISTRY[effect].core(dict(zip(aug.names, aug.zero)))
+    assert core == ((effect, tuple(float(v) for v in aug.zero)),)
+    bl = nominal.backlash
+    args = (list(nominal.linear.a), list(nominal.linear.b), bl.c_left, bl.c_right, list(bl.m_left), list(bl.m_right))
+    u = np.linspace(-1.0, 1.0, 50)
+    np.testing.assert_array_equal(_core.simulate_augmented(*args, u, effects=list(core)), _core.simulate_augmented(*args, u))
+    with pytest.raises(bx.ModelError, match="parameter|pairs"):
+        _core.simulate_augmented(*args, u, effects=[(effect, [0.0] * (len(aug.names) + 1))])
 
 
 @pytest.mark.parametrize("effect", fx.EFFECTS)
@@ -54,7 +78,7 @@ def test_every_augmentation_at_zero_size_is_the_nominal_model(effect: str, nomin
         old = dict(zip(Structure(2, 2, 3).names, theta))
         s, theta = big, np.array([old.get(n, 0.0) for n in big.names])
     params = dict(zip(aug.names, aug.zero))
-    model = fx.AugmentedModel(effect, s, theta, params, fx._effect_kwargs(effect, params))
+    model = fx.AugmentedModel(effect, s, theta, params, fx.REGISTRY[effect].core(params))
     want = nominal.simulate(u)
     np.testing.assert_allclose(model.simulate(u, t0=1234.0), want, rtol=0, atol=1e-12)
     np.testing.assert_allclose(model.predict(u, want + 0.1, t0=5.0), want, rtol=0, atol=1e-12)
@@ -72,21 +96,21 @@ def test_the_core_simulator_continues_a_record_from_a_state(nominal, u) -> None:
 
 
 PLANTED = [
-    # effect, planted core kwargs, {param: (true value, tolerance)}; a constant offset is nearly
+    # effect, planted parameters, {param: (true value, tolerance)}; a constant offset is nearly
     # confounded with the widths and branch coefficients (L(x) + o ~ L(x + dc)), hence 0.03 on o_0
-    ("dead_time", {"delay": 2}, {"d": (2, 0)}),
-    ("saturation", {"sat_lo": -1.0, "sat_hi": 1.1}, {"lo": (-1.0, 0.02), "hi": (1.1, 0.02)}),
-    ("friction", {"f_c": 0.08, "f_v": 0.15}, {"F_c": (0.08, 0.01), "F_v": (0.15, 0.03)}),
-    ("width_drift", {"drift_left": 0.1, "drift_right": -0.05}, {"dc_L": (0.1, 0.01), "dc_R": (-0.05, 0.01)}),
-    ("output_offset", {"offset": 0.1, "offset_rate": 0.05}, {"o_0": (0.1, 0.03), "o_1": (0.05, 0.01)}),
-    ("compliance", {"compliance": 1.0, "omega": 1.2, "zeta": 0.1}, {"k": (1.0, 0.05), "omega": (1.2, 0.03), "zeta": (0.1, 0.02)}),
-    ("quantization", {"quantum": 0.3}, {"q": (0.3, 0.01)}),
+    ("dead_time", {"d": 2}, {"d": (2, 0)}),
+    ("saturation", {"lo": -1.0, "hi": 1.1}, {"lo": (-1.0, 0.02), "hi": (1.1, 0.02)}),
+    ("friction", {"F_c": 0.08, "F_v": 0.15}, {"F_c": (0.08, 0.01), "F_v": (0.15, 0.03)}),
+    ("width_drift", {"dc_L": 0.1, "dc_R": -0.05}, {"dc_L": (0.1, 0.01), "dc_R": (-0.05, 0.01)}),
+    ("output_offset", {"o_0": 0.1, "o_1": 0.05}, {"o_0": (0.1, 0.03), "o_1": (0.05, 0.01)}),
+    ("compliance", {"k": 1.0, "omega": 1.2, "zeta": 0.1}, {"k": (1.0, 0.05), "omega": (1.2, 0.03), "zeta": (0.1, 0.02)}),
+    ("quantization", {"q": 0.3}, {"q": (0.3, 0.01)}),
 ]
 
 
 @pytest.mark.parametrize("effect, planted, expected", PLANTED, ids=[p[0] for p in PLANTED])
 def test_refit_recovers_a_planted_effect(effect, planted, expected, nominal, u) -> None:
-    y = _plant(nominal, u, **planted)
+    y = _plant(nominal, u, effect, planted)
     fit = fx.fit_effect(effect, nominal, u, y, warmup=50)
     for name, (value, tol) in expected.items():
         assert abs(fit.params[name] - value) <= tol, (name, fit.params)
@@ -95,7 +119,7 @@ def test_refit_recovers_a_planted_effect(effect, planted, expected, nominal, u) 
 
 def test_refit_explains_planted_hysteresis_memory(nominal, u) -> None:
     # two plays can share one planted play between them: judge the output, not the split
-    y = _plant(nominal, u, play_r=[0.3], play_w=[0.2])
+    y = _plant(nominal, u, "hysteresis_memory", {"r_1": 0.3, "w_1": 0.2, "r_2": 0.0, "w_2": 0.0})
     fit = fx.fit_effect("hysteresis_memory", nominal, u, y, warmup=50)
     e = (y - fit.simulate(u))[50:]
     assert np.sqrt(np.mean(e**2)) < 1.1 * NOISE
@@ -128,7 +152,7 @@ def test_bigger_structures_explain_a_richer_truth(effect, nominal, u) -> None:
 
 
 def test_screening_ranks_the_planted_effect_first(nominal, u) -> None:
-    y = _plant(nominal, u, delay=1)
+    y = _plant(nominal, u, "dead_time", {"d": 1})
     ranked = fx.screen(nominal, u, y, warmup=50)
     assert ranked[0].effect in ("dead_time", "linear_order")
     assert ranked[0].p_value < 1e-6
@@ -144,6 +168,6 @@ def test_bad_inputs_raise_actionable_errors(nominal, u) -> None:
     with pytest.raises(bx.ModelError, match="fit_cascade"):
         fx.fit_effect("dead_time", bx.example2(), u, u)
     with pytest.raises(bx.ModelError, match="lo < hi"):
-        _core.simulate_augmented([1.0], [], 0.1, 0.1, [1.0], [1.0], u, sat_lo=1.0, sat_hi=-1.0)
+        _core.simulate_augmented([1.0], [], 0.1, 0.1, [1.0], [1.0], u, effects=[("saturation", [1.0, -1.0])])
     with pytest.raises(bx.DataError):
         _core.simulate_augmented([1.0], [], 0.1, 0.1, [1.0], [1.0], np.array([np.nan]))

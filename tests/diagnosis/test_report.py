@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import backlashid as bx
-from backlashid.diagnosis import Candidate, DiagnosisReport
-from backlashid.diagnosis._report import MAX_LIST, jsonable
+from backlashid._json import MAX_LIST, jsonable
+from backlashid.diagnosis import Candidate, DiagnosisDetails, DiagnosisReport
 from backlashid.diagnosis.analyses import REGIMES, frequency_analysis, regime_shares, residual_tests, time_analysis
 
 N, WARMUP, NOISE = 3000, 40, 0.05
@@ -88,7 +88,7 @@ def test_unexplained_names_the_best_deterministic_candidate_not_the_noise_model(
     noise = Candidate("colored_noise", 1.0, 1e-20, report.ranking[0].model, {"ar1": 0.9}, 1, 0.05, 0.05, -20000.0, False)
     unexplained = dataclasses.replace(
         report, best_effect="unexplained", ranking=[noise, *report.ranking],
-        details={"colored_noise_ruled_out": ["the residual depends on the input (p 1e-09)"]},
+        details=DiagnosisDetails(colored_noise_ruled_out=("the residual depends on the input (p 1e-09)",)),
     )
     verdict = unexplained.summary().splitlines()[1]
     assert "the best, branch_degree, closes 91 %" in verdict
@@ -100,7 +100,7 @@ def test_unexplained_says_why_a_candidate_closing_half_the_gap_is_not_named(repo
     # modulation of the nominal residual remains in its own): the verdict must not claim that
     # no candidate closes half the gap
     why = {"branch_degree": "its residual is still modulated by the output (p 4.3e-48)"}
-    unexplained = dataclasses.replace(report, best_effect="unexplained", details={"closing_not_named": why})
+    unexplained = dataclasses.replace(report, best_effect="unexplained", details=DiagnosisDetails(closing_not_named=why))
     verdict = unexplained.summary().splitlines()[1]
     assert verdict.startswith("Verdict: unexplained: a significant gap that no deterministic candidate explains")
     assert "closes by half" not in verdict
@@ -108,7 +108,7 @@ def test_unexplained_says_why_a_candidate_closing_half_the_gap_is_not_named(repo
     # one held back that is not the best by BIC is named too, and the best then reads plainly
     second = report.ranking[1]
     held = {second.effect: "branch_degree has the lower BIC"}
-    other = dataclasses.replace(report, best_effect="unexplained", details={"closing_not_named": held})
+    other = dataclasses.replace(report, best_effect="unexplained", details=DiagnosisDetails(closing_not_named=held))
     verdict = other.summary().splitlines()[1]
     assert "no deterministic candidate explains" in verdict and "closes by half" not in verdict
     assert "the best, branch_degree, closes 91 %;" in verdict

@@ -11,8 +11,8 @@ import pytest
 from scipy.signal import lfilter
 
 import backlashid as bx
+from backlashid.diagnosis._statistics import holm
 from backlashid.diagnosis.analyses import REGIMES, TEST_NAMES, frequency_analysis, regime_shares, residual_tests, time_analysis
-from backlashid.diagnosis.analyses._residual_tests import holm
 from backlashid.errors import DataError
 
 

@@ -4,6 +4,7 @@ the ``backlashid`` command line (``backlashid.app._cli``).
 
 from __future__ import annotations
 
+from ._dashboard import plot_diagnosis
 from ._io import Record, Selection, concatenate, decimate, load_record, parse_range, read_signals, select_records, split_fraction
 from ._parallel import diagnose_many, fit_many
 from ._plotting import plot_branches_comparison, plot_characteristic, plot_residuals, plot_simulation, plot_trajectories
@@ -19,6 +20,7 @@ __all__ = [
     "parse_range",
     "plot_branches_comparison",
     "plot_characteristic",
+    "plot_diagnosis",
     "plot_residuals",
     "plot_simulation",
     "plot_trajectories",

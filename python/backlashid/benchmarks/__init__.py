@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from ._examples import ExampleData, example1, example2, example_data, shared_data_folder
 from ._paper import ExampleRun, ExampleSetting, iteration_table, paper_report, run_example, write_figures
-from ._withheld import ALL_EFFECTS, CATALOGUE, OUT_OF_CATALOGUE, Case, CaseSpec, case_specs, cases, make_case
+from ._withheld import ALL_EFFECTS, CATALOGUE, OUT_OF_CATALOGUE, Case, CaseSpec, case_specs, cases, make_case, simulate_true
 
 __all__ = [
     "ALL_EFFECTS",
@@ -27,5 +27,6 @@ __all__ = [
     "paper_report",
     "run_example",
     "shared_data_folder",
+    "simulate_true",
     "write_figures",
 ]

@@ -34,8 +34,15 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import brentq
 
+from .._json import json_number
+from ..diagnosis import EFFECTS
 from ..errors import DataError, ModelError
 from ..models import CascadeModel, GeneralBacklash, LinearBlock
+from ._reference import backlash as _backlash
+from ._reference import branch as _branch
+from ._reference import difference_equation as _filter
+from ._reference import linear_with_friction as _linear_with_friction
+from ._reference import play as _play
 
 __all__ = [
     "CATALOGUE",
@@ -49,20 +56,9 @@ __all__ = [
     "simulate_true",
 ]
 
-# The contract's catalogue, spelled out here so that the benchmark does not import the diagnoser.
-CATALOGUE = (
-    "dead_time",
-    "saturation",
-    "friction",
-    "width_drift",
-    "output_offset",
-    "branch_degree",
-    "linear_order",
-    "compliance",
-    "quantization",
-    "hysteresis_memory",
-    "colored_noise",
-)
+# The diagnoser's catalogue of effect names; how each is generated is this module's own truth
+# (_GENERATORS), independent of the diagnoser's parametrisation.
+CATALOGUE: tuple[str, ...] = EFFECTS
 OUT_OF_CATALOGUE = ("output_gain_drift", "input_gain_drift")
 ALL_EFFECTS = ("none",) + CATALOGUE + OUT_OF_CATALOGUE
 
@@ -72,76 +68,6 @@ MAX_ATTEMPTS = 50
 ENR_RTOL = 1e-9  # a size-scaled ENR further than this from the target falls back to the noise
 
 Array = NDArray[np.float64]
-
-
-# ------------------------------------------------------------------------- plain simulators
-def _filter(num: Sequence[float], den: Sequence[float], u: Array) -> Array:
-    """y(t) = sum_{k>=0} num[k] u(t-k) - sum_{j>=1} den[j-1] y(t-j), from rest (eq 16 with
-    num = [0, a_1, .., a_na], den = b)."""
-    num, den = [float(v) for v in num], [float(v) for v in den]
-    uu = [0.0] * len(num) + u.tolist()
-    yy = [0.0] * len(den)
-    ku, kd = len(num), len(den)
-    for t in range(len(u)):
-        acc = 0.0
-        for k, c in enumerate(num):
-            acc += c * uu[ku + t - k]
-        for j, c in enumerate(den, 1):
-            acc -= c * yy[kd + t - j]
-        yy.append(acc)
-    return np.array(yy[kd:], dtype=np.float64)
-
-
-def _linear_with_friction(a: Sequence[float], b: Sequence[float], u: Array, f_c: float, f_v: float) -> Array:
-    """Eq (16) driven by u_eff(t) = u(t) - F_c sign(v(t)) - F_v v(t), v(t) = x(t) - x(t-1)
-    (sign(0) = 0): x(t) needs u_eff up to t - 1 only, so u_eff(t) follows x(t)."""
-    a, b = [float(v) for v in a], [float(v) for v in b]
-    na, nb = len(a), len(b)
-    ue = [0.0] * na  # u_eff(t-na) .. u_eff(t-1), oldest first
-    xx = [0.0] * max(nb, 1)
-    out = np.empty(len(u))
-    for t, ut in enumerate(u.tolist()):
-        x = 0.0
-        for i in range(1, na + 1):
-            x += a[i - 1] * ue[-i]
-        for j in range(1, nb + 1):
-            x -= b[j - 1] * xx[-j]
-        v = x - xx[-1]
-        sign = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
-        ue.append(ut - f_c * sign - f_v * v)
-        xx.append(x)
-        out[t] = x
-    return out
-
-
-def _branch(m: Sequence[float], xi: Array) -> Array:
-    """sum_{i=1}^n m_i xi^i (eq 4-5) by Horner's rule."""
-    acc = np.zeros_like(xi)
-    for c in reversed([float(v) for v in m]):
-        acc = (acc + c) * xi
-    return acc
-
-
-def _backlash(left: Array, right: Array, y0: float = 0.0) -> Array:
-    """Eq (1) with the exclusive case order: L if L(x) <= y(t-1), else R if R(x) >= y(t-1),
-    else hold. ``left``, ``right`` are the branch values L(x(t)), R(x(t)) per sample."""
-    y_prev, out = float(y0), np.empty(len(left))
-    for t, (lv, rv) in enumerate(zip(left.tolist(), right.tolist())):
-        if lv <= y_prev:
-            y_prev = lv
-        elif rv >= y_prev:
-            y_prev = rv
-        out[t] = y_prev
-    return out
-
-
-def _play(x: Array, r: float) -> Array:
-    """Play operator of radius r: p(t) = max(x(t) - r, min(x(t) + r, p(t-1))), p = 0 at rest."""
-    p, out = 0.0, np.empty(len(x))
-    for t, xt in enumerate(x.tolist()):
-        p = max(xt - r, min(xt + r, p))
-        out[t] = p
-    return out
 
 
 # ------------------------------------------------------------------------- the true system
@@ -182,61 +108,87 @@ def _resonance(omega: float, zeta: float) -> tuple[list[float], list[float]]:
 def simulate_true(
     nom: _Nominal | CascadeModel, effect: str, params: dict[str, Any], u: Array, t: Array, horizon: float
 ) -> tuple[Array, Array]:
-    """(x, y): the internal signal and the noise-free output of the nominal cascade with one
-    effect (``effect="none"`` or a size-0 effect give the nominal), over the full record from
-    rest; ``t`` is the continuous time of each sample, ``horizon`` = T. For "colored_noise" the
-    output is the nominal one (the effect is in the noise)."""
+    """The internal signal and the noise-free output of the true system: the nominal cascade
+    with one effect.
+
+    The record is simulated from rest by the per-sample NumPy reference (``_reference``),
+    independently of the diagnoser's augmentations. For "colored_noise" the output is the
+    nominal one (the effect is in the noise).
+
+    Parameters
+    ----------
+    nom : CascadeModel
+        The nominal cascade.
+    effect : str
+        "none" or a name from ``ALL_EFFECTS`` (a size-0 effect gives the nominal too).
+    params : dict
+        The effect's physical parameters (as in ``Case.effect_params``).
+    u : ndarray
+        Input over the full record.
+    t : ndarray
+        Continuous time of each sample.
+    horizon : float
+        T, the time scale of the drifts.
+
+    Returns
+    -------
+    x : ndarray
+        The linear block's output.
+    y : ndarray
+        The noise-free output.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.benchmarks import simulate_true
+    >>> u = np.sin(0.1 * np.arange(50))
+    >>> _, y = simulate_true(bid.example1(), "none", {}, u, np.arange(50.0), 50.0)
+    >>> bool(np.allclose(y, bid.example1().simulate(u)))
+    True
+    """
     if isinstance(nom, CascadeModel):
         nom = _Nominal.of(nom)
-    u = np.asarray(u, dtype=np.float64)
+    g = _GENERATORS.get(effect, _NOMINAL)
     p = params
-    # input stage
-    if effect == "dead_time":
-        d = int(p["d"])
-        u = np.r_[np.zeros(d), u[: len(u) - d]]
-    elif effect == "saturation":
-        u = np.clip(u, p["lo"], p["hi"])
-    elif effect == "input_gain_drift":
-        u = (1.0 + p["s"] * np.sin(2.0 * np.pi * p["cycles"] * t / horizon + p["phase"])) * u
-    # linear block (16)
-    a, b = list(nom.a), list(nom.b)
-    if effect == "linear_order":
-        a, b = _lag_block(a, b, p["p"])
-    if effect == "friction":
-        x = _linear_with_friction(a, b, u, p["F_c"], p["F_v"])
-    else:
-        x = _filter([0.0, *a], b, u)
-    # backlash (1), (4)-(5)
-    c_l: Any = nom.c_left
-    c_r: Any = nom.c_right
-    m_l, m_r = list(nom.m_left), list(nom.m_right)
-    if effect == "width_drift":
-        c_l = nom.c_left + p["dc_L"] * t / horizon
-        c_r = nom.c_right + p["dc_R"] * t / horizon
-    elif effect == "branch_degree":
-        n = int(p["degree"])
-        m_l = m_l + [0.0] * (n - 1 - len(m_l)) + [p["m_L_extra"]]
-        m_r = m_r + [0.0] * (n - 1 - len(m_r)) + [p["m_R_extra"]]
-    y = _backlash(_branch(m_l, x + c_l), _branch(m_r, x - c_r))
-    # output stage
-    if effect == "hysteresis_memory":
-        y = y + sum(w * _play(x, r) for w, r in zip(p["weights"], p["radii"]))
-    elif effect == "compliance":
-        num, den = _resonance(p["omega"], p["zeta"])
-        y = y + p["s"] * (_filter(num, den, y) - y)
-    elif effect == "output_offset":
-        y = y + p["o_0"] + p["o_1"] * t / horizon
-    elif effect == "output_gain_drift":
-        y = (1.0 + p["s"] * np.sin(2.0 * np.pi * p["cycles"] * t / horizon + p["phase"])) * y
-    elif effect == "quantization" and p["q"] > 0.0:  # q = 0: no quantiser
-        y = p["q"] * np.round(y / p["q"])
+    u = np.asarray(u, dtype=np.float64)
+    if g.drive is not None:  # input stage
+        u = g.drive(u, p, t, horizon)
+    a, b = list(nom.a), list(nom.b)  # linear block (16)
+    if g.block is not None:
+        a, b = g.block(a, b, p)
+    x = g.linear(a, b, u, p) if g.linear is not None else _filter([0.0, *a], b, u)
+    c_l, c_r, m_l, m_r = g.branches(nom, p, t, horizon) if g.branches is not None else _nominal_branches(nom)
+    y = _backlash(_branch(m_l, x + c_l), _branch(m_r, x - c_r))  # backlash (1), (4)-(5)
+    if g.output is not None:  # output stage
+        y = g.output(y, x, p, t, horizon)
     return x, y
+
+
+def _nominal_branches(nom: _Nominal) -> tuple[Any, Any, list[float], list[float]]:
+    return nom.c_left, nom.c_right, list(nom.m_left), list(nom.m_right)
 
 
 # ------------------------------------------------------------------------- drawing a case
 @dataclass(frozen=True)
 class CaseSpec:
-    """What identifies a case: ``make_case(*spec)`` rebuilds it."""
+    """What identifies a case: ``make_case(spec.effect, spec.level, spec.seed)`` rebuilds it.
+
+    Attributes
+    ----------
+    effect : str
+        The withheld effect, or "none".
+    level : float
+        The target effect-to-noise ratio (0 for "none").
+    seed : int
+        The seed the case is reproducible from.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import CaseSpec, make_case
+    >>> spec = CaseSpec("none", 0.0, 3)
+    >>> make_case(spec.effect, spec.level, spec.seed, n_est=300, n_val=300, preroll=50).effect
+    'none'
+    """
 
     effect: str
     level: float
@@ -246,7 +198,64 @@ class CaseSpec:
 @dataclass(frozen=True)
 class Case:
     """One benchmark case. The user sees u_est, y_est, u_val, y_val and the nominal structure
-    (na, nb, degree); the rest is the truth behind them."""
+    (na, nb, degree); the rest is the truth behind them.
+
+    Attributes
+    ----------
+    effect : str
+        The effect's name.
+    level : float
+        Target ENR (0 for "none").
+    seed : int
+        The seed the case is reproducible from.
+    u_est : ndarray
+        Estimation input.
+    y_est : ndarray
+        Estimation output (with the effect and the noise).
+    u_val : ndarray
+        Validation input (directly after the estimation record).
+    y_val : ndarray
+        Validation output.
+    na : int
+        Order of the numerator of the linear block (eq 16).
+    nb : int
+        Order of its denominator.
+    degree : int
+        Degree n of the backlash branches (eq 4-5).
+    nominal : CascadeModel
+        The true nominal cascade (m_L1 = 1).
+    effect_params : dict
+        Physical parameters of the effect (JSON-safe).
+    size : float
+        The scaled size knob of the effect (0 for "none").
+    noise_std : float
+        Standard deviation of the white noise e.
+    enr : float
+        Measured RMS(change) / noise_std over both records.
+    enr_scaled_by : str
+        "size" (noise_std = noise_ratio std(y_nominal)) or "noise" (from the change).
+    y_nominal_est : ndarray
+        Noise-free nominal output of the estimation record.
+    y_nominal_val : ndarray
+        The same of the validation record.
+    change_est : ndarray
+        The effect's change of the estimation output (the coloured noise for colored_noise).
+    change_val : ndarray
+        The same on the validation record.
+    u_preroll : ndarray
+        The dropped pre-roll input (the record starts from rest before it).
+    moving_fraction : float
+        Share of the samples on which the nominal backlash moves, over both records.
+    attempts : int
+        Draws until a usable case.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import make_case
+    >>> c = make_case("output_offset", 2.0, 4, n_est=300, n_val=300, preroll=50)
+    >>> c.structure == (c.na, c.nb, c.degree), c.in_catalogue
+    (True, True)
+    """
 
     effect: str
     level: float  # target ENR (0 for "none")
@@ -294,14 +303,22 @@ class Case:
 
     @property
     def in_catalogue(self) -> bool:
+        """Whether the effect is one of the diagnoser's catalogue."""
         return self.effect in CATALOGUE
 
     @property
     def spec(self) -> CaseSpec:
+        """(effect, level, seed), what rebuilds this case with :func:`make_case`."""
         return CaseSpec(self.effect, self.level, self.seed)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe description without the signals."""
+        """JSON-safe description without the signals.
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "effect": self.effect,
             "level": self.level,
@@ -376,6 +393,7 @@ def _rms(v: Array) -> float:
 class _Context:
     rng: np.random.Generator
     nom: _Nominal
+    nominal: CascadeModel  # the same as a model
     u: Array  # full record, pre-roll included
     t: Array
     horizon: float
@@ -483,34 +501,191 @@ def _params_gain_drift(sh: dict[str, Any], s: float) -> dict[str, Any]:
     return {"cycles": sh["cycles"], "phase": sh["phase"], "s": s}
 
 
-_SCALED: dict[str, tuple[Callable[[_Context], tuple[dict[str, Any], float, float]], Callable[[dict[str, Any], float], dict[str, Any]]]] = {
-    "saturation": (_shape_saturation, _params_saturation),
-    "friction": (_shape_friction, _params_friction),
-    "width_drift": (_shape_width_drift, _params_width_drift),
-    "output_offset": (_shape_output_offset, _params_output_offset),
-    "branch_degree": (_shape_branch_degree, _params_branch_degree),
-    "linear_order": (_shape_linear_order, _params_linear_order),
-    "compliance": (_shape_compliance, _params_compliance),
-    "quantization": (_shape_quantization, _params_quantization),
-    "hysteresis_memory": (_shape_hysteresis_memory, _params_hysteresis_memory),
-    "output_gain_drift": (_shape_gain_drift, _params_gain_drift),
-    "input_gain_drift": (_shape_gain_drift, _params_gain_drift),
+# Stages of the true system, per effect: the input, the linear block, the backlash, the output.
+def _dead_time_drive(u: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    d = int(p["d"])
+    return np.r_[np.zeros(d), u[: len(u) - d]]
+
+
+def _saturation_drive(u: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    return np.clip(u, p["lo"], p["hi"])
+
+
+def _gain(p: dict[str, Any], t: Array, horizon: float) -> Array:
+    """1 + s sin(2 pi cycles t / T + phase): a slowly drifting gain."""
+    return 1.0 + p["s"] * np.sin(2.0 * np.pi * p["cycles"] * t / horizon + p["phase"])
+
+
+def _input_gain_drive(u: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    return _gain(p, t, horizon) * u
+
+
+def _lag_order_block(a: list[float], b: list[float], p: dict[str, Any]) -> tuple[list[float], list[float]]:
+    return _lag_block(a, b, p["p"])
+
+
+def _friction_linear(a: list[float], b: list[float], u: Array, p: dict[str, Any]) -> Array:
+    return _linear_with_friction(a, b, u, p["F_c"], p["F_v"])
+
+
+def _width_drift_branches(nom: _Nominal, p: dict[str, Any], t: Array, horizon: float) -> tuple[Any, Any, list[float], list[float]]:
+    c_l = nom.c_left + p["dc_L"] * t / horizon
+    c_r = nom.c_right + p["dc_R"] * t / horizon
+    return c_l, c_r, list(nom.m_left), list(nom.m_right)
+
+
+def _branch_degree_branches(nom: _Nominal, p: dict[str, Any], t: Array, horizon: float) -> tuple[Any, Any, list[float], list[float]]:
+    n = int(p["degree"])
+    m_l = list(nom.m_left) + [0.0] * (n - 1 - len(nom.m_left)) + [p["m_L_extra"]]
+    m_r = list(nom.m_right) + [0.0] * (n - 1 - len(nom.m_right)) + [p["m_R_extra"]]
+    return nom.c_left, nom.c_right, m_l, m_r
+
+
+def _hysteresis_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    return y + sum(w * _play(x, r) for w, r in zip(p["weights"], p["radii"]))
+
+
+def _compliance_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    num, den = _resonance(p["omega"], p["zeta"])
+    return y + p["s"] * (_filter(num, den, y) - y)
+
+
+def _offset_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    return y + p["o_0"] + p["o_1"] * t / horizon
+
+
+def _output_gain_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    return _gain(p, t, horizon) * y
+
+
+def _quantization_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    return p["q"] * np.round(y / p["q"]) if p["q"] > 0.0 else y  # q = 0: no quantiser
+
+
+def _width_drift_backlashes(nom: _Nominal, p: dict[str, Any], t: Array, horizon: float) -> list[GeneralBacklash]:
+    """Both ends of the drift."""
+    ends = [(nom.c_left + p["dc_L"] * tt / horizon, nom.c_right + p["dc_R"] * tt / horizon) for tt in (t[0], t[-1])]
+    if min(min(e) for e in ends) < 0.0:
+        raise _Redraw("a width drifts below zero")
+    return [GeneralBacklash(cl, cr, nom.m_left, nom.m_right) for cl, cr in ends]
+
+
+# What a draw gives: the effect's parameters, its size, the change of the output (full record),
+# the noise std and how the ENR was met ("size" or "noise").
+_Drawn = tuple[dict[str, Any], float, Array, float, str]
+
+
+def _draw_nothing(g: _Generator, ctx: _Context, effect: str, level: float, sigma: float) -> _Drawn:
+    return {}, 0.0, np.zeros(ctx.u.size), sigma, "size"
+
+
+def _draw_colored_noise(g: _Generator, ctx: _Context, effect: str, level: float, sigma: float) -> _Drawn:
+    """AR(1) or lightly resonant AR(2) filtered white noise, scaled exactly."""
+    rng = ctx.rng
+    if rng.random() < 0.5:
+        den = [-float(rng.uniform(0.7, 0.95))]
+    else:
+        r, phi = rng.uniform(0.8, 0.95), rng.uniform(0.2, 1.2)
+        den = [-2.0 * r * np.cos(phi), r * r]
+    raw = _filter([1.0], den, rng.standard_normal(ctx.u.size))
+    size = level * sigma / _rms(raw[ctx.rec])
+    return {"ar": [float(v) for v in den], "scale": size}, size, size * raw, sigma, "size"
+
+
+def _draw_dead_time(g: _Generator, ctx: _Context, effect: str, level: float, sigma: float) -> _Drawn:
+    """d is discrete: the noise std is set from the change."""
+    d = int(ctx.rng.integers(1, 3))
+    params = {"d": d}
+    x_true, y_true = simulate_true(ctx.nom, effect, params, ctx.u, ctx.t, ctx.horizon)
+    change = y_true - ctx.y_nom
+    sigma = _rms(change[ctx.rec]) / level
+    if not _valid(ctx.nominal.backlash, x_true):
+        raise _Redraw("branches invalid on the true x range")
+    return params, float(d), change, sigma, "noise"
+
+
+def _draw_scaled(g: _Generator, ctx: _Context, effect: str, level: float, sigma: float) -> _Drawn:
+    """A shape drawn once, then the size scaled (bracketing root search) to the target ENR."""
+    if g.shape is None or g.params is None:
+        raise TypeError(f"{effect}: a generator scaled by size needs a shape and its parameters")
+    nom, u, t, horizon, rec, y_nom = ctx.nom, ctx.u, ctx.t, ctx.horizon, ctx.rec, ctx.y_nom
+    params_of = g.params
+    shape, s0, s_max = g.shape(ctx)
+    target = level * sigma
+    cache: dict[float, tuple[Array, Array]] = {}
+
+    def rms_change(s: float) -> float:
+        if s not in cache:
+            with np.errstate(over="ignore", invalid="ignore"):
+                cache[s] = simulate_true(nom, effect, params_of(shape, s), u, t, horizon)
+        value = _rms(cache[s][1][rec] - y_nom[rec])
+        return value if np.isfinite(value) else np.inf
+
+    lo, hi = 0.0, min(s0, s_max)
+    while rms_change(hi) < target:
+        if hi >= s_max or not np.isfinite(rms_change(hi)):
+            raise _Redraw(f"{effect} cannot reach ENR {level} within its size range")
+        lo, hi = hi, min(2.0 * hi, s_max)
+    if not np.isfinite(rms_change(hi)):
+        raise _Redraw(f"{effect} of size {hi:.3g} makes the system unstable")
+    size = float(brentq(lambda s: rms_change(s) - target, lo, hi, xtol=1e-15 * hi, rtol=1e-14, maxiter=200))
+    params = params_of(shape, size)
+    x_true, y_true = simulate_true(nom, effect, params, u, t, horizon)
+    change = y_true - y_nom
+    for bl in g.true_backlashes(nom, params, t, horizon):
+        if not _valid(bl, x_true):
+            raise _Redraw("true branches invalid on the true x range")
+    by = "size"
+    achieved = _rms(change[rec])
+    if abs(achieved - target) > ENR_RTOL * target:  # a jump in the change (quantiser, Coulomb sign)
+        sigma, by = achieved / level, "noise"
+    return params, size, change, sigma, by
+
+
+@dataclass(frozen=True)
+class _Generator:
+    """How one effect's true system is drawn and simulated: its stages (None: nominal) and,
+    for an effect scaled by size, its shape (drawn once: shape, s_start, s_max) and its
+    physical parameters at size s (s = 0: nominal)."""
+
+    shape: Callable[[_Context], tuple[dict[str, Any], float, float]] | None = None
+    params: Callable[[dict[str, Any], float], dict[str, Any]] | None = None
+    draw: Callable[[_Generator, _Context, str, float, float], _Drawn] = _draw_scaled
+    drive: Callable[[Array, dict[str, Any], Array, float], Array] | None = None
+    block: Callable[[list[float], list[float], dict[str, Any]], tuple[list[float], list[float]]] | None = None
+    linear: Callable[[list[float], list[float], Array, dict[str, Any]], Array] | None = None
+    branches: Callable[[_Nominal, dict[str, Any], Array, float], tuple[Any, Any, list[float], list[float]]] | None = None
+    output: Callable[[Array, Array, dict[str, Any], Array, float], Array] | None = None
+    backlashes: Callable[[_Nominal, dict[str, Any], Array, float], list[GeneralBacklash]] | None = None
+
+    def true_backlashes(self, nom: _Nominal, params: dict[str, Any], t: Array, horizon: float) -> list[GeneralBacklash]:
+        """The backlash(es) the true system passes through (both ends of a width drift)."""
+        if self.backlashes is not None:
+            return self.backlashes(nom, params, t, horizon)
+        c_l, c_r, m_l, m_r = self.branches(nom, params, t, horizon) if self.branches is not None else _nominal_branches(nom)
+        return [GeneralBacklash(c_l, c_r, m_l, m_r)]
+
+
+_NOMINAL = _Generator(draw=_draw_nothing)
+
+# The benchmark's truth, one generator per effect (the catalogue's and two outside it).
+_GENERATORS: dict[str, _Generator] = {
+    "dead_time": _Generator(draw=_draw_dead_time, drive=_dead_time_drive),
+    "saturation": _Generator(_shape_saturation, _params_saturation, drive=_saturation_drive),
+    "friction": _Generator(_shape_friction, _params_friction, linear=_friction_linear),
+    "width_drift": _Generator(
+        _shape_width_drift, _params_width_drift, branches=_width_drift_branches, backlashes=_width_drift_backlashes
+    ),
+    "output_offset": _Generator(_shape_output_offset, _params_output_offset, output=_offset_output),
+    "branch_degree": _Generator(_shape_branch_degree, _params_branch_degree, branches=_branch_degree_branches),
+    "linear_order": _Generator(_shape_linear_order, _params_linear_order, block=_lag_order_block),
+    "compliance": _Generator(_shape_compliance, _params_compliance, output=_compliance_output),
+    "quantization": _Generator(_shape_quantization, _params_quantization, output=_quantization_output),
+    "hysteresis_memory": _Generator(_shape_hysteresis_memory, _params_hysteresis_memory, output=_hysteresis_output),
+    "colored_noise": _Generator(draw=_draw_colored_noise),
+    "output_gain_drift": _Generator(_shape_gain_drift, _params_gain_drift, output=_output_gain_output),
+    "input_gain_drift": _Generator(_shape_gain_drift, _params_gain_drift, drive=_input_gain_drive),
 }
-
-
-def _true_backlashes(nom: _Nominal, effect: str, params: dict[str, Any], horizon: float, t: Array) -> list[GeneralBacklash]:
-    """The backlash(es) the true system passes through (both ends of a width drift)."""
-    if effect == "width_drift":
-        ends = [(nom.c_left + params["dc_L"] * tt / horizon, nom.c_right + params["dc_R"] * tt / horizon) for tt in (t[0], t[-1])]
-        if min(min(e) for e in ends) < 0.0:
-            raise _Redraw("a width drifts below zero")
-        return [GeneralBacklash(cl, cr, nom.m_left, nom.m_right) for cl, cr in ends]
-    if effect == "branch_degree":
-        n = int(params["degree"])
-        m_l = list(nom.m_left) + [0.0] * (n - 1 - len(nom.m_left)) + [params["m_L_extra"]]
-        m_r = list(nom.m_right) + [0.0] * (n - 1 - len(nom.m_right)) + [params["m_R_extra"]]
-        return [GeneralBacklash(nom.c_left, nom.c_right, m_l, m_r)]
-    return [GeneralBacklash(nom.c_left, nom.c_right, nom.m_left, nom.m_right)]
 
 
 def _draw(effect: str, level: float, rng: np.random.Generator, n_est: int, n_val: int, noise_ratio: float, preroll: int) -> dict[str, Any]:
@@ -540,63 +715,9 @@ def _draw(effect: str, level: float, rng: np.random.Generator, n_est: int, n_val
     if moving < MIN_MOVING:
         raise _Redraw(f"the backlash moves on {moving:.2f} of the samples only")
     sigma = noise_ratio * float(y_nom[rec].std())
-    ctx = _Context(rng, nom, u, t, horizon, rec, x_nom, y_nom)
-
-    params: dict[str, Any] = {}
-    size, by = 0.0, "size"
-    change = np.zeros(m)
-    if effect == "none":
-        pass
-    elif effect == "colored_noise":
-        # coloured part: AR(1) or lightly resonant AR(2) filtered white noise, scaled exactly
-        if rng.random() < 0.5:
-            den = [-float(rng.uniform(0.7, 0.95))]
-        else:
-            r, phi = rng.uniform(0.8, 0.95), rng.uniform(0.2, 1.2)
-            den = [-2.0 * r * np.cos(phi), r * r]
-        raw = _filter([1.0], den, rng.standard_normal(m))
-        size = level * sigma / _rms(raw[rec])
-        change = size * raw
-        params = {"ar": [float(v) for v in den], "scale": size}
-    elif effect == "dead_time":
-        d = int(rng.integers(1, 3))
-        params = {"d": d}
-        x_true, y_true = simulate_true(nom, effect, params, u, t, horizon)
-        change = y_true - y_nom
-        size, by = float(d), "noise"
-        sigma = _rms(change[rec]) / level
-        if not _valid(nominal.backlash, x_true):
-            raise _Redraw("branches invalid on the true x range")
-    else:
-        shape_of, params_of = _SCALED[effect]
-        shape, s0, s_max = shape_of(ctx)
-        target = level * sigma
-        cache: dict[float, tuple[Array, Array]] = {}
-
-        def rms_change(s: float) -> float:
-            if s not in cache:
-                with np.errstate(over="ignore", invalid="ignore"):
-                    cache[s] = simulate_true(nom, effect, params_of(shape, s), u, t, horizon)
-            value = _rms(cache[s][1][rec] - y_nom[rec])
-            return value if np.isfinite(value) else np.inf
-
-        lo, hi = 0.0, min(s0, s_max)
-        while rms_change(hi) < target:
-            if hi >= s_max or not np.isfinite(rms_change(hi)):
-                raise _Redraw(f"{effect} cannot reach ENR {level} within its size range")
-            lo, hi = hi, min(2.0 * hi, s_max)
-        if not np.isfinite(rms_change(hi)):
-            raise _Redraw(f"{effect} of size {hi:.3g} makes the system unstable")
-        size = float(brentq(lambda s: rms_change(s) - target, lo, hi, xtol=1e-15 * hi, rtol=1e-14, maxiter=200))
-        params = params_of(shape, size)
-        x_true, y_true = simulate_true(nom, effect, params, u, t, horizon)
-        change = y_true - y_nom
-        for bl in _true_backlashes(nom, effect, params, horizon, t):
-            if not _valid(bl, x_true):
-                raise _Redraw("true branches invalid on the true x range")
-        achieved = _rms(change[rec])
-        if abs(achieved - target) > ENR_RTOL * target:  # a jump in the change (quantiser, Coulomb sign)
-            sigma, by = achieved / level, "noise"
+    ctx = _Context(rng, nom, nominal, u, t, horizon, rec, x_nom, y_nom)
+    g = _GENERATORS.get(effect, _NOMINAL)
+    params, size, change, sigma, by = g.draw(g, ctx, effect, level, sigma)
     e = sigma * rng.standard_normal(m)
     y = y_nom + change + e
     enr = _rms(change[rec]) / sigma if effect != "none" else 0.0
@@ -616,10 +737,46 @@ def make_case(
     noise_ratio: float = 0.03,
     preroll: int = PREROLL,
 ) -> Case:
-    """One case: a random nominal cascade with ``effect`` withheld at ENR ``level`` (ignored for
-    "none"), reproducible from ``seed``. Draws that give no usable case (invalid branches, too
-    little motion, an effect that cannot reach the ENR) are redrawn from seeds derived from
-    ``seed``."""
+    """One benchmark case: a random nominal cascade with one effect withheld.
+
+    Draws that give no usable case (invalid branches, too little motion, an effect that
+    cannot reach the ENR) are redrawn from seeds derived from ``seed``.
+
+    Parameters
+    ----------
+    effect : str
+        "none" or a name from ``ALL_EFFECTS``.
+    level : float
+        Target effect-to-noise ratio (ignored for "none").
+    seed : int
+        The case is reproducible from it.
+    n_est : int, default 4000
+        Samples of the estimation record.
+    n_val : int, default 4000
+        Samples of the validation record.
+    noise_ratio : float, default 0.03
+        Noise std relative to std(y_nominal) when the size is scaled.
+    preroll : int, default 500
+        Samples simulated from rest and dropped before the estimation record.
+
+    Returns
+    -------
+    Case
+        The records the user sees and the truth behind them.
+
+    Raises
+    ------
+    DataError
+        If the effect is unknown, a number is out of range, or no usable case is found in
+        ``MAX_ATTEMPTS`` draws.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import make_case
+    >>> c = make_case("saturation", 3.0, 1, n_est=300, n_val=300, preroll=50)
+    >>> round(c.enr, 6), c.u_est.size
+    (3.0, 300)
+    """
     if effect not in ALL_EFFECTS:
         raise DataError(f"unknown effect {effect!r}: choose one of {', '.join(ALL_EFFECTS)}")
     if effect != "none" and not level > 0:
@@ -643,7 +800,7 @@ def make_case(
             effect=effect, level=level, seed=int(seed),
             u_est=d["u"][est], y_est=d["y"][est], u_val=d["u"][val], y_val=d["y"][val],
             na=len(nom.a), nb=len(nom.b), degree=len(nom.m_left), nominal=nom.model(),
-            effect_params=_json_safe(d["params"]), size=d["size"], noise_std=float(d["sigma"]),
+            effect_params=json_number(d["params"]), size=d["size"], noise_std=float(d["sigma"]),
             enr=float(d["enr"]), enr_scaled_by=d["by"],
             y_nominal_est=d["y_nom"][est], y_nominal_val=d["y_nom"][val],
             change_est=d["change"][est], change_val=d["change"][val], u_preroll=d["u"][:preroll],
@@ -652,26 +809,45 @@ def make_case(
     raise DataError(f"no usable {effect} case from seed {seed} in {MAX_ATTEMPTS} draws (last: {reasons[-1]})")
 
 
-def _json_safe(params: dict[str, Any]) -> dict[str, Any]:
-    def conv(v: Any) -> Any:
-        if isinstance(v, (list, tuple, np.ndarray)):
-            return [conv(w) for w in v]
-        if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
-            return int(v)
-        return float(v)
-
-    return {k: conv(v) for k, v in params.items()}
-
-
 def case_specs(
     levels: Sequence[float] = (3.0, 1.0),
     per_effect: int = 5,
     seed: int = 0,
     effects: Sequence[str] | None = None,
 ) -> list[CaseSpec]:
-    """The benchmark's cases: ``per_effect`` per effect and level (catalogue and out of
-    catalogue), and ``per_effect * len(levels)`` "none" cases. A case's seed depends only on
-    (seed, effect, level, index), so a subset of effects or levels gives the same cases."""
+    """The benchmark's cases: which effect, level and seed each has.
+
+    ``per_effect`` cases per effect and level (catalogue and out of catalogue), and
+    ``per_effect * len(levels)`` "none" cases. A case's seed depends only on (seed, effect,
+    level, index), so a subset of effects or levels gives the same cases.
+
+    Parameters
+    ----------
+    levels : sequence of float, default (3.0, 1.0)
+        The effect-to-noise ratios.
+    per_effect : int, default 5
+        Cases per effect and level.
+    seed : int, default 0
+        Seed of the whole set.
+    effects : sequence of str, optional
+        The effects (default: ``ALL_EFFECTS``).
+
+    Returns
+    -------
+    list of CaseSpec
+        ``make_case(spec.effect, spec.level, spec.seed)`` builds each.
+
+    Raises
+    ------
+    DataError
+        If an effect is unknown or ``per_effect`` < 1.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import case_specs
+    >>> [s.effect for s in case_specs(levels=(1.0,), per_effect=1, effects=["none", "friction"])]
+    ['none', 'friction']
+    """
     chosen = ALL_EFFECTS if effects is None else tuple(effects)
     for e in chosen:
         if e not in ALL_EFFECTS:
@@ -700,6 +876,32 @@ def cases(
     effects: Sequence[str] | None = None,
     **kwargs: Any,
 ) -> Iterator[Case]:
-    """The cases of :func:`case_specs`, built one at a time (``kwargs`` go to :func:`make_case`)."""
+    """The cases of :func:`case_specs`, built one at a time.
+
+    Parameters
+    ----------
+    levels : sequence of float, default (3.0, 1.0)
+        Effect-to-noise ratios, as for :func:`case_specs`.
+    per_effect : int, default 5
+        How many cases of each effect at each level.
+    seed : int, default 0
+        The seed all the cases derive from.
+    effects : sequence of str, optional
+        Which effects (default: all of ``ALL_EFFECTS``).
+    **kwargs
+        Passed to :func:`make_case` (record lengths, noise ratio, pre-roll).
+
+    Yields
+    ------
+    Case
+        One case after the other.
+
+    Examples
+    --------
+    >>> from backlashid.benchmarks import cases
+    >>> c = next(cases(levels=(2.0,), per_effect=1, effects=["dead_time"], n_est=300, n_val=300, preroll=50))
+    >>> c.effect, c.enr_scaled_by
+    ('dead_time', 'noise')
+    """
     for spec in case_specs(levels, per_effect, seed, effects):
         yield make_case(spec.effect, spec.level, spec.seed, **kwargs)

@@ -9,16 +9,20 @@ a :class:`DiagnosisReport`.
 from __future__ import annotations
 
 from ._diagnose import default_warmup, diagnose, estimated_start, held_state
-from ._report import Candidate, DiagnosisReport
-from .effects import EFFECTS, fit_effect
+from ._report import Candidate, DiagnosisDetails, DiagnosisReport
+from .effects import EFFECTS, REGISTRY, Effect, fit_effect, screen
 
 __all__ = [
     "Candidate",
+    "DiagnosisDetails",
     "DiagnosisReport",
     "EFFECTS",
+    "Effect",
+    "REGISTRY",
     "default_warmup",
     "diagnose",
     "estimated_start",
     "fit_effect",
     "held_state",
+    "screen",
 ]

@@ -48,17 +48,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize, stats
 
-from .._validation import as_signal
+from .._validation import check_signals
 from ..errors import DataError, ModelError
 from ..models import CascadeModel, CascadeState, LinearBlock
-from ._report import Candidate, DiagnosisReport
-from .analyses._drift import time_analysis
-from .analyses._regimes import regime_shares
-from .analyses._residual_tests import residual_tests
-from .analyses._spectral import frequency_analysis
-from .effects._catalogue import EFFECTS, MAX_DELAY, AugmentedModel, fit_effect, held_x, screen
+from ._report import Candidate, DiagnosisDetails, DiagnosisReport
+from .analyses import frequency_analysis, regime_shares, residual_tests, time_analysis
+from .effects import EFFECTS, AugmentedModel, fit_effect, screen
+from .effects._base import held_x
+from .effects._dead_time import MAX_DELAY
 
-__all__ = ["diagnose", "DiagnosisReport", "Candidate", "ALPHA", "CLOSE_ENOUGH", "estimated_start", "held_state"]
+__all__ = ["diagnose", "ALPHA", "CLOSE_ENOUGH", "default_warmup", "estimated_start", "held_state"]
 
 ALPHA = 0.01  # family-wise significance level of "the validation error improved"
 CLOSE_ENOUGH = 0.5  # a candidate must close at least this fraction of the gap
@@ -77,25 +76,36 @@ Array = NDArray[np.float64]
 def _record(pair: Any, name: str) -> tuple[Array, Array]:
     if not isinstance(pair, (tuple, list)) or len(pair) != 2:
         raise DataError(f"{name} must be a pair (u, y) of 1-D signals, e.g. {name}=(u, y)")
-    u = as_signal(pair[0], f"{name}[0] (u)").ravel()
-    y = as_signal(pair[1], f"{name}[1] (y)").ravel()
-    if u.shape != y.shape:
-        raise DataError(f"{name}: u has {u.size} samples and y {y.size}: give the input and output of one record")
-    for what, s in (("u", u), ("y", y)):
-        bad = np.flatnonzero(~np.isfinite(s))
-        if bad.size:
-            raise DataError(
-                f"{name}: {what} holds {bad.size} non-finite values (first at sample {bad[0]}): "
-                "remove or interpolate NaN/inf samples before diagnosing"
-            )
+    u, y = check_signals((f"{name}[0] (u)", pair[0]), (f"{name}[1] (y)", pair[1]))
     return u, y
 
 
 def default_warmup(model: CascadeModel, n: int) -> int:
-    """Samples until the slowest pole's transient decays to 1e-4 (plus the block's memory and
-    the longest dead time searched), at least 20, at most n // 5."""
+    """The default warm-up of a record: samples until the model forgets its start.
+
+    The slowest pole's transient decays to 1e-4, plus the block's memory and the longest dead
+    time searched; at least 20, at most n // 5.
+
+    Parameters
+    ----------
+    model : CascadeModel
+        The nominal cascade.
+    n : int
+        Samples of the shorter record.
+
+    Returns
+    -------
+    int
+        The warm-up in samples.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> from backlashid.diagnosis import default_warmup
+    >>> default_warmup(bid.example1(), 100)
+    20
+    """
     rho = model.linear.spectral_radius()
-    rho = rho() if callable(rho) else rho
     settle = math.ceil(math.log(1e-4) / math.log(rho)) if 0.0 < rho < 1.0 else 0
     w = settle + model.linear.na + model.linear.nb + MAX_DELAY
     return int(min(max(w, 20), n // 5))
@@ -116,20 +126,81 @@ MEMORY_GRID = 33  # backlash memories tried before the 1-D refinement
 
 
 def held_state(model: CascadeModel, u0: float, y_prev: float) -> CascadeState:
-    """The cascade after the input was held at u0: the linear block (16) at its equilibrium
-    x = sum a / (1 + sum b) u0, and the backlash memory y_prev."""
+    """The cascade after the input was held at u0.
+
+    The linear block (16) at its equilibrium x = sum a / (1 + sum b) u0, and the backlash
+    memory y_prev.
+
+    Parameters
+    ----------
+    model : CascadeModel
+        The cascade.
+    u0 : float
+        The input held before the record.
+    y_prev : float
+        The backlash memory y(0).
+
+    Returns
+    -------
+    CascadeState
+        The state to start a simulation from.
+
+    Raises
+    ------
+    ModelError
+        If the linear block has a pole at z = 1 (no equilibrium).
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> from backlashid.diagnosis import held_state
+    >>> held_state(bid.example1(), 0.0, 0.5).y_prev
+    0.5
+    """
     x_eq = held_x(model.linear, float(u0))
     return CascadeState(u_past=(float(u0),) * model.linear.na, x_past=(x_eq,) * model.linear.nb, y_prev=float(y_prev))
 
 
 def estimated_start(simulate: Any, u: Array, y: Array, memory_range: tuple[float, float]) -> tuple[Array, float]:
-    """Output of ``simulate(u, y_prev, held=True)`` with the backlash memory y_prev that best fits
-    the record: a grid over the output's range, then a bounded 1-D search around the best point.
-    Returns (output, y_prev). The memory acts only until the backlash first moves, which may be
-    long after the warm-up, so it is fitted on the whole record (one parameter for every model
-    alike, as initial conditions are estimated for validation in common practice); fitted on
-    the warm-up alone, its error persists over a long hold and the paired test would read the
-    differences between models' memories as significant."""
+    """A simulation of the record from the backlash memory y(0) that best fits it.
+
+    ``simulate(u, y_prev, True)`` is tried on a grid over the output's range, then a bounded
+    1-D search around the best point. The memory acts only until the backlash first moves,
+    which may be long after the warm-up, so it is fitted on the whole record (one parameter for
+    every model alike, as initial conditions are estimated for validation in common practice);
+    fitted on the warm-up alone, its error persists over a long hold and the paired test would
+    read the differences between models' memories as significant.
+
+    Parameters
+    ----------
+    simulate : callable
+        ``simulate(u, y_prev, held)`` -> output of the record.
+    u : ndarray
+        Input of the record.
+    y : ndarray
+        Measured output of the record.
+    memory_range : tuple of float
+        (lo, hi), the range of memories searched.
+
+    Returns
+    -------
+    output : ndarray
+        The simulation from the best memory.
+    y_prev : float
+        That memory.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.diagnosis import estimated_start, held_state
+    >>> m = bid.example1()
+    >>> u = np.r_[np.zeros(50), np.sin(0.05 * np.arange(150))]
+    >>> def sim(u, y0, held):
+    ...     return m.simulate(u, initial_state=held_state(m, u[0], y0))
+    >>> _, y0 = estimated_start(sim, u, sim(u, 0.3, True), (-1.0, 1.0))
+    >>> round(y0, 6)
+    0.3
+    """
 
     def cost(y0: float) -> float:
         r = y - simulate(u, y0, True)
@@ -258,18 +329,62 @@ def diagnose(
     initial_state: str = "estimate",
     seed: int = 0,
 ) -> DiagnosisReport:
-    """Which effect beyond the nominal cascade ``model`` explains its validation error?
+    """Which effect beyond the nominal cascade explains its validation error?
 
-    ``estimation`` = (u_est, y_est) is the record the effects are refitted on (typically the one
-    the nominal model was fitted on); ``validation`` = (u_val, y_val) directly follows it in
-    time and is where they are scored. ``noise_std``: the measurement noise std if known (else
-    estimated, see the module docstring). ``warmup``: samples at the start of each record left
-    out of every criterion (default from the slowest pole, :func:`default_warmup`).
-    ``initial_state``: how every model (nominal and augmented) starts the validation record.
-    "estimate" (default): the linear block at its equilibrium with u_val[0] and the backlash
-    memory y(0) that best fits the record (one parameter, for every model alike), so a record
-    that starts with the device holding a force (a memory the warm-up cannot flush) is not read
-    as model error; "rest": from zero, as the paper assumes."""
+    Every candidate effect is screened and refitted together with the nominal parameters on
+    the estimation record, then scored on the validation record (see the module doc for the
+    decision rule).
+
+    Parameters
+    ----------
+    model : CascadeModel
+        The nominal cascade, e.g. ``fit_cascade(...).model``.
+    estimation : tuple of array_like
+        (u_est, y_est), the record the effects are refitted on (typically the one the nominal
+        model was fitted on).
+    validation : tuple of array_like
+        (u_val, y_val), the record that directly follows it in time, where they are scored.
+    candidates : sequence of str, optional
+        The effects to try (default: every one of ``EFFECTS``).
+    noise_std : float, optional
+        The measurement noise standard deviation if known (else estimated, see the module
+        doc).
+    warmup : int, optional
+        Samples at the start of each record left out of every criterion (default from the
+        slowest pole, :func:`default_warmup`).
+    initial_state : {"estimate", "rest"}, default "estimate"
+        How every model (nominal and augmented) starts the validation record. "estimate": the
+        linear block at its equilibrium with u_val[0] and the backlash memory y(0) that best
+        fits the record (one parameter, for every model alike), so a record that starts with
+        the device holding a force is not read as model error; "rest": from zero, as the paper
+        assumes.
+    seed : int, default 0
+        Passed to :func:`fit_effect` (no random starts are used).
+
+    Returns
+    -------
+    DiagnosisReport
+        The verdict, the ranked candidates and where the nominal model's error lies.
+
+    Raises
+    ------
+    DataError
+        If a record is unusable (not a pair, lengths, NaN, too short), a candidate is unknown,
+        or an option is out of range.
+    ModelError
+        If ``model`` is not a CascadeModel.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> m = bid.example1()
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.uniform(-1.5, 1.5, 1200)
+    >>> y = m.simulate(np.r_[0.0, 0.0, u[:-2]]) + 0.02 * rng.standard_normal(1200)
+    >>> report = bid.diagnose(m, (u[:600], y[:600]), (u[600:], y[600:]), candidates=["dead_time", "output_offset"])
+    >>> report.best_effect, report.best.params["d"]
+    ('dead_time', 2)
+    """
     start = time.perf_counter()
     if not isinstance(model, CascadeModel):
         raise ModelError(
@@ -444,8 +559,8 @@ def diagnose(
 
     noise = math.sqrt(floor)
     residual_full = y_v - ynom_v
-    details = dict(
-        screening=screening,
+    details = DiagnosisDetails(
+        screening=tuple(screening),
         black_box_p_value=p_black_box,
         input_p_value=p_input,
         modulation_p_value=p_modulation,
@@ -456,13 +571,13 @@ def diagnose(
             else "estimated: lowest validation MSE of a cross-validated black-box residual model and the refitted candidates"
         ),
         warmup_rule="given" if warmup_given else "slowest pole's transient to 1e-4 plus the block memory and dead-time search",
-        screened_order=order,
+        screened_order=tuple(order),
         initial_state=(
             f"estimated: linear block at equilibrium with u_val[0], backlash memory y(0) = {y0_nominal:.6g} fitted on the record"
             if estimate_state
             else "from rest"
         ),
-        colored_noise_ruled_out=ruled_out,
+        colored_noise_ruled_out=tuple(ruled_out),
         closing_not_named=not_named,
     )
     x_v = model.linear.simulate(u_v)

@@ -13,45 +13,18 @@ noise model), over the samples after the warm-up.
 from __future__ import annotations
 
 import math
-import textwrap
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .analyses._drift import TimeAnalysis
-from .analyses._regimes import RegimeShares
-from .analyses._residual_tests import ResidualTests
-from .analyses._spectral import FrequencyAnalysis
+from .._json import jsonable
+from .analyses import FrequencyAnalysis, RegimeShares, ResidualTests, TimeAnalysis
+from .effects import Screening
 
-__all__ = ["Candidate", "DiagnosisReport", "jsonable"]
-
-MAX_LIST = 64  # arrays longer than this are left out of to_dict()
+__all__ = ["Candidate", "DiagnosisDetails", "DiagnosisReport"]
 CLOSES_HALF = 0.5  # a candidate "explains" the gap when it closes at least this share
-
-
-def jsonable(value: Any) -> Any:
-    """``value`` with numpy types turned into Python ones, NaN and inf into None, and arrays
-    longer than ``MAX_LIST`` left out (None), so that ``json.dumps`` works."""
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist()) if value.size <= MAX_LIST else None
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        f = float(value)
-        return f if math.isfinite(f) else None
-    if value is None or isinstance(value, str):
-        return value
-    if hasattr(value, "to_dict"):
-        return jsonable(value.to_dict())
-    return str(value)
 
 
 def _model_dict(model: Any) -> Any:
@@ -78,18 +51,52 @@ def _p(v: float) -> str:
 @dataclass(frozen=True)
 class Candidate:
     """One candidate effect: the nominal model augmented by it, refitted on the estimation
-    record and scored on the validation record."""
+    record and scored on the validation record.
 
-    effect: str  # a name from EFFECTS
-    gap_closed: float  # fraction of the validation gap above the noise floor removed
-    p_value: float  # significance of the validation improvement over the nominal model
-    model: Any  # refitted augmented model: .simulate(u) -> ndarray y, .to_dict() JSON-safe
-    params: dict[str, float]  # the effect's own fitted parameters
-    n_extra: int  # number of extra parameters over the nominal
-    estimation_rmse: float  # free-run simulation RMSE (one-step prediction RMSE for colored_noise)
-    validation_rmse: float  # the same on validation data
-    criterion: float  # information criterion used in the ranking (lower is better)
-    signature_removed: bool  # the residual signature the effect predicts is gone after augmentation
+    Attributes
+    ----------
+    effect : str
+        A name from ``EFFECTS``.
+    gap_closed : float
+        Fraction of the validation gap above the noise floor removed.
+    p_value : float
+        Significance of the validation improvement over the nominal model.
+    model : AugmentedModel or object
+        The refitted augmented model: ``.simulate(u)`` gives y, ``.to_dict()`` is JSON-safe.
+    params : dict of str to float
+        The effect's own fitted parameters.
+    n_extra : int
+        Number of extra parameters over the nominal model.
+    estimation_rmse : float
+        Free-run simulation RMSE on the estimation record (one-step prediction RMSE for
+        colored_noise).
+    validation_rmse : float
+        The same on the validation record.
+    criterion : float
+        Information criterion used in the ranking (lower is better).
+    signature_removed : bool
+        The residual signature the effect predicts is gone after augmentation.
+
+    Examples
+    --------
+    >>> from backlashid.diagnosis import Candidate
+    >>> c = Candidate("dead_time", 0.9, 1e-9, None, {"d": 2}, 1, 0.05, 0.05, -100.0, True)
+    >>> c.explains
+    True
+    """
+
+    CLOSES_HALF: ClassVar[float] = CLOSES_HALF
+
+    effect: str
+    gap_closed: float
+    p_value: float
+    model: Any
+    params: dict[str, float]
+    n_extra: int
+    estimation_rmse: float
+    validation_rmse: float
+    criterion: float
+    signature_removed: bool
 
     @property
     def explains(self) -> bool:
@@ -97,6 +104,13 @@ class Candidate:
         return bool(self.gap_closed >= CLOSES_HALF and self.p_value < 0.05)
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe description, the refitted model included.
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         out: dict[str, Any] = jsonable(
             {
                 "effect": self.effect,
@@ -114,28 +128,136 @@ class Candidate:
         return out
 
 
-@dataclass
-class DiagnosisReport:
-    """What ``diagnose`` found: the best effect, the ranked candidates, and where the nominal
-    model's validation error lies."""
+@dataclass(frozen=True)
+class DiagnosisDetails:
+    """The diagnoser's intermediate numbers and reasons behind the verdict.
 
-    best_effect: str  # a name from EFFECTS, "none" or "unexplained"
+    Attributes
+    ----------
+    screening : tuple of Screening
+        The score tests of the candidates, most significant first.
+    black_box_p_value : float
+        p-value of the black-box residual model's (with the residual's past) improvement.
+    input_p_value : float
+        p-value of the black-box model of input features alone (does the residual depend on
+        the input?).
+    modulation_p_value : float
+        p-value of the residual being a slowly modulated copy of the output.
+    significance_level : float
+        The Bonferroni-corrected level the candidates were judged at.
+    noise_floor : str
+        Where the noise floor came from.
+    warmup_rule : str
+        Where the warm-up came from.
+    screened_order : tuple of str
+        The candidates in screening order.
+    initial_state : str
+        How every model started the validation record.
+    colored_noise_ruled_out : tuple of str
+        Why colored_noise was not named.
+    closing_not_named : dict of str to str
+        Candidates that close half the gap yet were not named, and why.
+
+    Examples
+    --------
+    >>> from backlashid.diagnosis import DiagnosisDetails
+    >>> DiagnosisDetails(closing_not_named={"friction": "dead_time has the lower BIC"}).to_dict()["closing_not_named"]
+    {'friction': 'dead_time has the lower BIC'}
+    """
+
+    screening: tuple[Screening, ...] = ()
+    black_box_p_value: float = float("nan")
+    input_p_value: float = float("nan")
+    modulation_p_value: float = float("nan")
+    significance_level: float = float("nan")
+    noise_floor: str = ""
+    warmup_rule: str = ""
+    screened_order: tuple[str, ...] = ()
+    initial_state: str = ""
+    colored_noise_ruled_out: tuple[str, ...] = ()
+    closing_not_named: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (the screenings as dicts).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
+        out: dict[str, Any] = jsonable({k: getattr(self, k) for k in self.__dataclass_fields__})
+        return out
+
+
+@dataclass(frozen=True)
+class DiagnosisReport:
+    """What :func:`diagnose` found: the best effect, the ranked candidates, and where the
+    nominal model's validation error lies.
+
+    Attributes
+    ----------
+    best_effect : str
+        A name from ``EFFECTS``, "none" or "unexplained".
+    ranking : list of Candidate
+        The refitted candidates, best first.
+    regimes : RegimeShares
+        The validation error's share per backlash regime.
+    tests : ResidualTests
+        Correlation tests of the nominal model's validation residual.
+    spectrum : FrequencyAnalysis
+        The residual's spectrum against the noise floor.
+    drift : TimeAnalysis
+        The residual's trends and change points.
+    noise_std : float
+        The noise standard deviation (given or estimated).
+    noise_std_estimated : bool
+        Whether ``noise_std`` was estimated.
+    nominal_validation_rmse : float
+        Free-run simulation RMSE of the nominal model on the validation record.
+    gap : float
+        Nominal validation MSE above the noise floor (>= 0).
+    warmup : int
+        Samples at the start of each record left out.
+    u_val : ndarray
+        Validation input.
+    y_val : ndarray
+        Validation output.
+    y_nominal : ndarray
+        Nominal simulation of the validation record.
+    y_best : ndarray
+        The best candidate's output (the nominal one without a best candidate).
+    elapsed : float
+        Seconds the diagnosis took.
+    details : DiagnosisDetails or None
+        The diagnoser's intermediate numbers (None for a report built by hand).
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.diagnosis import DiagnosisReport
+    >>> z = np.zeros(3)
+    >>> r = DiagnosisReport("none", [], None, None, None, None, 0.1, True, 0.1, 0.0, 0, z, z, z, z, 0.5)
+    >>> r.verdict()
+    'none: no gap beyond the noise (nominal RMSE 0.1, noise std 0.1)'
+    """
+
+    best_effect: str
     ranking: list[Candidate]
-    regimes: RegimeShares  # regimes.py
-    tests: ResidualTests  # residual_tests.py, on the nominal model's validation residual
-    spectrum: FrequencyAnalysis  # spectral.py
-    drift: TimeAnalysis  # drift.py
+    regimes: RegimeShares
+    tests: ResidualTests
+    spectrum: FrequencyAnalysis
+    drift: TimeAnalysis
     noise_std: float
     noise_std_estimated: bool
     nominal_validation_rmse: float
-    gap: float  # nominal validation MSE above the noise floor (>= 0)
+    gap: float
     warmup: int
     u_val: NDArray[np.float64]
     y_val: NDArray[np.float64]
     y_nominal: NDArray[np.float64]
     y_best: NDArray[np.float64]
-    elapsed: float  # seconds
-    details: dict[str, Any] = field(default_factory=dict)  # the diagnoser's extra numbers (in to_dict)
+    elapsed: float
+    details: DiagnosisDetails | None = None
 
     # ------------------------------------------------------------------ derived
     @property
@@ -148,6 +270,7 @@ class DiagnosisReport:
 
     @property
     def n_validation(self) -> int:
+        """Number of validation samples."""
         return int(np.asarray(self.y_val).size)
 
     @property
@@ -157,7 +280,15 @@ class DiagnosisReport:
         return float(self.gap) / var if var > 0 else float("nan")
 
     # ------------------------------------------------------------------ text
-    def _verdict(self) -> str:
+    def verdict(self) -> str:
+        """The verdict in one line: the effect named and how much of the gap it closes, or why
+        none is named.
+
+        Returns
+        -------
+        str
+            The verdict.
+        """
         best = self.best
         if self.best_effect == "none":
             return (
@@ -170,7 +301,7 @@ class DiagnosisReport:
             top = next((c for c in self.ranking if c.effect != "colored_noise"), None)
             tail = f"; the best, {top.effect}, closes {_pct(top.gap_closed).strip()}" if top else ""
             # candidates that close half the gap, yet a rule keeps from being named, and why
-            held = self.details.get("closing_not_named") or {}
+            held = self.details.closing_not_named if self.details is not None else {}
             if top and top.effect in held:
                 tail += f", but {held[top.effect]}"
             for c in self.ranking:
@@ -188,7 +319,7 @@ class DiagnosisReport:
 
     def _not_noise(self) -> str:
         """Why the residual is not noise, as the diagnoser recorded it in ``details``."""
-        reasons = self.details.get("colored_noise_ruled_out") or []
+        reasons = self.details.colored_noise_ruled_out if self.details is not None else ()
         return ": " + " and ".join(reasons) if reasons else ""
 
     def _where(self) -> list[str]:
@@ -244,7 +375,7 @@ class DiagnosisReport:
         lines = [
             f"Diagnosis of the nominal model: {self.n_validation} validation samples, warm-up {self.warmup} "
             f"excluded, {self.elapsed:.2f} s",
-            f"Verdict: {self._verdict()}",
+            f"Verdict: {self.verdict()}",
             f"Nominal free-run simulation RMSE {self.nominal_validation_rmse:.4g}; noise std {self.noise_std:.4g} ({src}); "
             f"gap above the noise floor (MSE) {self.gap:.3g}"
             + (f" = {self.gap_ratio:.2f} x noise variance" if math.isfinite(self.gap_ratio) else ""),
@@ -291,183 +422,37 @@ class DiagnosisReport:
                 "regimes": self.regimes.to_dict() if self.regimes is not None else None,
                 "spectrum": self.spectrum.to_dict() if self.spectrum is not None else None,
                 "drift": self.drift.to_dict() if self.drift is not None else None,
-                "details": self.details,
+                "details": self.details.to_dict() if self.details is not None else {},
             }
         )
         return out
 
     # ------------------------------------------------------------------ figure
     def plot(self, path: Any = None, **kw: Any) -> Any:
-        """The dashboard figure: measured vs nominal simulation, the error coloured by regime,
-        error share by regime, residual correlation tests, gap closed by candidate, and the
-        nominal against the best augmented simulation where the error is largest. Returns the
-        Figure; with ``path``, saves it (PNG by the file's extension) through the Agg backend.
-        Keywords: ``figsize`` (13, 15), ``window`` (samples in the before/after panel, 300),
-        ``dpi`` (110)."""
-        figsize = kw.pop("figsize", (13, 15))
-        window = int(kw.pop("window", 300))
-        dpi = kw.pop("dpi", 110)
-        if kw:
-            raise TypeError(f"unexpected keyword(s) {', '.join(sorted(kw))}: use figsize, window, dpi")
-        if path is not None:
-            try:
-                from matplotlib.backends.backend_agg import FigureCanvasAgg
-                from matplotlib.figure import Figure
-            except ImportError:
-                from .._optional import pyplot
+        """The dashboard figure (drawn by :func:`backlashid.app.plot_diagnosis`).
 
-                pyplot()  # raises the library's message
-                raise
-            fig = Figure(figsize=figsize, dpi=dpi)
-            FigureCanvasAgg(fig)
-        else:
-            from .._optional import pyplot
+        Measured vs nominal simulation, the error coloured by regime, error share by regime,
+        residual correlation tests, gap closed by candidate, and the nominal against the best
+        augmented simulation where the error is largest.
 
-            fig = pyplot().figure(figsize=figsize, dpi=dpi)
-        gs = fig.add_gridspec(
-            4, 2, height_ratios=[1.1, 1.0, 1.0, 1.0], hspace=0.45, wspace=0.22, top=0.94, bottom=0.04, left=0.16, right=0.98
-        )
-        self._plot_signals(fig.add_subplot(gs[0, :]))
-        self._plot_error(fig.add_subplot(gs[1, :]))
-        self._plot_regimes(fig.add_subplot(gs[2, 0]))
-        self._plot_tests(fig.add_subplot(gs[2, 1]))
-        self._plot_ranking(fig.add_subplot(gs[3, 0]))
-        self._plot_before_after(fig.add_subplot(gs[3, 1]), window)
-        fig.suptitle(textwrap.fill(f"Diagnosis: {self._verdict()}", width=150), fontsize=10)
-        if path is not None:
-            fig.savefig(path, dpi=dpi)
-        return fig
+        Parameters
+        ----------
+        path : str or path-like, optional
+            Where to save it (PNG by the file's extension), through the Agg backend.
+        **kw
+            ``figsize`` (default (13, 15)), ``window`` (samples in the before/after panel,
+            default 300), ``dpi`` (default 110).
 
-    def _shade_warmup(self, ax: Any) -> None:
-        if self.warmup > 0:
-            ax.axvspan(-0.5, self.warmup - 0.5, color="0.9", lw=0, label=f"warm-up ({self.warmup})", zorder=0)
+        Returns
+        -------
+        matplotlib.figure.Figure
+            The figure.
 
-    def _plot_signals(self, ax: Any) -> None:
-        t = np.arange(self.n_validation)
-        self._shade_warmup(ax)
-        ax.plot(t, self.y_nominal, color="C0", lw=0.9, label="nominal simulation")
-        ax.plot(t, self.y_val, color="k", lw=0.5, alpha=0.6, label="measured")
-        ax.set_title(f"Validation record: measured vs nominal free-run simulation (RMSE {self.nominal_validation_rmse:.4g})")
-        ax.set_xlabel("sample")
-        ax.set_ylabel("y")
-        ax.legend(loc="upper right", fontsize="small", ncol=3)
-        ax.grid(alpha=0.3)
+        Raises
+        ------
+        TypeError
+            If an unknown keyword is given.
+        """
+        from ..app import plot_diagnosis
 
-    def _plot_error(self, ax: Any) -> None:
-        err = np.asarray(self.y_val) - np.asarray(self.y_nominal)
-        t = np.arange(err.size)
-        self._shade_warmup(ax)
-        if self.regimes is not None and self.regimes.masks["dead_band"].size == err.size:
-            labels = self.regimes.labels()
-            styles = ((-1, "0.75", None), (0, "0.35", "dead band"), (1, "C0", "left branch"), (2, "C3", "right branch"))
-            for value, color, name in styles:
-                sel = labels == value
-                if sel.any():
-                    ax.scatter(t[sel], err[sel], s=3, lw=0, color=color, label=name)
-        else:
-            ax.scatter(t, err, s=3, lw=0, color="0.35", label="error")
-        for sign in (-2.0, 2.0):
-            ax.axhline(sign * self.noise_std, color="k", ls="--", lw=0.8)
-        after = err[self.warmup :]
-        if after.size and np.ptp(after) > 0:  # scale to the evaluated samples, not the transient
-            pad = 0.08 * float(np.ptp(after))
-            ax.set_ylim(min(float(after.min()), -2 * self.noise_std) - pad, max(float(after.max()), 2 * self.noise_std) + pad)
-        ax.set_title("Nominal model's error (measured - simulated) by backlash state; dashed: +-2 noise std")
-        ax.set_xlabel("sample")
-        ax.set_ylabel("error")
-        ax.legend(loc="upper right", fontsize="small", ncol=4, markerscale=3)
-        ax.grid(alpha=0.3)
-
-    def _plot_regimes(self, ax: Any) -> None:
-        if self.regimes is None:
-            ax.set_axis_off()
-            return
-        names = [r.name for r in self.regimes.regimes]
-        pos = np.arange(len(names))
-        samples = [100 * r.sample_share for r in self.regimes.regimes]
-        energy = [100 * r.energy_share for r in self.regimes.regimes]
-        ax.bar(pos - 0.2, samples, 0.4, color="0.7", label="share of samples")
-        ax.bar(pos + 0.2, energy, 0.4, color="C1", label="share of error energy")
-        for i, r in enumerate(self.regimes.regimes):
-            if r.significant:
-                mark = "*" if r.excess else "(-)"
-                ax.text(i + 0.2, energy[i] + 1.5, mark, ha="center", fontsize=11 if r.excess else 8)
-        ax.set_xticks(pos)
-        ax.set_xticklabels([n.replace("_", "\n") for n in names], fontsize=8)
-        ax.set_ylabel("%")
-        ax.set_title("Error share by regime (* significantly more error)")
-        ax.legend(fontsize="small")
-        ax.grid(alpha=0.3, axis="y")
-
-    def _plot_tests(self, ax: Any) -> None:
-        if self.tests is None:
-            ax.set_axis_off()
-            return
-        shown = [name for name in ("acf", "ccf_u", "ccf_x") if name in self.tests]
-        width = 0.8 / max(len(shown), 1)
-        for i, name in enumerate(shown):
-            t = self.tests[name]
-            offset = (i - (len(shown) - 1) / 2) * width
-            label = f"{name} (p {t.p_adjusted:.1e}{'' if t.passed else ', FAIL'})"
-            ax.bar(t.lags + offset, t.values, width, color=f"C{i}", label=label)
-        bound = self.tests.tests[0].bound
-        ax.axhspan(-bound, bound, color="0.85", zorder=0, label=f"95 % bounds +-{bound:.3f}")
-        ax.axhline(0.0, color="k", lw=0.5)
-        failed = ", ".join(self.tests.failed) or "none"
-        ax.set_title(f"Residual correlations (failed tests: {failed})", fontsize=10)
-        ax.set_xlabel("lag k")
-        ax.set_ylabel("normalised correlation")
-        ax.legend(fontsize="x-small")
-        ax.grid(alpha=0.3)
-
-    def _plot_ranking(self, ax: Any) -> None:
-        if not self.ranking:
-            ax.text(0.5, 0.5, "no candidates", ha="center", va="center", transform=ax.transAxes)
-            ax.set_axis_off()
-            return
-        ranked = self.ranking[:12]
-        pos = np.arange(len(ranked))
-        raw = np.array([c.gap_closed if math.isfinite(c.gap_closed) else 0.0 for c in ranked])
-        lo, hi = -0.25, 1.1  # a tiny gap gives huge shares either way: show them clipped
-        closed = np.clip(raw, lo, hi)
-        colors = ["C2" if c.explains else ("C1" if c.p_value < 0.05 else "0.65") for c in ranked]
-        ax.barh(pos, closed, color=colors)
-        ax.set_yticks(pos)
-        ax.set_yticklabels([f"{c.effect}{'' if c.signature_removed else ' (sig. remains)'}" for c in ranked], fontsize=7)
-        ax.invert_yaxis()
-        ax.axvline(CLOSES_HALF, color="k", ls="--", lw=0.8)
-        ax.axvline(1.0, color="k", lw=0.8)
-        ax.set_xlim(min(0.0, float(closed.min()) - 0.05), max(1.05, float(closed.max()) + 0.05))
-        clipped = " (clipped)" if np.any(closed != raw) else ""
-        ax.set_xlabel(f"share of the gap closed on validation{clipped} (green: >= half and p < 0.05)")
-        ax.set_title("Candidates, best first")
-        ax.grid(alpha=0.3, axis="x")
-
-    def _plot_before_after(self, ax: Any, window: int) -> None:
-        y = np.asarray(self.y_val)
-        nominal = np.asarray(self.y_nominal)
-        n = y.size
-        w = int(np.clip(window, 10, max(n - self.warmup, 10)))
-        err2 = (y - nominal) ** 2
-        err2[: self.warmup] = 0.0
-        if n - self.warmup > w:
-            energy = np.convolve(err2, np.ones(w), mode="valid")
-            start = int(np.argmax(energy[self.warmup :]) + self.warmup)
-        else:
-            start = self.warmup
-        sl = slice(start, min(start + w, n))
-        t = np.arange(n)[sl]
-        ax.plot(t, y[sl], color="0.45", lw=1.0, label="measured")
-        ax.plot(t, nominal[sl], color="C0", lw=1.0, label="nominal")
-        if self.best is not None and self.y_best is not None and np.asarray(self.y_best).size == n:
-            name = self.best.effect
-            best = np.asarray(self.y_best)
-            rmse_b = float(np.sqrt(np.mean((y[sl] - best[sl]) ** 2)))
-            ax.plot(t, best[sl], color="C2", lw=1.0, ls="--", label=f"augmented: {name} (RMSE {rmse_b:.3g})")
-        rmse_n = float(np.sqrt(np.mean((y[sl] - nominal[sl]) ** 2)))
-        ax.set_title(f"Before/after where the nominal error is largest (nominal RMSE {rmse_n:.3g})", fontsize=10)
-        ax.set_xlabel("sample")
-        ax.set_ylabel("y")
-        ax.legend(fontsize="x-small")
-        ax.grid(alpha=0.3)
-
+        return plot_diagnosis(self, path, **kw)

@@ -1,119 +1,24 @@
-//! The nominal cascade (eq 16 -> eq 1) with the effects of the diagnosis catalogue, simulated
-//! sample by sample. Every effect is an optional term that gives exactly the nominal model at
-//! zero size, so a refit of the effect's parameters starts from the nominal fit:
+//! The nominal cascade (eq 16 -> eq 1) with effects of the diagnosis catalogue, simulated
+//! sample by sample in one fused pass. Every effect ([`crate::effects`], one module each) is an
+//! optional term that gives exactly the nominal model at zero size, so a refit of the effect's
+//! parameters starts from the nominal fit. Per sample, in this order:
 //!
-//! - dead time: the linear block sees u(t - d) (d extra samples; before the record: rest);
-//! - saturation: u clipped to [lo, hi] before the linear block;
-//! - friction: u_eff(t) = u(t) - F_c sign(v(t)) - F_v v(t), v(t) = x(t) - x(t-1), sign(0) = 0
-//!   (x(t) depends on u_eff up to t-1 only, so this is causal);
-//! - width drift: c_L(t) = c_L + dc_L tau, c_R(t) = c_R + dc_R tau, tau = (t0 + t) / time_scale;
-//! - compliance: y = (1 - k) f + k H(q) f, H a unit-DC-gain 2nd-order resonance with natural
-//!   frequency omega (rad/sample) and damping zeta (k = 1: the pure resonance);
-//! - extra plays on x: y += sum_k w_k play_{r_k}(x);
-//! - output offset and drift: y += o_0 + o_1 tau;
-//! - quantiser: y := q round(y / q) (q = 0: none).
+//! - drive stage (dead time, saturation, friction): the linear block's input u_eff(t);
+//! - widths stage (width drift): the dead-band widths of that time;
+//! - the backlash (eq 1) on x(t);
+//! - output stage (compliance, extra plays, output offset, quantiser).
 //!
 //! Time t is 0-based within the record; `t0` places the record in a longer continuous one
-//! (the validation record follows the estimation record).
+//! (the validation record follows the estimation record), tau = (t0 + t) / time_scale.
 
 use crate::backlash::{check_memory, GeneralBacklash};
 use crate::cascade::{CascadeModel, CascadeState};
+use crate::effects::{AnyEffect, Sample, Stage};
 use crate::error::{Error, Result};
 use crate::signal::check_signal;
 
-/// The effects' parameters; `Effects::default()` is the nominal model.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Effects {
-    /// Extra input delay d in samples.
-    pub delay: usize,
-    /// Saturation bounds (lo, hi) of the drive input; (-inf, +inf) is none.
-    pub saturation: (f64, f64),
-    /// Coulomb and viscous friction (F_c, F_v).
-    pub friction: (f64, f64),
-    /// Drift rates (dc_L, dc_R) of the dead-band widths per time unit.
-    pub width_drift: (f64, f64),
-    /// Compliance (k, omega, zeta): share of the resonant path, natural frequency in rad per
-    /// sample, damping ratio. k = 0 is none.
-    pub compliance: (f64, f64, f64),
-    /// Extra plays (r_k, w_k) on x.
-    pub plays: Vec<(f64, f64)>,
-    /// Output offset o_0 and its drift rate o_1 per time unit.
-    pub offset: (f64, f64),
-    /// Quantiser step q (0: none).
-    pub quantum: f64,
-    /// Samples per time unit of the drifts (> 0).
-    pub time_scale: f64,
-}
-
-impl Default for Effects {
-    fn default() -> Self {
-        Effects {
-            delay: 0,
-            saturation: (f64::NEG_INFINITY, f64::INFINITY),
-            friction: (0.0, 0.0),
-            width_drift: (0.0, 0.0),
-            compliance: (0.0, 0.5, 0.1),
-            plays: Vec::new(),
-            offset: (0.0, 0.0),
-            quantum: 0.0,
-            time_scale: 1000.0,
-        }
-    }
-}
-
-fn finite(name: &str, v: f64, what: &str) -> Result<()> {
-    if v.is_finite() {
-        Ok(())
-    } else {
-        Err(Error::Model(format!("{name} = {v}: {what}")))
-    }
-}
-
-impl Effects {
-    /// Every parameter in its domain; the message says which one to fix.
-    pub fn check(&self) -> Result<()> {
-        let (lo, hi) = self.saturation;
-        if lo.is_nan() || hi.is_nan() || lo >= hi {
-            return Err(Error::Model(format!(
-                "saturation bounds lo = {lo}, hi = {hi}: give lo < hi (+-inf for no bound)"
-            )));
-        }
-        finite("F_c", self.friction.0, "give a finite Coulomb friction")?;
-        finite("F_v", self.friction.1, "give a finite viscous friction")?;
-        finite("dc_L", self.width_drift.0, "give a finite drift rate")?;
-        finite("dc_R", self.width_drift.1, "give a finite drift rate")?;
-        let (k, omega, zeta) = self.compliance;
-        finite("compliance share k", k, "give a finite share (0 for none)")?;
-        if k != 0.0 && !(omega > 0.0 && omega < std::f64::consts::PI && zeta > 0.0 && zeta < 1.0) {
-            return Err(Error::Model(format!(
-                "compliance omega = {omega}, zeta = {zeta}: give 0 < omega < pi (rad/sample) \
-                 and 0 < zeta < 1 (a lightly damped mode)"
-            )));
-        }
-        for &(r, w) in &self.plays {
-            if !(r.is_finite() && r >= 0.0 && w.is_finite()) {
-                return Err(Error::Model(format!(
-                    "play (r = {r}, w = {w}): give a finite half-width r >= 0 and a finite weight"
-                )));
-            }
-        }
-        finite("o_0", self.offset.0, "give a finite offset")?;
-        finite("o_1", self.offset.1, "give a finite offset drift")?;
-        if !(self.quantum.is_finite() && self.quantum >= 0.0) {
-            return Err(Error::Model(format!(
-                "quantiser step q = {}: give q >= 0 (0 for no quantiser)",
-                self.quantum
-            )));
-        }
-        if !(self.time_scale.is_finite() && self.time_scale > 0.0) {
-            return Err(Error::Data(format!(
-                "time_scale = {}: give a positive number of samples per time unit",
-                self.time_scale
-            )));
-        }
-        Ok(())
-    }
-}
+/// Default samples per time unit of the drifts.
+pub const TIME_SCALE: f64 = 1000.0;
 
 /// Horner's rule for sum_{i>=1} m_i xi^i (eq 4-5).
 #[inline(always)]
@@ -137,31 +42,29 @@ fn select(l: f64, r: f64, y_prev: f64) -> f64 {
     }
 }
 
-#[inline(always)]
-fn sign(v: f64) -> f64 {
-    if v > 0.0 {
-        1.0
-    } else if v < 0.0 {
-        -1.0
-    } else {
-        0.0
-    }
-}
-
 /// The augmented cascade's output for the input `u`, from `state` (the linear block's past of
-/// the effective input and of x, and the backlash memory). `t0` is the time of u[0] in the
-/// continuous record (drifts only).
+/// the effective input and of x, and the backlash memory), with `effects` (any order; each
+/// applies at its place in the pass, see the module docs). `t0` is the time of u[0] in the
+/// continuous record and `time_scale` the samples per time unit (drifts only).
 pub fn simulate_augmented(
     model: &CascadeModel,
-    effects: &Effects,
+    effects: &[AnyEffect],
     u: &[f64],
     t0: f64,
+    time_scale: f64,
     state: &CascadeState,
 ) -> Result<Vec<f64>> {
     check_signal("u", u)?;
     model.linear.check_state(&state.linear, "state.linear")?;
     check_memory(state.y_prev)?;
-    effects.check()?;
+    for e in effects {
+        e.check()?;
+    }
+    if !(time_scale.is_finite() && time_scale > 0.0) {
+        return Err(Error::Data(format!(
+            "time_scale = {time_scale}: give a positive number of samples per time unit"
+        )));
+    }
     if !t0.is_finite() {
         return Err(Error::Data(format!(
             "t0 = {t0}: give the record's start time in samples"
@@ -171,27 +74,20 @@ pub fn simulate_augmented(
     let bl: &GeneralBacklash = &model.backlash;
     let (m_l, m_r) = (bl.left().coefficients(), bl.right().coefficients());
     let (c_l, c_r) = (bl.c_left(), bl.c_right());
-    let e = effects;
-    let (lo, hi) = e.saturation;
-    let (f_c, f_v) = e.friction;
-    let (dc_l, dc_r) = e.width_drift;
-    let drifting = dc_l != 0.0 || dc_r != 0.0;
-    let friction = f_c != 0.0 || f_v != 0.0;
-    let (k, omega, zeta) = e.compliance;
-    // H(q) = g / (1 + d1 q^-1 + d2 q^-2), poles exp(omega (-zeta +- j sqrt(1 - zeta^2))).
-    let (d1, d2) = if k != 0.0 {
-        let rho = (-zeta * omega).exp();
-        (
-            -2.0 * rho * (omega * (1.0 - zeta * zeta).sqrt()).cos(),
-            rho * rho,
-        )
-    } else {
-        (0.0, 0.0)
-    };
-    let g = 1.0 + d1 + d2;
-    let (mut h1, mut h2) = (state.y_prev, state.y_prev); // the resonance at rest on y(0)
     let x0 = state.linear.x_past.first().copied().unwrap_or(0.0);
-    let mut plays = vec![x0; e.plays.len()]; // each play at rest on x(0)
+    // fresh copies with their memories at rest on x(0), y(0), in the order of the pass
+    let mut running: Vec<AnyEffect> = effects.iter().map(|e| e.start(x0, state.y_prev)).collect();
+    running.sort_by_key(|e| e.order());
+    let mut drive: Vec<AnyEffect> = Vec::new();
+    let mut widths: Vec<AnyEffect> = Vec::new();
+    let mut output: Vec<AnyEffect> = Vec::new();
+    for e in running {
+        match e.stage() {
+            Stage::Drive => drive.push(e),
+            Stage::Widths => widths.push(e),
+            Stage::Output => output.push(e),
+        }
+    }
     let n = u.len();
     let mut u_eff = vec![0.0; n];
     let mut x = vec![0.0; n];
@@ -201,43 +97,36 @@ pub fn simulate_augmented(
     for t in 0..n {
         let xt = lin.output_at(&u_eff, &x, t, &state.linear);
         x[t] = xt;
-        // the drive input of the linear block at t
-        let mut v = if t >= e.delay { u[t - e.delay] } else { 0.0 };
-        v = if v < lo {
-            lo
-        } else if v > hi {
-            hi
-        } else {
-            v
+        let mut s = Sample {
+            t,
+            u,
+            x: xt,
+            x_prev,
+            f: 0.0,
+            tau: (t0 + t as f64) / time_scale,
         };
-        if friction {
-            let vel = xt - x_prev;
-            v -= f_c * sign(vel) + f_v * vel;
+        // the drive input of the linear block at t
+        let mut v = u[t];
+        for e in drive.iter_mut() {
+            v = e.drive(v, &s);
         }
         u_eff[t] = v;
         x_prev = xt;
-        let tau = (t0 + t as f64) / e.time_scale;
-        let f = if drifting {
-            let (cl, cr) = (c_l + dc_l * tau, c_r + dc_r * tau);
-            select(branch(m_l, xt + cl), branch(m_r, xt - cr), y_prev)
-        } else {
-            bl.step(xt, y_prev)
+        let mut c = None;
+        for e in &widths {
+            if let Some(w) = e.widths(c_l, c_r, &s) {
+                c = Some(w);
+            }
+        }
+        let f = match c {
+            Some((cl, cr)) => select(branch(m_l, xt + cl), branch(m_r, xt - cr), y_prev),
+            None => bl.step(xt, y_prev),
         };
         y_prev = f;
+        s.f = f;
         let mut out = f;
-        if k != 0.0 {
-            let h = g * f - d1 * h1 - d2 * h2;
-            h2 = h1;
-            h1 = h;
-            out = (1.0 - k) * f + k * h;
-        }
-        for (p, &(r, w)) in plays.iter_mut().zip(&e.plays) {
-            *p = (xt - r).max((xt + r).min(*p));
-            out += w * *p;
-        }
-        out += e.offset.0 + e.offset.1 * tau;
-        if e.quantum > 0.0 {
-            out = e.quantum * (out / e.quantum).round();
+        for e in output.iter_mut() {
+            out = e.output(out, &s);
         }
         if !(out.is_finite() && xt.is_finite()) {
             return Err(Error::Model(format!(
@@ -253,6 +142,7 @@ pub fn simulate_augmented(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::effects::from_parameters;
     use crate::linear::LinearBlock;
 
     fn model(degree3: bool) -> CascadeModel {
@@ -280,24 +170,74 @@ mod tests {
             .fold(0.0, f64::max)
     }
 
+    /// The effects of (name, parameters) pairs.
+    fn fx(list: &[(&str, &[f64])]) -> Vec<AnyEffect> {
+        list.iter()
+            .map(|(name, p)| from_parameters(name, p).unwrap())
+            .collect()
+    }
+
+    fn sim(m: &CascadeModel, e: &[(&str, &[f64])], u: &[f64], t0: f64, ts: f64) -> Vec<f64> {
+        simulate_augmented(m, &fx(e), u, t0, ts, &m.rest_state()).unwrap()
+    }
+
     #[test]
     fn zero_size_effects_are_the_nominal_model() {
         let u = input(700);
+        let zero: &[(&str, &[f64])] = &[
+            ("dead_time", &[0.0]),
+            ("saturation", &[f64::NEG_INFINITY, f64::INFINITY]),
+            ("friction", &[0.0, 0.0]),
+            ("width_drift", &[0.0, 0.0]),
+            ("compliance", &[0.0, 0.4, 0.05]),
+            ("hysteresis_memory", &[0.3, 0.0, 0.1, 0.0]),
+            ("output_offset", &[0.0, 0.0]),
+            ("quantization", &[0.0]),
+        ];
         for m in [model(true), model(false)] {
             let nominal = m.simulate(&u, &m.rest_state()).unwrap();
-            let zero = Effects {
-                plays: vec![(0.3, 0.0), (0.1, 0.0)],
-                compliance: (0.0, 0.4, 0.05),
-                ..Effects::default()
-            };
-            let aug = simulate_augmented(&m, &zero, &u, 123.0, &m.rest_state()).unwrap();
+            let aug = sim(&m, zero, &u, 123.0, TIME_SCALE);
             assert!(max_diff(&aug, &nominal) < 1e-12);
             // from a non-rest state too
-            let sim = m.simulate_internals(&u[..300], &m.rest_state()).unwrap();
-            let nominal = m.simulate(&u[300..], &sim.final_state).unwrap();
-            let aug = simulate_augmented(&m, &zero, &u[300..], 0.0, &sim.final_state).unwrap();
+            let s = m.simulate_internals(&u[..300], &m.rest_state()).unwrap();
+            let nominal = m.simulate(&u[300..], &s.final_state).unwrap();
+            let aug = simulate_augmented(&m, &fx(zero), &u[300..], 0.0, TIME_SCALE, &s.final_state)
+                .unwrap();
             assert!(max_diff(&aug, &nominal) < 1e-12);
         }
+    }
+
+    #[test]
+    fn the_order_of_the_list_does_not_matter() {
+        let m = model(true);
+        let u = input(500);
+        let a = sim(
+            &m,
+            &[
+                ("quantization", &[0.05]),
+                ("friction", &[0.05, 0.1]),
+                ("dead_time", &[2.0]),
+                ("output_offset", &[0.1, 0.2]),
+                ("compliance", &[0.5, 0.6, 0.1]),
+            ],
+            &u,
+            0.0,
+            TIME_SCALE,
+        );
+        let b = sim(
+            &m,
+            &[
+                ("dead_time", &[2.0]),
+                ("friction", &[0.05, 0.1]),
+                ("compliance", &[0.5, 0.6, 0.1]),
+                ("output_offset", &[0.1, 0.2]),
+                ("quantization", &[0.05]),
+            ],
+            &u,
+            0.0,
+            TIME_SCALE,
+        );
+        assert_eq!(a, b);
     }
 
     #[test]
@@ -307,11 +247,7 @@ mod tests {
         let mut shifted = vec![0.0; 3];
         shifted.extend_from_slice(&u[..397]);
         let want = m.simulate(&shifted, &m.rest_state()).unwrap();
-        let e = Effects {
-            delay: 3,
-            ..Effects::default()
-        };
-        let got = simulate_augmented(&m, &e, &u, 0.0, &m.rest_state()).unwrap();
+        let got = sim(&m, &[("dead_time", &[3.0])], &u, 0.0, TIME_SCALE);
         assert!(max_diff(&got, &want) < 1e-12);
     }
 
@@ -321,11 +257,7 @@ mod tests {
         let u = input(400);
         let clipped: Vec<f64> = u.iter().map(|v| v.clamp(-0.8, 0.9)).collect();
         let want = m.simulate(&clipped, &m.rest_state()).unwrap();
-        let e = Effects {
-            saturation: (-0.8, 0.9),
-            ..Effects::default()
-        };
-        let got = simulate_augmented(&m, &e, &u, 0.0, &m.rest_state()).unwrap();
+        let got = sim(&m, &[("saturation", &[-0.8, 0.9])], &u, 0.0, TIME_SCALE);
         assert!(max_diff(&got, &want) < 1e-12);
     }
 
@@ -336,11 +268,7 @@ mod tests {
             LinearBlock::new(vec![0.5], vec![]).unwrap(),
             GeneralBacklash::new(0.0, 0.0, vec![1.0], vec![1.0]).unwrap(),
         );
-        let e = Effects {
-            friction: (0.1, 0.2),
-            ..Effects::default()
-        };
-        let y = simulate_augmented(&m, &e, &[1.0; 3], 0.0, &m.rest_state()).unwrap();
+        let y = sim(&m, &[("friction", &[0.1, 0.2])], &[1.0; 3], 0.0, TIME_SCALE);
         // t=0: x=0, v=0 -> u_eff = 1; t=1: x=0.5, v=0.5 -> u_eff = 1 - 0.1 - 0.1 = 0.8;
         // t=2: x=0.4, v=-0.1 -> identity backlash y = x.
         assert!(max_diff(&y, &[0.0, 0.5, 0.4]) < 1e-15);
@@ -349,13 +277,8 @@ mod tests {
     #[test]
     fn width_drift_equals_the_backlash_with_the_widths_of_that_time() {
         let m = model(false);
-        let e = Effects {
-            width_drift: (0.2, 0.05),
-            time_scale: 100.0,
-            ..Effects::default()
-        };
         let u = input(50);
-        let y = simulate_augmented(&m, &e, &u, 1000.0, &m.rest_state()).unwrap();
+        let y = sim(&m, &[("width_drift", &[0.2, 0.05])], &u, 1000.0, 100.0);
         // sample 40: tau = 10.4; recompute that step with a backlash of those widths
         let x = m.linear.simulate(&u, &m.linear.rest_state()).unwrap();
         let bl = GeneralBacklash::new(0.6 + 2.08, 0.5 + 0.52, vec![1.0], vec![1.2]).unwrap();
@@ -368,11 +291,13 @@ mod tests {
             LinearBlock::new(vec![1.0], vec![]).unwrap(),
             GeneralBacklash::new(0.0, 0.0, vec![1.0], vec![1.0]).unwrap(),
         );
-        let e = Effects {
-            compliance: (1.0, 0.3, 0.05),
-            ..Effects::default()
-        };
-        let y = simulate_augmented(&m, &e, &[1.0; 2000], 0.0, &m.rest_state()).unwrap();
+        let y = sim(
+            &m,
+            &[("compliance", &[1.0, 0.3, 0.05])],
+            &[1.0; 2000],
+            0.0,
+            TIME_SCALE,
+        );
         assert!((y[1999] - 1.0).abs() < 1e-9);
         let peak = y.iter().cloned().fold(f64::MIN, f64::max);
         assert!(
@@ -389,24 +314,17 @@ mod tests {
         );
         // x = u(t-1): 0, 1, 0.5, -1; play r = 0.25: 0, 0.75, 0.75, -0.75
         let u = [1.0, 0.5, -1.0, 0.0];
-        let e = Effects {
-            plays: vec![(0.25, 2.0)],
-            ..Effects::default()
-        };
-        let y = simulate_augmented(&m, &e, &u, 0.0, &m.rest_state()).unwrap();
+        let y = sim(
+            &m,
+            &[("hysteresis_memory", &[0.25, 2.0])],
+            &u,
+            0.0,
+            TIME_SCALE,
+        );
         assert!(max_diff(&y, &[0.0, 2.5, 2.0, -2.5]) < 1e-15);
-        let e = Effects {
-            offset: (0.1, 1.0),
-            time_scale: 10.0,
-            ..Effects::default()
-        };
-        let y = simulate_augmented(&m, &e, &u, 10.0, &m.rest_state()).unwrap();
+        let y = sim(&m, &[("output_offset", &[0.1, 1.0])], &u, 10.0, 10.0);
         assert!(max_diff(&y, &[1.1, 2.2, 1.8, 0.4]) < 1e-12);
-        let e = Effects {
-            quantum: 0.4,
-            ..Effects::default()
-        };
-        let y = simulate_augmented(&m, &e, &u, 0.0, &m.rest_state()).unwrap();
+        let y = sim(&m, &[("quantization", &[0.4])], &u, 0.0, TIME_SCALE);
         assert!(max_diff(&y, &[0.0, 1.2, 0.4, -1.2]) < 1e-12);
     }
 
@@ -414,40 +332,30 @@ mod tests {
     fn bad_effects_are_errors_not_panics() {
         let m = model(true);
         let u = input(10);
-        for e in [
-            Effects {
-                saturation: (1.0, -1.0),
-                ..Effects::default()
-            },
-            Effects {
-                quantum: -1.0,
-                ..Effects::default()
-            },
-            Effects {
-                compliance: (1.0, 4.0, 0.1),
-                ..Effects::default()
-            },
-            Effects {
-                plays: vec![(-0.1, 1.0)],
-                ..Effects::default()
-            },
-            Effects {
-                time_scale: 0.0,
-                ..Effects::default()
-            },
-        ] {
-            assert!(simulate_augmented(&m, &e, &u, 0.0, &m.rest_state()).is_err());
+        let bad: &[(&str, &[f64])] = &[
+            ("saturation", &[1.0, -1.0]),
+            ("quantization", &[-1.0]),
+            ("compliance", &[1.0, 4.0, 0.1]),
+            ("hysteresis_memory", &[-0.1, 1.0]),
+            ("hysteresis_memory", &[0.1]),
+            ("dead_time", &[1.5]),
+            ("friction", &[0.1]),
+            ("gremlins", &[]),
+        ];
+        for (name, p) in bad {
+            assert!(
+                matches!(from_parameters(name, p), Err(Error::Model(_))),
+                "{name}"
+            );
         }
+        assert!(simulate_augmented(&m, &[], &u, 0.0, 0.0, &m.rest_state()).is_err());
         assert!(matches!(
-            simulate_augmented(&m, &Effects::default(), &[f64::NAN], 0.0, &m.rest_state()),
+            simulate_augmented(&m, &[], &[f64::NAN], 0.0, TIME_SCALE, &m.rest_state()),
             Err(Error::Data(_))
         ));
-        let wild = Effects {
-            friction: (0.0, -50.0),
-            ..Effects::default()
-        };
+        let wild = fx(&[("friction", &[0.0, -50.0])]);
         assert!(matches!(
-            simulate_augmented(&m, &wild, &input(2000), 0.0, &m.rest_state()),
+            simulate_augmented(&m, &wild, &input(2000), 0.0, TIME_SCALE, &m.rest_state()),
             Err(Error::Model(_))
         ));
     }

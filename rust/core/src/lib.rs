@@ -5,6 +5,7 @@
 //! backlash (eq 16-17) and the sandwich linear -> backlash -> linear (eq 29).
 
 pub mod augmented;
+pub mod effects;
 pub mod backlash;
 pub mod cascade;
 pub mod error;
@@ -19,7 +20,8 @@ pub mod signal;
 pub mod streaming;
 pub mod switching;
 
-pub use augmented::{simulate_augmented, Effects};
+pub use augmented::simulate_augmented;
+pub use effects::{AnyEffect, Effect};
 pub use backlash::{Branch, BranchCheck, GeneralBacklash};
 pub use cascade::{CascadeModel, CascadeSimulation, CascadeState};
 pub use error::{Error, Result};

@@ -27,7 +27,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
-from ._residual_tests import checked_record, json_float, snap_constant
+from ..._json import json_float
+from ..._validation import check_signals
+from .._statistics import snap_constant
 
 __all__ = ["ChangePoint", "TimeAnalysis", "time_analysis"]
 
@@ -39,7 +41,29 @@ MAX_CHANGES = 5  # per kind (mean, variance)
 
 @dataclass(frozen=True)
 class ChangePoint:
-    """A change at sample ``index`` (the first sample of the new segment)."""
+    """A change at sample ``index`` (the first sample of the new segment).
+
+    Attributes
+    ----------
+    index : int
+        The first sample of the new segment.
+    kind : str
+        "mean" or "variance".
+    p_value : float
+        The p-value.
+    before : float
+        Mean (kind "mean") or standard deviation (kind "variance") before.
+    after : float
+        The same after.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import time_analysis
+    >>> e = np.random.default_rng(0).standard_normal(3000) + np.r_[np.zeros(1000), 2 * np.ones(2000)]
+    >>> abs(time_analysis(e).change_points[0].index - 1000) < 20
+    True
+    """
 
     index: int
     kind: str  # "mean" or "variance"
@@ -48,6 +72,13 @@ class ChangePoint:
     after: float  # the same after
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "index": int(self.index),
             "kind": self.kind,
@@ -63,7 +94,42 @@ class ChangePoint:
 
 @dataclass(frozen=True, eq=False)
 class TimeAnalysis:
-    """Drift of the residual over the record."""
+    """Drift of the residual over the record.
+
+    Attributes
+    ----------
+    n : int
+        Number of evaluated samples.
+    n_blocks : int
+        Number of blocks of the local mean and RMS.
+    mean_change : float
+        Change of the local mean over the record (linear trend).
+    mean_change_se : float
+        Its standard error.
+    mean_p : float
+        p-value of the mean trend.
+    rms_ratio : float
+        Local RMS at the end of the record over that at the start (trend).
+    rms_p : float
+        p-value of the RMS trend.
+    change_points : tuple of ChangePoint
+        Significant changes of the mean or the variance.
+    alpha : float
+        The significance level of the test.
+    block_centers : ndarray
+        Sample index of each block's centre.
+    block_mean : ndarray
+        Mean of each block.
+    block_rms : ndarray
+        RMS about the block mean.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import time_analysis
+    >>> time_analysis(np.random.default_rng(0).standard_normal(3000)).significant
+    False
+    """
 
     n: int
     n_blocks: int
@@ -80,14 +146,17 @@ class TimeAnalysis:
 
     @property
     def mean_drift(self) -> bool:
+        """The local mean trends significantly (Bonferroni over the four tests)."""
         return bool(self.mean_p < self.alpha / 4)  # Bonferroni over the four tests
 
     @property
     def rms_drift(self) -> bool:
+        """The local RMS trends significantly (Bonferroni over the four tests)."""
         return bool(self.rms_p < self.alpha / 4)
 
     @property
     def significant(self) -> bool:
+        """True when the mean or the RMS drifts or the residual has a change point."""
         return self.mean_drift or self.rms_drift or bool(self.change_points)
 
     @property
@@ -98,6 +167,13 @@ class TimeAnalysis:
         return float(min(1.0, min(ps)))
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "n": self.n,
             "n_blocks": self.n_blocks,
@@ -203,9 +279,34 @@ def _segment_values(e: NDArray[np.float64], cuts: list[int]) -> list[NDArray[np.
 
 
 def time_analysis(residual: ArrayLike) -> TimeAnalysis:
-    """Trends and change points of ``residual`` over its record (pass the samples after the
-    warm-up). A constant residual has no drift and no change point."""
-    e = snap_constant(checked_record(residual, "residual", min_length=MIN_SAMPLES, what="a drift analysis"))
+    """Trends and change points of a residual over its record.
+
+    A constant residual has no drift and no change point.
+
+    Parameters
+    ----------
+    residual : array_like
+        Measured minus simulated output, 1-D, finite: the samples after the warm-up.
+
+    Returns
+    -------
+    TimeAnalysis
+        Trends of the local mean and RMS, and the change points.
+
+    Raises
+    ------
+    DataError
+        If the residual is not 1-D, holds NaN or is too short.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import time_analysis
+    >>> e = np.random.default_rng(0).standard_normal(3000)
+    >>> time_analysis(e + np.r_[np.zeros(1500), np.ones(1500)]).change_points[0].kind
+    'mean'
+    """
+    e = snap_constant(check_signals(("residual", residual), min_length=MIN_SAMPLES, what="a drift analysis")[0])
     n = e.size
     min_segment = max(30, n // 50)
 

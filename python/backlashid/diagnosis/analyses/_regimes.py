@@ -31,9 +31,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..._json import json_float
+from ..._validation import check_signals
 from ...errors import DataError
 from ...models import CascadeModel, CascadeState, SandwichModel, SandwichState
-from ._residual_tests import checked_record, holm, json_float, same_length, snap_constant
+from .._statistics import holm, same_length, snap_constant
 
 __all__ = ["REGIMES", "RegimeShare", "RegimeShares", "regime_masks", "regime_shares"]
 
@@ -60,7 +62,42 @@ def _description(name: str, k: int) -> str:
 
 @dataclass(frozen=True)
 class RegimeShare:
-    """Error share of one regime."""
+    """Error share of one regime.
+
+    Attributes
+    ----------
+    name : str
+        The regime, one of ``REGIMES``.
+    description : str
+        The regime in words.
+    n_samples : int
+        Evaluated samples in the regime.
+    sample_share : float
+        Share of the evaluated samples.
+    energy_share : float
+        Share of sum e^2.
+    mse : float
+        Mean e^2 in the regime.
+    mse_rest : float
+        Mean e^2 elsewhere.
+    p_value : float
+        Circular-shift test, two-sided, this regime alone.
+    p_adjusted : float
+        Holm-adjusted over the regimes.
+    alpha : float
+        The significance level of the test.
+    z : float
+        MSE difference in standard deviations of its shift distribution.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.diagnosis.analyses import regime_shares
+    >>> rng = np.random.default_rng(0)
+    >>> share = regime_shares(bid.example1(), rng.uniform(-1.5, 1.5, 800), rng.standard_normal(800))["dead_band"]
+    >>> share.name, share.significant
+    ('dead_band', False)
+    """
 
     name: str
     description: str
@@ -82,6 +119,7 @@ class RegimeShare:
 
     @property
     def significant(self) -> bool:
+        """The regime's error differs significantly from elsewhere (Holm)."""
         return bool(self.p_adjusted < self.alpha)
 
     @property
@@ -90,6 +128,13 @@ class RegimeShare:
         return self.significant and self.mse > self.mse_rest
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "name": self.name,
             "description": self.description,
@@ -110,7 +155,32 @@ class RegimeShare:
 @dataclass(frozen=True, eq=False)
 class RegimeShares:
     """Error shares by regime of the nominal model's residual, with the per-sample regimes
-    (``masks``: name -> bool array over the whole record, False in the warm-up)."""
+    (``masks``: name -> bool array over the whole record, False in the warm-up).
+
+    Attributes
+    ----------
+    regimes : tuple of RegimeShare
+        One per regime of ``REGIMES``.
+    n : int
+        Evaluated samples (after the warm-up).
+    warmup : int
+        Samples left out at the start.
+    total_mse : float
+        Mean squared residual over the evaluated samples.
+    window : int
+        k, the samples counted as just after a reversal or a re-engagement.
+    masks : dict of str to ndarray
+        Per-sample regime masks (bool) over the whole record, False in the warm-up.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.diagnosis.analyses import regime_shares
+    >>> rng = np.random.default_rng(0)
+    >>> shares = regime_shares(bid.example1(), rng.uniform(-1.5, 1.5, 1000), rng.standard_normal(1000))
+    >>> shares.n, shares.significant
+    (1000, False)
+    """
 
     regimes: tuple[RegimeShare, ...]
     n: int  # evaluated samples (after the warm-up)
@@ -146,6 +216,13 @@ class RegimeShares:
         return lab
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "n": self.n,
             "warmup": self.warmup,
@@ -195,8 +272,37 @@ def _window(direction: NDArray[np.int64]) -> int:
 def regime_masks(
     x: NDArray[np.float64], f1: NDArray[np.bool_], f2: NDArray[np.bool_], x_before: float, evaluated: NDArray[np.bool_]
 ) -> tuple[dict[str, NDArray[np.bool_]], int]:
-    """The regime indicators of ``REGIMES`` from the internal signals of a simulation, and
-    the window k; ``x_before`` is x(0), the sample before the record."""
+    """The regime indicators of ``REGIMES`` from the internal signals of a simulation.
+
+    Parameters
+    ----------
+    x : ndarray
+        The linear block's output x(t).
+    f1 : ndarray of bool
+        The left-branch switching signal (eq 25, exclusive rule).
+    f2 : ndarray of bool
+        The right-branch switching signal (eq 26).
+    x_before : float
+        x(0), the sample before the record.
+    evaluated : ndarray of bool
+        The samples evaluated (False in the warm-up).
+
+    Returns
+    -------
+    masks : dict of str to ndarray
+        A bool mask per regime name.
+    window : int
+        k, the samples counted as just after a reversal or a re-engagement.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.diagnosis.analyses import REGIMES, regime_masks
+    >>> sim = bid.example1().simulate(np.sin(0.05 * np.arange(400)), internals=True)
+    >>> masks, k = regime_masks(sim.x, sim.f1, sim.f2, 0.0, np.ones(400, dtype=bool))
+    >>> set(masks) == set(REGIMES)
+    True
+    """
     f1 = np.asarray(f1, dtype=bool)
     f2 = np.asarray(f2, dtype=bool) & ~f1  # exclusive case order of eq (1)
     moving = f1 | f2
@@ -277,15 +383,51 @@ def _simulate(model: Any, u: NDArray[np.float64], initial_state: Any) -> tuple[A
 def regime_shares(
     model: Any, u: ArrayLike, residual: ArrayLike, *, warmup: int = 0, initial_state: Any = None
 ) -> RegimeShares:
-    """Error shares of ``residual`` (measured minus the nominal model's simulation, the whole
-    record) by the regimes the nominal ``model`` passes through when driven by ``u`` from
-    ``initial_state``; the first ``warmup`` samples are left out. A zero residual counts as
-    spread over the regimes as the samples are (no regime stands out)."""
+    """Error shares of a residual by the backlash regimes the nominal model passes through.
+
+    The model is driven by u from ``initial_state``; a zero residual counts as spread over the
+    regimes as the samples are (no regime stands out).
+
+    Parameters
+    ----------
+    model : CascadeModel or SandwichModel
+        The nominal model.
+    u : array_like
+        Input of the record, 1-D, finite.
+    residual : array_like
+        Measured minus the nominal model's simulation, the whole record.
+    warmup : int, default 0
+        Samples at the start left out.
+    initial_state : CascadeState or SandwichState, optional
+        The model's state before the record (default: rest).
+
+    Returns
+    -------
+    RegimeShares
+        The share of the error and of the samples per regime, with a circular-shift test.
+
+    Raises
+    ------
+    DataError
+        If the model is not a cascade or sandwich, the signals are unusable or of different
+        lengths, the warm-up is out of range, or the state is of the wrong kind.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.diagnosis.analyses import regime_shares
+    >>> m = bid.example1()
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.uniform(-1.5, 1.5, 2000)
+    >>> shares = regime_shares(m, u, 0.05 * rng.standard_normal(2000), warmup=20)
+    >>> [r.name for r in shares.regimes][:3]
+    ['dead_band', 'left_branch', 'right_branch']
+    """
     if not isinstance(warmup, (int, np.integer)) or isinstance(warmup, bool) or warmup < 0:
         raise DataError(f"warmup = {warmup!r}: give a non-negative integer number of samples")
     warmup = int(warmup)
-    e = checked_record(residual, "residual", min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")
-    u_arr = checked_record(u, "u", min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")
+    e = check_signals(("residual", residual), min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")[0]
+    u_arr = check_signals(("u", u), min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")[0]
     same_length(e.size, u=u_arr)
     sim, x_before = _simulate(model, u_arr, initial_state)
     evaluated = np.arange(e.size) >= warmup

@@ -42,10 +42,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import linalg, stats
 
-from ..._validation import as_signal
+from ..._validation import check_signals
 from ...errors import DataError
+from .._statistics import holm, same_length, snap_constant
 
-__all__ = ["CorrelationTest", "ResidualTests", "TEST_NAMES", "residual_tests", "holm"]
+__all__ = ["CorrelationTest", "ResidualTests", "TEST_NAMES", "residual_tests"]
 
 TEST_NAMES = ("acf", "ccf_u", "ccf_x", "e_eu", "u2_e", "u2_e2", "e_e2", "e2_e2")
 MAX_AR_ORDER = 10  # prewhitening noise model: AR(p), p <= this, chosen by AIC
@@ -61,63 +62,6 @@ _DESCRIPTIONS = {
     "e_e2": "e(t) vs e^2'(t-k) (Billings-Zhu)",
     "e2_e2": "autocorrelation of e^2' (McLeod-Li)",
 }
-
-
-# --------------------------------------------------------------------------- shared helpers
-def checked_record(values: Any, name: str, *, min_length: int, what: str) -> NDArray[np.float64]:
-    """A finite 1-D float copy of a signal of at least ``min_length`` samples (``what`` says
-    which analysis needs them); DataError otherwise, saying what to do."""
-    arr = as_signal(values, name)
-    if arr.ndim != 1:
-        if arr.ndim == 2 and 1 in arr.shape:
-            arr = arr.ravel()
-        else:
-            raise DataError(f"{name} has shape {arr.shape}: pass a 1-D signal (one record)")
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        raise DataError(
-            f"{name} has {bad.size} NaN or infinite values (first at sample {bad[0]}): "
-            "cut the record before them or interpolate them first"
-        )
-    if arr.size < min_length:
-        raise DataError(f"{name} has {arr.size} samples; {what} needs at least {min_length}: give a longer record")
-    return arr.copy()
-
-
-def snap_constant(e: NDArray[np.float64], *, centre: bool = False) -> NDArray[np.float64]:
-    """e, made exactly constant when it varies only by rounding (relative spread < 1e-12), so
-    that no analysis reads structure into rounding errors; ``centre`` also removes the mean
-    (a constant becomes exactly zero)."""
-    scale = float(np.abs(e).max()) if e.size else 0.0
-    if float(np.ptp(e)) <= 1e-12 * scale:
-        return np.zeros_like(e) if centre else np.full_like(e, e[0])
-    return e - e.mean() if centre else e
-
-
-def same_length(n: int, **signals: NDArray[np.float64]) -> None:
-    for name, s in signals.items():
-        if s.size != n:
-            raise DataError(f"{name} has {s.size} samples and the residual {n}: pass signals of one record, aligned")
-
-
-def holm(p_values: ArrayLike) -> NDArray[np.float64]:
-    """Holm's step-down adjustment of a family of p-values (NaN entries are left out)."""
-    p = np.asarray(p_values, dtype=np.float64)
-    out = np.full_like(p, np.nan)
-    ok = np.flatnonzero(np.isfinite(p))
-    if ok.size == 0:
-        return out
-    order = ok[np.argsort(p[ok], kind="stable")]
-    m = ok.size
-    adjusted = np.minimum(1.0, np.maximum.accumulate(p[order] * (m - np.arange(m))))
-    out[order] = adjusted
-    return out
-
-
-def json_float(v: Any) -> float | None:
-    """A float for JSON (NaN and inf become None)."""
-    f = float(v)
-    return f if np.isfinite(f) else None
 
 
 def _centered(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -157,7 +101,42 @@ def _filter(a_poly: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray[np.f
 # --------------------------------------------------------------------------- results
 @dataclass(frozen=True, eq=False)
 class CorrelationTest:
-    """One correlation test over its lags, with per-lag bounds and a portmanteau p-value."""
+    """One correlation test over its lags, with per-lag bounds and a portmanteau p-value.
+
+    Attributes
+    ----------
+    name : str
+        One of ``TEST_NAMES``.
+    description : str
+        What the test looks for.
+    lags : ndarray
+        The lags k tested.
+    values : ndarray
+        Normalised correlation at each lag.
+    bound : float
+        Per-lag bound z_(1-alpha/2) / sqrt(N).
+    statistic : float
+        Portmanteau Q.
+    dof : int
+        Degrees of freedom of the portmanteau statistic.
+    p_value : float
+        p-value of this test alone.
+    p_adjusted : float
+        Holm-adjusted over the tests of the family.
+    alpha : float
+        The significance level of the test.
+    prewhitened : bool
+        Whether the residual was prewhitened by the AR noise model.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import residual_tests
+    >>> rng = np.random.default_rng(1)
+    >>> acf = residual_tests(rng.standard_normal(1000), rng.standard_normal(1000), None)["acf"]
+    >>> acf.name, int(acf.lags[0])
+    ('acf', 1)
+    """
 
     name: str
     description: str
@@ -173,6 +152,7 @@ class CorrelationTest:
 
     @property
     def passed(self) -> bool:
+        """The test finds nothing left (adjusted p-value >= alpha)."""
         return not self.p_adjusted < self.alpha
 
     @property
@@ -182,9 +162,17 @@ class CorrelationTest:
 
     @property
     def worst_lag(self) -> int:
+        """The lag of the largest absolute correlation."""
         return int(self.lags[int(np.argmax(np.abs(self.values)))])
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "name": self.name,
             "description": self.description,
@@ -205,7 +193,30 @@ class CorrelationTest:
 @dataclass(frozen=True, eq=False)
 class ResidualTests:
     """The family of residual correlation tests on one residual; ``passed`` when no test fails
-    after Holm's correction, ``p_value`` the smallest adjusted p-value."""
+    after Holm's correction, ``p_value`` the smallest adjusted p-value.
+
+    Attributes
+    ----------
+    n : int
+        Number of evaluated samples.
+    max_lag : int
+        Largest lag K tested.
+    alpha : float
+        The significance level of the test.
+    ar_order : int
+        Order of the prewhitening AR noise model.
+    tests : tuple of CorrelationTest
+        One per name of ``TEST_NAMES``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import residual_tests
+    >>> rng = np.random.default_rng(1)
+    >>> e = np.convolve(rng.standard_normal(1000), [1.0, 0.9])[:1000]
+    >>> "acf" in residual_tests(e, rng.standard_normal(1000), None).failed
+    True
+    """
 
     n: int
     max_lag: int
@@ -215,10 +226,12 @@ class ResidualTests:
 
     @property
     def p_value(self) -> float:
+        """The smallest Holm-adjusted p-value of the tests."""
         return float(min(t.p_adjusted for t in self.tests))
 
     @property
     def passed(self) -> bool:
+        """Every test passes."""
         return all(t.passed for t in self.tests)
 
     @property
@@ -234,6 +247,7 @@ class ResidualTests:
 
     @property
     def names(self) -> tuple[str, ...]:
+        """The tests' names, in order."""
         return tuple(t.name for t in self.tests)
 
     def __getitem__(self, name: str) -> CorrelationTest:
@@ -246,6 +260,13 @@ class ResidualTests:
         return name in self.names
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "n": self.n,
             "max_lag": self.max_lag,
@@ -299,10 +320,45 @@ def _portmanteau(a: NDArray[np.float64], b: NDArray[np.float64], lags: NDArray[n
 def residual_tests(
     residual: ArrayLike, u: ArrayLike, x: ArrayLike | None, *, max_lag: int = 20, alpha: float = 0.05
 ) -> ResidualTests:
-    """The correlation tests of the module doc on ``residual`` (measured minus simulated
-    output), with input ``u`` and the model's internal signal ``x`` (None leaves out
-    ``ccf_x``). Pass the samples after the warm-up, all of one record. A constant residual
-    (a perfect model on noise-free data) leaves nothing to correlate: every test passes."""
+    """Correlation tests of a residual: is anything left that the model should explain?
+
+    The tests of the module doc on ``residual`` (measured minus simulated output) with the
+    input u and the model's internal signal x. A constant residual (a perfect model on
+    noise-free data) leaves nothing to correlate: every test passes.
+
+    Parameters
+    ----------
+    residual : array_like
+        Measured minus simulated output, 1-D, finite: the samples after the warm-up.
+    u : array_like
+        Input of the same samples.
+    x : array_like or None
+        The model's internal signal x of the same samples; None leaves out ``ccf_x``.
+    max_lag : int, default 20
+        Largest lag K of every test.
+    alpha : float, default 0.05
+        Significance level (per-lag bounds and the Holm-corrected verdict).
+
+    Returns
+    -------
+    ResidualTests
+        One CorrelationTest per name of ``TEST_NAMES``.
+
+    Raises
+    ------
+    DataError
+        If a signal is not 1-D, holds NaN, is too short for ``max_lag``, the lengths differ,
+        u is constant, or ``max_lag``, ``alpha`` are out of range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import residual_tests
+    >>> rng = np.random.default_rng(0)
+    >>> tests = residual_tests(rng.standard_normal(2000), rng.standard_normal(2000), None)
+    >>> tests.passed
+    True
+    """
     if not isinstance(max_lag, (int, np.integer)) or isinstance(max_lag, bool) or max_lag < 1:
         raise DataError(f"max_lag = {max_lag!r}: give a positive integer number of lags (e.g. 20)")
     max_lag = int(max_lag)
@@ -311,13 +367,13 @@ def residual_tests(
     alpha = float(alpha)
     need = max(MIN_SAMPLES_PER_LAG * max_lag, 50)
     what = f"testing {max_lag} lags"
-    e = snap_constant(checked_record(residual, "residual", min_length=need, what=what), centre=True)
+    e = snap_constant(check_signals(("residual", residual), min_length=need, what=what)[0], centre=True)
     n = e.size
-    u_arr = checked_record(u, "u", min_length=need, what=what)
+    u_arr = check_signals(("u", u), min_length=need, what=what)[0]
     same_length(n, u=u_arr)
     x_arr = None
     if x is not None:
-        x_arr = checked_record(x, "x", min_length=need, what=what)
+        x_arr = check_signals(("x", x), min_length=need, what=what)[0]
         same_length(n, x=x_arr)
     if np.ptp(u_arr) == 0.0:
         raise DataError("u is constant: the input carries no excitation to correlate the residual with")

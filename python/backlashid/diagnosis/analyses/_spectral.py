@@ -27,8 +27,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal, stats
 
+from ..._json import json_float
+from ..._validation import check_signals
 from ...errors import DataError
-from ._residual_tests import checked_record, holm, json_float, same_length, snap_constant
+from .._statistics import holm, same_length, snap_constant
 
 __all__ = ["Band", "FrequencyAnalysis", "frequency_analysis"]
 
@@ -42,7 +44,44 @@ FLOOR_FROM = 0.25  # the estimated floor uses f >= this
 
 @dataclass(frozen=True)
 class Band:
-    """One frequency band: residual power against the floor, and coherence with the input."""
+    """One frequency band: residual power against the floor, and coherence with the input.
+
+    Attributes
+    ----------
+    lo : float
+        Lower band edge in cycles per sample.
+    hi : float
+        Upper band edge in cycles per sample.
+    n_bins : int
+        Periodogram bins in the band.
+    power : float
+        Mean residual density over the band.
+    ratio : float
+        Power / floor.
+    energy_share : float
+        Share of the residual variance in this band.
+    p_value : float
+        p-value of the band above the floor, this band alone.
+    p_adjusted : float
+        Holm over the bands.
+    coherence_max : float
+        Largest residual-input coherence in the band.
+    coherence_p : float
+        That the band holds coherence (Bonferroni over its Welch bins).
+    coherence_p_adjusted : float
+        Holm over the bands.
+    alpha : float
+        The significance level of the test.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import frequency_analysis
+    >>> rng = np.random.default_rng(0)
+    >>> band = frequency_analysis(rng.standard_normal(2000), rng.standard_normal(2000), noise_std=1.0).bands[0]
+    >>> band.lo
+    0.0
+    """
 
     lo: float
     hi: float
@@ -59,21 +98,32 @@ class Band:
 
     @property
     def label(self) -> str:
+        """The band as 'lo-hi' in cycles per sample."""
         return f"{self.lo:.4g}-{self.hi:.4g}"
 
     @property
     def above_floor(self) -> bool:
+        """The residual lies significantly above the noise floor in this band (Holm)."""
         return bool(self.p_adjusted < self.alpha)
 
     @property
     def coherent(self) -> bool:
+        """The residual is significantly coherent with the input in this band (Holm)."""
         return bool(self.coherence_p_adjusted < self.alpha)
 
     @property
     def ratio_db(self) -> float:
+        """``ratio`` in decibels."""
         return float(10.0 * np.log10(self.ratio)) if self.ratio > 0 else float("-inf")
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "lo": self.lo,
             "hi": self.hi,
@@ -94,7 +144,45 @@ class Band:
 
 @dataclass(frozen=True, eq=False)
 class FrequencyAnalysis:
-    """Residual spectrum by band against the noise floor, and residual-input coherence."""
+    """Residual spectrum by band against the noise floor, and residual-input coherence.
+
+    Attributes
+    ----------
+    n : int
+        Number of evaluated samples.
+    noise_std : float
+        The noise standard deviation of the floor.
+    noise_std_estimated : bool
+        Whether it was estimated from the residual.
+    floor : float
+        One-sided density of the noise floor.
+    bands : tuple of Band
+        The frequency bands.
+    coherence_threshold : float
+        Coherence threshold pointwise, level alpha.
+    coherence_threshold_global : float
+        The same, Bonferroni over all Welch bins.
+    effective_segments : float
+        Effective number of Welch segments (with overlap).
+    alpha : float
+        The significance level of the test.
+    frequencies : ndarray
+        The Welch frequency grid.
+    psd : ndarray
+        Welch density of the residual.
+    coherence : ndarray
+        Residual-input coherence on that grid.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import frequency_analysis
+    >>> t = np.arange(4000)
+    >>> rng = np.random.default_rng(0)
+    >>> fa = frequency_analysis(rng.standard_normal(4000) + 2 * np.sin(0.6 * t), rng.standard_normal(4000), noise_std=1.0)
+    >>> fa.significant
+    True
+    """
 
     n: int
     noise_std: float
@@ -123,6 +211,7 @@ class FrequencyAnalysis:
 
     @property
     def significant(self) -> bool:
+        """True when some band lies above the floor or is coherent with the input."""
         return bool(self.exceeding or self.coherent)
 
     @property
@@ -133,6 +222,13 @@ class FrequencyAnalysis:
         return float(total / bins / self.floor) if bins and self.floor > 0 else float("nan")
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the fields (NaN and inf as None).
+
+        Returns
+        -------
+        dict
+            ``json.dumps`` works on it.
+        """
         return {
             "n": self.n,
             "noise_std": float(self.noise_std),
@@ -188,11 +284,39 @@ def _effective_segments(n: int, nseg: int) -> float:
 
 
 def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | None = None) -> FrequencyAnalysis:
-    """The residual's spectrum by band against the noise floor and its coherence with the
-    input ``u`` (pass the samples after the warm-up, of one record). ``noise_std = 0``
-    (noise-free data) puts every band with any power above the floor."""
-    e = snap_constant(checked_record(residual, "residual", min_length=MIN_SAMPLES, what="a spectrum by band"), centre=True)
-    u_arr = checked_record(u, "u", min_length=MIN_SAMPLES, what="a spectrum by band")
+    """The residual's spectrum by band against the noise floor, and its coherence with the input.
+
+    Parameters
+    ----------
+    residual : array_like
+        The model's output error after the warm-up (1-D, finite).
+    u : array_like
+        The input over those samples.
+    noise_std : float, optional
+        The noise standard deviation if known (else estimated from the residual); 0
+        (noise-free data) puts every band with any power above the floor.
+
+    Returns
+    -------
+    FrequencyAnalysis
+        Bands above the floor and coherent with the input.
+
+    Raises
+    ------
+    DataError
+        If a signal is unusable or too short, the lengths differ, or ``noise_std`` < 0.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis.analyses import frequency_analysis
+    >>> rng = np.random.default_rng(0)
+    >>> fa = frequency_analysis(rng.standard_normal(4000), rng.standard_normal(4000), noise_std=1.0)
+    >>> fa.significant
+    False
+    """
+    e = snap_constant(check_signals(("residual", residual), min_length=MIN_SAMPLES, what="a spectrum by band")[0], centre=True)
+    u_arr = check_signals(("u", u), min_length=MIN_SAMPLES, what="a spectrum by band")[0]
     same_length(e.size, u=u_arr)
     n = e.size
     if noise_std is not None:

@@ -1,0 +1,62 @@
+"""hysteresis_memory: extra plays on x, y + sum_k w_k play_{r_k}(x)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ... import _core
+from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
+
+N_PLAYS = 2  # extra plays
+
+
+AUGMENTATION = Augmentation(
+    "hysteresis_memory",
+    tuple(n for k in range(1, N_PLAYS + 1) for n in (f"r_{k}", f"w_{k}")),
+    tuple(v for _ in range(N_PLAYS) for v in (0.1, 0.0)),
+    "y + sum_k w_k play_{r_k}(x)",
+)
+
+
+class HysteresisMemory(Effect, rank=9, augmentation=AUGMENTATION):
+    """Weighted play operators on the internal signal x added to the output."""
+
+    @staticmethod
+    def _x(prob: Problem, theta0: Array) -> Array:
+        """x of the nominal linear block from rest."""
+        est = prob.structure.unpack(theta0)
+        return _core.LinearBlock(est.a, est.b).simulate(prob.u, [0.0] * len(est.a), [0.0] * len(est.b))
+
+    def refit(self, prob: Problem, theta0: Array) -> Fitted:
+        """The weights enter linearly at fixed half-widths: pick the pairs of half-widths whose
+        plays explain most of the nominal residual, then refit everything from the best three."""
+        x = self._x(prob, theta0)
+        sx = float(np.std(x)) + 1e-12
+        r0 = prob.y - prob.simulate(theta0)
+
+        def play(r: float) -> Array:
+            p, out = 0.0, np.empty_like(x)
+            for t, xt in enumerate(x):
+                p = max(xt - r, min(xt + r, p))
+                out[t] = p
+            return out
+
+        radii = sx * np.geomspace(0.01, 2.0, 10)
+        plays = [play(r)[prob.warmup :] for r in radii]
+        target = r0[prob.warmup :]
+        pairs = []
+        for i in range(len(radii)):
+            for j in range(i + 1, len(radii)):
+                a = np.column_stack([plays[i], plays[j]])
+                w, *_ = np.linalg.lstsq(a, target, rcond=None)
+                rss = float(np.sum((target - a @ w) ** 2))
+                pairs.append((rss, (float(radii[i]), float(w[0]), float(radii[j]), float(w[1]))))
+        pairs.sort()
+        lb = np.array([0.0, -np.inf] * N_PLAYS)
+        ub = np.array([5 * sx, np.inf] * N_PLAYS)
+        return self._multi_start(prob, theta0, [(np.array(e0), {}) for _, e0 in pairs[:3]], lb, ub)
+
+    def directions(self, screen: ScreenContext) -> list[Array]:
+        """One play of weight 1 at half-widths 0.05 and 0.3 std(u)."""
+        su = float(np.std(screen.u)) + 1e-12
+        return [screen.change((("hysteresis_memory", (r * su, 1.0)),)) for r in (0.05, 0.3)]

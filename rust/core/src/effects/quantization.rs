@@ -1,0 +1,42 @@
+//! Quantiser: y := q round(y / q) (q = 0: none), after everything else.
+
+use super::{arity, Effect, Sample, Stage};
+use crate::error::{Error, Result};
+
+/// Name in the catalogue.
+pub const NAME: &str = "quantization";
+
+/// Quantiser step q.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Quantization {
+    /// q (0: none).
+    pub quantum: f64,
+}
+
+/// From [q].
+pub fn from_parameters(p: &[f64]) -> Result<Quantization> {
+    arity(NAME, p, "q", 1)?;
+    Ok(Quantization { quantum: p[0] })
+}
+
+impl Effect for Quantization {
+    // last: the sensor's resolution
+    place!(Output, 7);
+    fn check(&self) -> Result<()> {
+        if !(self.quantum.is_finite() && self.quantum >= 0.0) {
+            return Err(Error::Model(format!(
+                "quantiser step q = {}: give q >= 0 (0 for no quantiser)",
+                self.quantum
+            )));
+        }
+        Ok(())
+    }
+    #[inline]
+    fn output(&mut self, out: f64, _s: &Sample) -> f64 {
+        if self.quantum > 0.0 {
+            self.quantum * (out / self.quantum).round()
+        } else {
+            out
+        }
+    }
+}

@@ -1,0 +1,45 @@
+//! Saturation: the drive input clipped to [lo, hi] before the linear block.
+
+use super::{arity, Effect, Sample, Stage};
+use crate::error::{Error, Result};
+
+/// Name in the catalogue.
+pub const NAME: &str = "saturation";
+
+/// Bounds (lo, hi) of the drive input; (-inf, +inf) is none.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Saturation {
+    /// Lower bound.
+    pub lo: f64,
+    /// Upper bound.
+    pub hi: f64,
+}
+
+/// From [lo, hi].
+pub fn from_parameters(p: &[f64]) -> Result<Saturation> {
+    arity(NAME, p, "lo, hi", 2)?;
+    Ok(Saturation { lo: p[0], hi: p[1] })
+}
+
+impl Effect for Saturation {
+    place!(Drive, 1);
+    fn check(&self) -> Result<()> {
+        let (lo, hi) = (self.lo, self.hi);
+        if lo.is_nan() || hi.is_nan() || lo >= hi {
+            return Err(Error::Model(format!(
+                "saturation bounds lo = {lo}, hi = {hi}: give lo < hi (+-inf for no bound)"
+            )));
+        }
+        Ok(())
+    }
+    #[inline]
+    fn drive(&mut self, v: f64, _s: &Sample) -> f64 {
+        if v < self.lo {
+            self.lo
+        } else if v > self.hi {
+            self.hi
+        } else {
+            v
+        }
+    }
+}
