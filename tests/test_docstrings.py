@@ -145,7 +145,7 @@ def check_docstring(name: str, obj: Any, owner: type | None) -> None:
         pytest.fail(f"{name}: numpydoc cannot read the docstring: {exc}")
     summary = " ".join(sections["Summary"]).strip()
     assert summary, f"{name}: no one-line summary"
-    assert summary.endswith("."), f"{name}: the summary should end with a period: {summary!r}"
+    assert summary.endswith((".", "?")), f"{name}: the summary should end a sentence (. or ?): {summary!r}"
     params = signature_parameters(obj, owner)
     if params is None:
         return

@@ -11,18 +11,45 @@ import numpy as np
 __all__ = ["plot_diagnosis"]
 
 
-def plot_diagnosis(report: Any, path: Any = None, **kw: Any) -> Any:
-    """The dashboard figure: measured vs nominal simulation, the error coloured by regime,
-    error share by regime, residual correlation tests, gap closed by candidate, and the
-    nominal against the best augmented simulation where the error is largest. Returns the
-    Figure; with ``path``, saves it (PNG by the file's extension) through the Agg backend.
-    Keywords: ``figsize`` (13, 15), ``window`` (samples in the before/after panel, 300),
-    ``dpi`` (110)."""
-    figsize = kw.pop("figsize", (13, 15))
-    window = int(kw.pop("window", 300))
-    dpi = kw.pop("dpi", 110)
-    if kw:
-        raise TypeError(f"unexpected keyword(s) {', '.join(sorted(kw))}: use figsize, window, dpi")
+def plot_diagnosis(
+    report: Any,
+    path: Any = None,
+    *,
+    figsize: tuple[float, float] = (13, 15),
+    window: int = 300,
+    dpi: float = 110,
+) -> Any:
+    """Draw the diagnosis dashboard of a :class:`~backlashid.diagnosis.DiagnosisReport`.
+
+    The panels: measured against nominal simulation, the error coloured by regime, the error
+    share by regime, the residual correlation tests, the gap closed by each candidate, and the
+    nominal against the best augmented simulation where the error is largest.
+
+    Parameters
+    ----------
+    report : DiagnosisReport
+        What :func:`backlashid.diagnose` returned.
+    path : str or path-like, optional
+        Save the figure here (PNG by the file's extension) through the Agg backend, without
+        touching pyplot's state; None draws into a new pyplot figure.
+    figsize : tuple of float, default (13, 15)
+        Figure size in inches.
+    window : int, default 300
+        Samples shown in the before/after panel.
+    dpi : float, default 110
+        Resolution of the figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The dashboard.
+
+    Raises
+    ------
+    BacklashIdError
+        If matplotlib is not installed.
+    """
+    window = int(window)
     if path is not None:
         try:
             from matplotlib.backends.backend_agg import FigureCanvasAgg
