@@ -59,16 +59,16 @@ html_css_files = ["parameters.css"]  # the Parameters sections as tables (one ro
 
 
 # -- API reference: one page per public module, generated from its __all__ -----------------------
-API_MODULES = [
-    ("backlashid", "The top level: the names most scripts need, re-exported from the layers."),
-    ("backlashid.models", "Models: the linear block, the general backlash, the cascade and the sandwich."),
-    ("backlashid.identify", "Identification: the paper's iterations, the refinement, Wiener-Hammerstein, metrics, scaling."),
-    ("backlashid.diagnosis", "Diagnosis of the sim-to-real gap."),
-    ("backlashid.diagnosis.analyses", "Where the error lies: residual tests, regimes, spectrum, drift."),
-    ("backlashid.diagnosis.effects", "Which unmodelled effect explains the error: the effect catalogue."),
-    ("backlashid.benchmarks", "Data with a known truth: the paper's examples and the withheld-effect cases."),
-    ("backlashid.app", "The application: record files, figures, fleets on Dask."),
-    ("backlashid.errors", "The exceptions."),
+API_MODULES = [  # each page opens with the module's own docstring
+    "backlashid",
+    "backlashid.models",
+    "backlashid.identify",
+    "backlashid.diagnosis",
+    "backlashid.diagnosis.analyses",
+    "backlashid.diagnosis.effects",
+    "backlashid.benchmarks",
+    "backlashid.app",
+    "backlashid.errors",
 ]
 
 
@@ -85,7 +85,7 @@ def _exported(module_name: str) -> list[str]:
 def _homes() -> dict[int, str]:
     """id(object) -> the public module whose page documents it: the module it is defined under
     if that module exports it, else the deepest module that does."""
-    names = [m for m, _ in API_MODULES]
+    names = list(API_MODULES)
     homes: dict[int, str] = {}
     for module_name in sorted(names, key=lambda m: -m.count(".")):
         for name in _exported(module_name):
@@ -106,10 +106,10 @@ def _kind(obj: Any) -> str:
     return "data"
 
 
-def _page(module_name: str, blurb: str, homes: dict[int, str]) -> str:
+def _page(module_name: str, homes: dict[int, str]) -> str:
     module = importlib.import_module(module_name)
     title = f"`{module_name}`"
-    lines = [f"# {title}", "", blurb, "", "```{eval-rst}", f".. automodule:: {module_name}", "   :no-members:", "```", ""]
+    lines = [f"# {title}", "", "```{eval-rst}", f".. automodule:: {module_name}", "   :no-members:", "```", ""]
     own: dict[str, list[str]] = {"class": [], "exception": [], "function": [], "data": []}
     elsewhere: list[tuple[str, str]] = []
     for name in sorted(_exported(module_name), key=str.lower):
@@ -149,9 +149,9 @@ def _write_api_pages() -> None:
     out = Path(__file__).parent / "api"
     out.mkdir(exist_ok=True)
     homes = _homes()
-    for module_name, blurb in API_MODULES:
+    for module_name in API_MODULES:
         target = out / f"{module_name}.md"
-        text = _page(module_name, blurb, homes)
+        text = _page(module_name, homes)
         if not target.exists() or target.read_text() != text:  # unchanged files keep Sphinx's cache valid
             target.write_text(text)
 
