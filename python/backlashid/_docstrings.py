@@ -55,3 +55,13 @@ Returns
 matplotlib.axes.Axes
     The axes drawn on."""
 """The end of a ``plot`` method's Parameters and its Returns (``{axes}``)."""
+
+
+PYPLOT = """Raises
+------
+BacklashIdError
+    If matplotlib is not installed (the ``plot`` extra)."""
+"""The Raises section of everything that draws with pyplot (``{pyplot}``)."""
+
+PLOT = AXES + "\n\n" + PYPLOT
+"""``ax``, ``title``, Returns and Raises of a plotting function (``{plot}``)."""

@@ -26,6 +26,7 @@ from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
 from typing import Any, Callable, Literal
 
+from .._docstrings import fill
 from ..errors import BacklashIdError, DataError
 from ..identify import FitResult, fit_cascade, fit_sandwich
 
@@ -33,6 +34,14 @@ __all__ = ["fit_many", "diagnose_many"]
 
 Kind = Literal["cascade", "sandwich"]
 _FITS: dict[str, Callable[..., FitResult]] = {"cascade": fit_cascade, "sandwich": fit_sandwich}
+_CLUSTER_DOC = """client : distributed.Client, optional
+    A client of a running cluster (used, not closed).
+address : str, optional
+    A running scheduler, ``"tcp://host:8786"``.
+n_workers : int, optional
+    Worker processes of the embedded cluster [default: one per core, at most one per record].
+progress : bool, default True
+    Show a progress bar (tqdm) on stderr."""
 _INSTALL = "pip install 'backlashid[dask]'"
 _TASKS_PER_THREAD = 8  # records are grouped into at most this many tasks per worker thread
 
@@ -111,6 +120,7 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
+@fill(cluster=_CLUSTER_DOC)
 def fit_many(
     datasets: Sequence[Any],
     kind: Kind = "cascade",
@@ -136,15 +146,7 @@ def fit_many(
         sandwich).
     kind : {"cascade", "sandwich"}, default "cascade"
         The fit: :func:`~backlashid.fit_cascade` or :func:`~backlashid.fit_sandwich`.
-    client : distributed.Client, optional
-        A client of a running cluster.
-    address : str, optional
-        A running scheduler, ``"tcp://host:8786"``.
-    n_workers : int, optional
-        Worker processes of the embedded cluster [default: one per core, at most one per
-        record].
-    progress : bool, default True
-        Show a progress bar (tqdm) on stderr.
+    {cluster}
     **fit_options
         Options of the fit (na, nb, degree, warmup, restarts, seed, ...), passed through.
 
@@ -247,6 +249,7 @@ def _case(item: Any, index: int) -> tuple[Any, Any, Any]:
     return model, estimation, validation
 
 
+@fill(cluster=_CLUSTER_DOC)
 def diagnose_many(
     cases: Sequence[Any],
     *,
@@ -266,15 +269,7 @@ def diagnose_many(
     cases : sequence
         (model, (u_est, y_est), (u_val, y_val)) triples, or dicts with keys ``model``,
         ``estimation`` and ``validation``.
-    client : distributed.Client, optional
-        A client of a running cluster.
-    address : str, optional
-        A running scheduler, ``"tcp://host:8786"``.
-    n_workers : int, optional
-        Worker processes of the embedded cluster [default: one per core, at most one per
-        case].
-    progress : bool, default True
-        Show a progress bar (tqdm) on stderr.
+    {cluster}
     **options
         Options of :func:`~backlashid.diagnose` (candidates, noise_std, warmup,
         initial_state, seed), passed through.

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docstrings import PLOT, fill
 from .._optional import pyplot
 from .._validation import as_signal
 from ..errors import DataError
@@ -96,6 +97,7 @@ def plot_characteristic(
     return ax
 
 
+@fill(plot=PLOT)
 def plot_branches_comparison(
     true_backlash: GeneralBacklash,
     estimated: GeneralBacklash,
@@ -114,20 +116,7 @@ def plot_branches_comparison(
         The estimate (dashed lines).
     x_range : tuple of float
         (low, high) of the backlash input x shown.
-    ax : matplotlib.axes.Axes, optional
-        Axes to draw on [default: a new figure].
-    title : str, optional
-        Title of the axes.
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-        The axes drawn on.
-
-    Raises
-    ------
-    BacklashIdError
-        If matplotlib is not installed.
+    {plot}
 
     Examples
     --------
@@ -153,6 +142,7 @@ def plot_branches_comparison(
     return ax
 
 
+@fill(plot=PLOT)
 def plot_trajectories(
     history: ArrayLike,
     names: list[str],
@@ -180,20 +170,7 @@ def plot_trajectories(
         True values by name.
     final : dict of str to float, optional
         Final estimates by name (``FitResult.parameters``).
-    ax : matplotlib.axes.Axes, optional
-        Axes to draw on [default: a new figure].
-    title : str, optional
-        Title of the axes.
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-        The axes drawn on.
-
-    Raises
-    ------
-    BacklashIdError
-        If matplotlib is not installed.
+    {plot}
 
     Examples
     --------
@@ -225,6 +202,7 @@ def plot_trajectories(
     return ax
 
 
+@fill(plot=PLOT)
 def plot_simulation(
     y: ArrayLike,
     y_sim: ArrayLike,
@@ -251,20 +229,7 @@ def plot_simulation(
         Sampling period: the time axis is in its units (in samples when 1).
     ylabel : str, default "output"
         Label of the output axis.
-    ax : matplotlib.axes.Axes, optional
-        Axes to draw on [default: a new figure].
-    title : str, optional
-        Title of the axes.
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-        The axes drawn on.
-
-    Raises
-    ------
-    BacklashIdError
-        If matplotlib is not installed.
+    {plot}
 
     Examples
     --------
