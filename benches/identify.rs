@@ -18,10 +18,10 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use backlashid_core::lstsq::LeastSquares;
-use backlashid_core::regressor::{arx_factor, cascade_factor, solve_factor};
-use backlashid_core::sensitivity::cascade_oe_factor;
-use backlashid_core::streaming::default_threads;
+use backlashid_core::identify::cascade_oe_factor;
+use backlashid_core::identify::{arx_factor, cascade_factor, solve_factor};
+use backlashid_core::linalg::default_threads;
+use backlashid_core::LeastSquares;
 use backlashid_core::{CascadeModel, GeneralBacklash, LinearBlock, TriangularFactor};
 use criterion::{BenchmarkId, Criterion, SamplingMode, Throughput};
 use rand::rngs::StdRng;

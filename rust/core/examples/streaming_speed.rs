@@ -3,25 +3,17 @@
 //! streaming_speed [N...]
 use std::time::Instant;
 
-use backlashid_core::regressor::{
+use backlashid_core::identify::regressor::{
     cascade_factor_threads, cascade_regression, sandwich_factor_threads, sandwich_regression,
 };
-use backlashid_core::sensitivity::{
+use backlashid_core::identify::sensitivity::{
     cascade_oe_factor_threads, cascade_sensitivity, sandwich_oe_factor_threads,
 };
-use backlashid_core::{CascadeModel, GeneralBacklash, LinearBlock, SandwichModel};
+use backlashid_core::{CascadeModel, SandwichModel};
 
-fn input(n: usize) -> Vec<f64> {
-    let mut s = 12345u64;
-    (0..n)
-        .map(|_| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        })
-        .collect()
-}
+#[path = "../src/test_params.rs"]
+mod test_params;
+use test_params::{example1, example2, input, names};
 
 /// The solve before this change: column-scaled N x p matrix, faer QR, explicit residual.
 fn faer_dense(a: &[f64], rows: usize, p: usize, b: &[f64]) -> Vec<f64> {
@@ -59,14 +51,9 @@ fn main() {
     } else {
         sizes
     };
-    let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
-    let bl = GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap();
-    let (l2, b2, o2) = (
-        LinearBlock::new(vec![0.8, 0.2], vec![0.2, -0.2]).unwrap(),
-        GeneralBacklash::new(0.4, 0.5, vec![1.0, 0.1, 0.3], vec![0.75, 0.2, 0.6]).unwrap(),
-        LinearBlock::new(vec![1.0, 0.15], vec![-0.2, 0.35]).unwrap(),
-    );
-    let names: Vec<String> = (0..14).map(|j| format!("p{j}")).collect();
+    let (lin, bl) = example1();
+    let (l2, b2, o2) = example2();
+    let names = names(14);
     println!("ns per sample (best of reps); cascade p = 11, sandwich p = 14");
     for &n in &sizes {
         let u = input(n);

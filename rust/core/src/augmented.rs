@@ -16,10 +16,10 @@
 //! Time t is 0-based within the record; `t0` places the record in a longer continuous one
 //! (the validation record follows the estimation record).
 
-use crate::backlash::{check_memory, GeneralBacklash};
-use crate::cascade::{CascadeModel, CascadeState};
 use crate::error::{Error, Result};
-use crate::signal::check_signal;
+use crate::model::backlash::{check_memory, GeneralBacklash};
+use crate::model::cascade::{CascadeModel, CascadeState};
+use crate::model::signal::check_signal;
 
 /// The effects' parameters; `Effects::default()` is the nominal model.
 #[derive(Debug, Clone, PartialEq)]
@@ -253,7 +253,7 @@ pub fn simulate_augmented(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::linear::LinearBlock;
+    use crate::model::linear::LinearBlock;
 
     fn model(degree3: bool) -> CascadeModel {
         let (ml, mr) = if degree3 {

@@ -5,25 +5,25 @@
 //! backlash (eq 16-17) and the sandwich linear -> backlash -> linear (eq 29).
 
 pub mod augmented;
-pub mod backlash;
-pub mod cascade;
 pub mod error;
-pub mod gradient;
-pub mod linear;
-pub mod lstsq;
-pub mod polynomial;
-pub mod regressor;
-pub mod sandwich;
-pub mod sensitivity;
-pub mod signal;
-pub mod streaming;
-pub mod switching;
+pub mod identify;
+pub mod linalg;
+pub mod model;
+#[cfg(test)]
+pub(crate) mod test_params;
+// `test_params` names this crate as the integration tests do.
+#[cfg(test)]
+extern crate self as backlashid_core;
 
 pub use augmented::{simulate_augmented, Effects};
-pub use backlash::{Branch, BranchCheck, GeneralBacklash};
-pub use cascade::{CascadeModel, CascadeSimulation, CascadeState};
 pub use error::{Error, Result};
-pub use linear::{LinearBlock, LinearState};
-pub use sandwich::{SandwichModel, SandwichSimulation, SandwichState};
-pub use streaming::{fold_parallel, TriangularFactor};
-pub use switching::{switching, switching_form, SwitchingSignals};
+pub use identify::{
+    arx_factor, cascade_iteration, cascade_oe_factor, cascade_oe_gradient, sandwich_factor,
+    sandwich_oe_factor, sandwich_oe_gradient, solve_factor, OeGradient,
+};
+pub use linalg::{fold_parallel, LeastSquares, TriangularFactor};
+pub use model::{
+    spectral_radius, switching, switching_form, Branch, BranchCheck, CascadeModel,
+    CascadeSimulation, CascadeState, GeneralBacklash, LinearBlock, LinearState, SandwichModel,
+    SandwichSimulation, SandwichState, SwitchingSignals,
+};

@@ -429,7 +429,7 @@ fn estimate(
 
 type LsOut<'py> = (SignalOut<'py>, f64, Bound<'py, PyArray2<f64>>, f64);
 
-fn ls_out<'py>(py: Python<'py>, ls: core::lstsq::LeastSquares) -> PyResult<LsOut<'py>> {
+fn ls_out<'py>(py: Python<'py>, ls: core::LeastSquares) -> PyResult<LsOut<'py>> {
     let p = ls.theta.len();
     let cov = ls.unscaled_covariance.into_pyarray(py).reshape([p, p])?;
     Ok((vec_f64(py, ls.theta), ls.rss, cov, ls.rcond))
@@ -453,7 +453,7 @@ fn lstsq<'py>(
     let a_vec: Vec<f64> = a.as_array().iter().copied().collect(); // row-major (logical order)
     let b = signal(py, "b", &b)?;
     let ls = run(py, || {
-        core::lstsq::solve(&a_vec, shape[0], shape[1], &b, &names)
+        core::linalg::lstsq::solve(&a_vec, shape[0], shape[1], &b, &names)
     })?;
     ls_out(py, ls)
 }
@@ -487,9 +487,9 @@ fn cascade_iteration<'py>(
     let (ls, moving, rmse) = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
         let (factor, moving, rmse) =
-            core::regressor::cascade_iteration(&lin, &bl, &u, &y, &ys, skip)?;
+            core::identify::cascade_iteration(&lin, &bl, &u, &y, &ys, skip)?;
         Ok((
-            core::regressor::solve_factor(&factor, &names, moving)?,
+            core::identify::solve_factor(&factor, &names, moving)?,
             moving,
             rmse,
         ))
@@ -521,9 +521,9 @@ fn sandwich_iteration<'py>(
     let (ls, moving) = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
         let out = core::LinearBlock::new(r, s)?;
-        let (factor, moving) = core::regressor::sandwich_factor(&lin, &bl, &out, &u, &w, skip)?;
+        let (factor, moving) = core::identify::sandwich_factor(&lin, &bl, &out, &u, &w, skip)?;
         Ok((
-            core::regressor::solve_factor(&factor, &names, moving)?,
+            core::identify::solve_factor(&factor, &names, moving)?,
             moving,
         ))
     })?;
@@ -547,7 +547,7 @@ fn arx<'py>(
         .chain((1..=nb).map(|j| format!("b{j}")))
         .collect();
     let ls = run(py, || {
-        core::regressor::arx_factor(&u, &y, na, nb, delay, skip)?.solve(&names)
+        core::identify::arx_factor(&u, &y, na, nb, delay, skip)?.solve(&names)
     })?;
     ls_out(py, ls)
 }
@@ -584,7 +584,7 @@ fn cascade_oe_factor<'py>(
     let (u, y) = (signal(py, "u", &u)?, signal(py, "y", &y)?);
     let out = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
-        core::sensitivity::cascade_oe_factor(&lin, &bl, &u, &y, warmup)
+        core::identify::cascade_oe_factor(&lin, &bl, &u, &y, warmup)
     })?;
     factor_out(py, out)
 }
@@ -612,7 +612,7 @@ fn sandwich_oe_factor<'py>(
     let out = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
         let out = core::LinearBlock::new(r, s)?;
-        core::sensitivity::sandwich_oe_factor(&lin, &bl, &out, &u, &w, warmup)
+        core::identify::sandwich_oe_factor(&lin, &bl, &out, &u, &w, warmup)
     })?;
     factor_out(py, out)
 }
@@ -640,10 +640,10 @@ fn oe_gradient<'py>(
     let g = run(py, || {
         let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
         if r.is_empty() {
-            core::gradient::cascade_oe_gradient(&lin, &bl, &u, &y, warmup)
+            core::identify::cascade_oe_gradient(&lin, &bl, &u, &y, warmup)
         } else {
             let out = core::LinearBlock::new(r, s)?;
-            core::gradient::sandwich_oe_gradient(&lin, &bl, &out, &u, &y, warmup)
+            core::identify::sandwich_oe_gradient(&lin, &bl, &out, &u, &y, warmup)
         }
     })?;
     Ok((vec_f64(py, g.gradient), g.cost))
@@ -653,7 +653,7 @@ fn oe_gradient<'py>(
 /// Largest root modulus of z^n + den[0] z^(n-1) + ... (0 for none, inf if not finite).
 #[pyfunction]
 fn spectral_radius(den: Vec<f64>) -> f64 {
-    core::polynomial::spectral_radius(&den)
+    core::spectral_radius(&den)
 }
 
 #[pyfunction]

@@ -1,10 +1,12 @@
 //! The cascade of Section 3 (Fig. 2): the linear block (16) followed by a general backlash (1).
 
-use crate::backlash::{check_memory, GeneralBacklash, Step};
 use crate::error::{Error, Result};
-use crate::linear::{blame_feeding_block, LinearBlock, LinearState, Recursion, RecursionUser};
-use crate::signal::check_signal;
-use crate::switching::switching;
+use crate::model::backlash::{check_memory, GeneralBacklash, Step};
+use crate::model::linear::{
+    blame_feeding_block, LinearBlock, LinearState, Recursion, RecursionUser,
+};
+use crate::model::signal::check_signal;
+use crate::model::switching::switching;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct CascadeModel {
@@ -264,21 +266,7 @@ fn flags_along<'a>(
 mod tests {
     use super::*;
 
-    pub(crate) fn example1() -> CascadeModel {
-        CascadeModel::new(
-            LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap(),
-            GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap(),
-        )
-    }
-
-    #[test]
-    fn equals_the_blocks_run_one_after_the_other() {
-        let m = example1();
-        let u: Vec<f64> = (0..500).map(|k| ((k as f64) * 0.7).sin()).collect();
-        let x = m.linear.simulate(&u, &m.linear.rest_state()).unwrap();
-        let y = m.backlash.simulate(&x, 0.0).unwrap();
-        assert_eq!(m.simulate(&u, &m.rest_state()).unwrap(), y);
-    }
+    use crate::test_params::example1_model as example1;
 
     #[test]
     fn moving_count_counts_the_flags_after_skip() {

@@ -6,15 +6,15 @@
 //! then for the sandwich r_2..r_nr, s_1..s_ns; with m_L1 = 1, r_1 = 1, c_L = c_1,
 //! c_R = c_2 / m_R1 (eq 20, 32).
 
-use crate::backlash::{GeneralBacklash, Step};
 use crate::error::{Error, Result};
-use crate::linear::LinearBlock;
-use crate::lstsq::{solve, LeastSquares};
-use crate::signal::{check_same_length, check_signal};
-use crate::streaming::{
+use crate::linalg::lstsq::{solve, LeastSquares};
+use crate::linalg::streaming::{
     fold_parallel, fold_parallel_split, threads_for, SplitRows, TriangularFactor,
 };
-use crate::switching::switching;
+use crate::model::backlash::{GeneralBacklash, Step};
+use crate::model::linear::LinearBlock;
+use crate::model::signal::{check_same_length, check_signal};
+use crate::model::switching::switching;
 
 /// Row-major regressor, target, and the internal signals the rows were built from.
 #[derive(Debug, Clone, PartialEq)]
@@ -97,98 +97,120 @@ fn degree(backlash: &GeneralBacklash) -> Result<usize> {
     Ok(nl)
 }
 
-/// The backlash part of eq (18) at sample `tau` (the whole phi(tau) of the cascade), written
-/// to the start of `row`: [u(tau-i) f1, -x(tau-j) f1, f1, xi1^i f1 (i>=2), x f2, -f2,
-/// xi2^i f2 (i>=2)]. Returns the number of values written (na + nb + 2n + 1).
-#[allow(clippy::too_many_arguments)]
-fn backlash_part(
-    row: &mut [f64],
+/// What the cascade's and the sandwich's rows share: the estimate's backlash, the input u,
+/// x by eq (22) and the switching functions f1, f2 (eq 25-26) for every sample, and the
+/// orders na, nb and degree n of the columns [a, b, c_1, m_L2..m_Ln, m_R1, c_2, m_R2..m_Rn]
+/// (eq 19).
+struct BacklashColumns<'a> {
+    backlash: &'a GeneralBacklash,
+    u: &'a [f64],
+    x: Vec<f64>,
+    f1: Vec<bool>,
+    f2: Vec<bool>,
     na: usize,
     nb: usize,
     n: usize,
-    backlash: &GeneralBacklash,
-    u: &[f64],
-    x: &[f64],
-    tau: usize,
-    f1: bool,
-    f2: bool,
-) -> usize {
-    let lag = |s: &[f64], k: usize| if k <= tau { s[tau - k] } else { 0.0 };
-    let (g1, g2) = (f1 as u8 as f64, f2 as u8 as f64);
-    let xi1 = x[tau] + backlash.c_left(); // eq (23)
-    let xi2 = x[tau] - backlash.c_right(); // eq (24)
-    let mut k = 0;
-    let mut put = |v: f64| {
-        row[k] = v;
-        k += 1;
-    };
-    (1..=na).for_each(|i| put(lag(u, i) * g1));
-    (1..=nb).for_each(|j| put(-lag(x, j) * g1));
-    put(g1);
-    (2..=n).for_each(|i| put(xi1.powi(i as i32) * g1));
-    put(x[tau] * g2);
-    put(-g2);
-    (2..=n).for_each(|i| put(xi2.powi(i as i32) * g2));
-    k
+}
+
+impl<'a> BacklashColumns<'a> {
+    /// Checks the estimate's degree and simulates x by eq (22) from rest (the caller has
+    /// checked u and evaluates the switching).
+    fn new(linear: &LinearBlock, backlash: &'a GeneralBacklash, u: &'a [f64]) -> Result<Self> {
+        let n = degree(backlash)?;
+        Ok(Self {
+            backlash,
+            u,
+            x: linear.simulate(u, &linear.rest_state())?, // eq (22)
+            f1: Vec::new(),
+            f2: Vec::new(),
+            na: linear.na(),
+            nb: linear.nb(),
+            n,
+        })
+    }
+
+    /// na + nb + 2n + 1 columns.
+    fn cols(&self) -> usize {
+        self.na + self.nb + 2 * self.n + 1
+    }
+
+    /// The backlash part of eq (18) at sample `tau` (the whole phi(tau) of the cascade),
+    /// written to the start of `row`: [u(tau-i) f1, -x(tau-j) f1, f1, xi1^i f1 (i>=2), x f2,
+    /// -f2, xi2^i f2 (i>=2)]. Returns the number of values written (`cols`).
+    fn fill(&self, row: &mut [f64], tau: usize, f1: bool, f2: bool) -> usize {
+        let (na, nb, n, u, x) = (self.na, self.nb, self.n, self.u, &self.x);
+        let lag = |s: &[f64], k: usize| if k <= tau { s[tau - k] } else { 0.0 };
+        let (g1, g2) = (f1 as u8 as f64, f2 as u8 as f64);
+        let xi1 = x[tau] + self.backlash.c_left(); // eq (23)
+        let xi2 = x[tau] - self.backlash.c_right(); // eq (24)
+        let mut k = 0;
+        let mut put = |v: f64| {
+            row[k] = v;
+            k += 1;
+        };
+        (1..=na).for_each(|i| put(lag(u, i) * g1));
+        (1..=nb).for_each(|j| put(-lag(x, j) * g1));
+        put(g1);
+        (2..=n).for_each(|i| put(xi1.powi(i as i32) * g1));
+        put(x[tau] * g2);
+        put(-g2);
+        (2..=n).for_each(|i| put(xi2.powi(i as i32) * g2));
+        k
+    }
 }
 
 /// A regression whose rows are built on demand from the internal signals of an estimate
 /// (eq 18 for the cascade, eq 33 for the sandwich).
-trait RowSource: Sync {
+trait RowSource<'a>: Sync {
+    /// The backlash columns, with x and f1, f2 of every sample.
+    fn part(&self) -> &BacklashColumns<'a>;
+    fn into_part(self) -> BacklashColumns<'a>;
     fn cols(&self) -> usize;
     /// The first usable row for a warm-up of `skip` samples.
     fn first_row(&self, skip: usize) -> usize;
-    fn len(&self) -> usize;
     /// The row of sample t into `row`; returns its target.
     fn fill(&self, t: usize, row: &mut [f64]) -> f64;
-    /// x of eq (22) and the switching functions f1, f2 of every sample.
-    fn signals(self) -> (Vec<f64>, Vec<bool>, Vec<bool>);
-    fn flags(&self) -> (&[bool], &[bool]);
+
+    fn len(&self) -> usize {
+        self.part().u.len()
+    }
 }
 
 /// All rows from `skip` on as a dense row-major matrix.
-fn dense<R: RowSource>(rows: R, skip: usize) -> Regression {
+fn dense<'a, R: RowSource<'a>>(rows: R, skip: usize) -> Regression {
     let (cols, start) = (rows.cols(), rows.first_row(skip).min(rows.len()));
     let mut phi = vec![0.0; (rows.len() - start) * cols];
     let target: Vec<f64> = (start..rows.len())
         .map(|t| rows.fill(t, &mut phi[(t - start) * cols..(t - start + 1) * cols]))
         .collect();
-    let (x, f1, f2) = rows.signals();
+    let part = rows.into_part();
     Regression {
         rows: target.len(),
         cols,
         phi,
         target,
-        x,
-        f1,
-        f2,
+        x: part.x,
+        f1: part.f1,
+        f2: part.f2,
     }
 }
 
 /// All rows from `skip` on folded into a triangular factor on `threads` threads, with the
 /// moving fraction.
-fn factor<R: RowSource>(rows: &R, skip: usize, threads: usize) -> (TriangularFactor, f64) {
+fn factor<'a, R: RowSource<'a>>(rows: &R, skip: usize, threads: usize) -> (TriangularFactor, f64) {
     let start = rows.first_row(skip).min(rows.len());
     let factor = fold_parallel(rows.len() - start, rows.cols(), threads, |i, row| {
         rows.fill(start + i, row)
     });
-    let (f1, f2) = rows.flags();
-    (factor, moving_fraction(f1, f2, skip))
+    let part = rows.part();
+    (factor, moving_fraction(&part.f1, &part.f2, skip))
 }
 
 /// The cascade's regression at an estimate: x by eq (22) and f1, f2 by eq (25)-(26) for
 /// every sample; rows are built from them on demand.
 struct CascadeRows<'a> {
-    backlash: &'a GeneralBacklash,
-    u: &'a [f64],
+    part: BacklashColumns<'a>,
     y: &'a [f64],
-    na: usize,
-    nb: usize,
-    n: usize,
-    cols: usize,
-    x: Vec<f64>,
-    f1: Vec<bool>,
-    f2: Vec<bool>,
 }
 
 impl<'a> CascadeRows<'a> {
@@ -200,10 +222,10 @@ impl<'a> CascadeRows<'a> {
         y_switch: &[f64],
     ) -> Result<Self> {
         let mut rows = Self::without_switching(linear, backlash, u, y, y_switch)?;
-        (rows.f1, rows.f2) = (0..u.len())
+        (rows.part.f1, rows.part.f2) = (0..u.len())
             .map(|t| {
                 let ys_prev = if t > 0 { y_switch[t - 1] } else { 0.0 };
-                switching(backlash, rows.x[t], ys_prev) // eq (25)-(26)
+                switching(backlash, rows.part.x[t], ys_prev) // eq (25)-(26)
             })
             .unzip();
         Ok(rows)
@@ -221,19 +243,9 @@ impl<'a> CascadeRows<'a> {
         check_signal("y", y)?;
         check_same_length(u, y, "y")?;
         check_same_length(u, y_switch, "y_switch")?;
-        let n = degree(backlash)?;
-        let (na, nb) = (linear.na(), linear.nb());
         Ok(Self {
-            backlash,
-            u,
+            part: BacklashColumns::new(linear, backlash, u)?,
             y,
-            na,
-            nb,
-            n,
-            cols: na + nb + 2 * n + 1,
-            x: linear.simulate(u, &linear.rest_state())?, // eq (22)
-            f1: Vec::new(),
-            f2: Vec::new(),
         })
     }
 
@@ -243,17 +255,18 @@ impl<'a> CascadeRows<'a> {
     /// every time (`SplitRows::keep`).
     #[inline]
     fn fill_parts(&self, t: usize, f1: bool, f2: bool, split: &mut SplitRows) {
-        let x = &self.x;
-        let (na, nb, n) = (self.na, self.nb, self.n);
+        let part = &self.part;
+        let (x, u, backlash) = (&part.x, part.u, part.backlash);
+        let (na, nb, n) = (part.na, part.nb, part.n);
         let left = split.slot(0);
         for i in 1..=na {
-            left[i - 1] = if i <= t { self.u[t - i] } else { 0.0 };
+            left[i - 1] = if i <= t { u[t - i] } else { 0.0 };
         }
         for j in 1..=nb {
             left[na + j - 1] = if j <= t { -x[t - j] } else { 0.0 };
         }
         left[na + nb] = 1.0;
-        let xi1 = x[t] + self.backlash.c_left(); // eq (23)
+        let xi1 = x[t] + backlash.c_left(); // eq (23)
         let mut power = xi1;
         for v in &mut left[na + nb + 1..na + nb + n] {
             power *= xi1;
@@ -263,7 +276,7 @@ impl<'a> CascadeRows<'a> {
         let right = split.slot(1);
         right[0] = x[t];
         right[1] = -1.0;
-        let xi2 = x[t] - self.backlash.c_right(); // eq (24)
+        let xi2 = x[t] - backlash.c_right(); // eq (24)
         let mut power = xi2;
         for v in &mut right[2..=n] {
             power *= xi2;
@@ -275,42 +288,27 @@ impl<'a> CascadeRows<'a> {
     }
 }
 
-impl RowSource for CascadeRows<'_> {
+impl<'a> RowSource<'a> for CascadeRows<'a> {
+    fn part(&self) -> &BacklashColumns<'a> {
+        &self.part
+    }
+
+    fn into_part(self) -> BacklashColumns<'a> {
+        self.part
+    }
+
     fn cols(&self) -> usize {
-        self.cols
+        self.part.cols()
     }
 
     fn first_row(&self, skip: usize) -> usize {
         skip
     }
 
-    fn len(&self) -> usize {
-        self.u.len()
-    }
-
-    fn signals(self) -> (Vec<f64>, Vec<bool>, Vec<bool>) {
-        (self.x, self.f1, self.f2)
-    }
-
-    fn flags(&self) -> (&[bool], &[bool]) {
-        (&self.f1, &self.f2)
-    }
-
     /// phi(t) of eq (18) into `row`; returns the target y(t) - y(t-1)[1 - f1][1 - f2] (21).
     fn fill(&self, t: usize, row: &mut [f64]) -> f64 {
-        let (f1, f2) = (self.f1[t], self.f2[t]);
-        backlash_part(
-            row,
-            self.na,
-            self.nb,
-            self.n,
-            self.backlash,
-            self.u,
-            &self.x,
-            t,
-            f1,
-            f2,
-        );
+        let (f1, f2) = (self.part.f1[t], self.part.f2[t]);
+        self.part.fill(row, t, f1, f2);
         let y_prev = if t > 0 { self.y[t - 1] } else { 0.0 };
         let hold = if f1 || f2 { 0.0 } else { y_prev };
         self.y[t] - hold // eq (21)
@@ -377,8 +375,8 @@ pub fn cascade_iteration(
 ) -> Result<(TriangularFactor, f64, f64)> {
     let rows = CascadeRows::without_switching(linear, backlash, u, y, y_switch)?;
     let rmse = match backlash.padded_step() {
-        Some(padded) => simulation_rmse(&rows.x, y, skip, padded),
-        None => simulation_rmse(&rows.x, y, skip, backlash),
+        Some(padded) => simulation_rmse(&rows.part.x, y, skip, padded),
+        None => simulation_rmse(&rows.part.x, y, skip, backlash),
     };
     let (factor, moving) =
         cascade_rows_factor(&rows, backlash, y_switch, skip, threads_for(u.len()));
@@ -442,11 +440,12 @@ fn fold_cascade_rows(
     threads: usize,
     cases: impl Fn(f64, f64) -> (bool, bool) + Sync,
 ) -> (TriangularFactor, usize) {
-    let (left, right) = (rows.na + rows.nb + rows.n, rows.n + 1);
+    let part = &rows.part;
+    let (left, right) = (part.na + part.nb + part.n, part.n + 1);
     fold_parallel_split(rows.len() - start, &[left, right], threads, |i, split| {
         let t = start + i;
         let ys_prev = if t > 0 { y_switch[t - 1] } else { 0.0 };
-        let (f1, f2) = cases(rows.x[t], ys_prev);
+        let (f1, f2) = cases(part.x[t], ys_prev);
         rows.fill_parts(t, f1, f2, split);
     })
 }
@@ -454,19 +453,11 @@ fn fold_cascade_rows(
 /// The sandwich's regression at an estimate: x by eq (22), the backlash output y by eq (35)
 /// and its f1, f2 for every sample; rows are built from them on demand.
 struct SandwichRows<'a> {
-    backlash: &'a GeneralBacklash,
-    u: &'a [f64],
+    part: BacklashColumns<'a>,
     w: &'a [f64],
-    na: usize,
-    nb: usize,
-    n: usize,
     nr: usize,
     ns: usize,
-    cols: usize,
-    x: Vec<f64>,
     y: Vec<f64>,
-    f1: Vec<bool>,
-    f2: Vec<bool>,
 }
 
 impl<'a> SandwichRows<'a> {
@@ -480,68 +471,42 @@ impl<'a> SandwichRows<'a> {
         check_signal("u", u)?;
         check_signal("w", w)?;
         check_same_length(u, w, "w")?;
-        let n = degree(backlash)?;
-        let (na, nb) = (input_linear.na(), input_linear.nb());
-        let (nr, ns) = (output_linear.na(), output_linear.nb());
-        let x = input_linear.simulate(u, &input_linear.rest_state())?; // eq (22)
-        let y = backlash.simulate(&x, 0.0)?; // eq (35)
-        let (f1, f2) = crate::cascade::switching_flags(backlash, &x, &y, 0.0);
+        let mut part = BacklashColumns::new(input_linear, backlash, u)?;
+        let y = backlash.simulate(&part.x, 0.0)?; // eq (35)
+        (part.f1, part.f2) = crate::model::cascade::switching_flags(backlash, &part.x, &y, 0.0);
         Ok(Self {
-            backlash,
-            u,
+            part,
             w,
-            na,
-            nb,
-            n,
-            nr,
-            ns,
-            cols: na + nb + 2 * n + 1 + nr.saturating_sub(1) + ns,
-            x,
+            nr: output_linear.na(),
+            ns: output_linear.nb(),
             y,
-            f1,
-            f2,
         })
     }
 }
 
-impl RowSource for SandwichRows<'_> {
+impl<'a> RowSource<'a> for SandwichRows<'a> {
+    fn part(&self) -> &BacklashColumns<'a> {
+        &self.part
+    }
+
+    fn into_part(self) -> BacklashColumns<'a> {
+        self.part
+    }
+
     fn cols(&self) -> usize {
-        self.cols
+        self.part.cols() + self.nr.saturating_sub(1) + self.ns
     }
 
     fn first_row(&self, skip: usize) -> usize {
         skip.max(1) // eq (33) starts from the backlash at t - 1
     }
 
-    fn len(&self) -> usize {
-        self.u.len()
-    }
-
-    fn signals(self) -> (Vec<f64>, Vec<bool>, Vec<bool>) {
-        (self.x, self.f1, self.f2)
-    }
-
-    fn flags(&self) -> (&[bool], &[bool]) {
-        (&self.f1, &self.f2)
-    }
-
     /// Phi(t) of eq (33) into `row` (t >= 1); returns the target of eq (34).
     fn fill(&self, t: usize, row: &mut [f64]) -> f64 {
         let tau = t - 1;
-        let (f1, f2) = (self.f1[tau], self.f2[tau]);
+        let (f1, f2) = (self.part.f1[tau], self.part.f2[tau]);
         let lag = |s: &[f64], k: usize| if k <= t { s[t - k] } else { 0.0 };
-        let mut k = backlash_part(
-            row,
-            self.na,
-            self.nb,
-            self.n,
-            self.backlash,
-            self.u,
-            &self.x,
-            tau,
-            f1,
-            f2,
-        );
+        let mut k = self.part.fill(row, tau, f1, f2);
         for i in 2..=self.nr {
             row[k] = lag(&self.y, i);
             k += 1;
@@ -692,63 +657,15 @@ impl<'a> ArxRows<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn names(p: usize) -> Vec<String> {
-        (0..p).map(|j| format!("p{j}")).collect()
-    }
-
-    fn input(n: usize) -> Vec<f64> {
-        // a deterministic, rich input in (-1, 1)
-        let mut s = 12345u64;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-            })
-            .collect()
-    }
-
-    #[test]
-    fn cascade_regression_is_exact_at_the_true_parameters() {
-        // Example 1: at the true values eq (21) holds with e = 0, so LS returns theta exactly.
-        let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
-        let bl = GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap();
-        let u = input(1500);
-        let x = lin.simulate(&u, &lin.rest_state()).unwrap();
-        let y = bl.simulate(&x, 0.0).unwrap();
-        let reg = cascade_regression(&lin, &bl, &u, &y, &y, 0).unwrap();
-        let ls = solve(&reg.phi, reg.rows, reg.cols, &reg.target, &names(reg.cols)).unwrap();
-        // theta = a1 a2 b1 b2 c1 mL2 mL3 mR1 c2 mR2 mR3 with c2 = mR1 cR
-        let want = [0.7, 0.5, -0.2, 0.35, 0.6, -0.3, 0.3, 1.5, 0.75, 0.4, 0.2];
-        for (g, w) in ls.theta.iter().zip(want) {
-            assert!((g - w).abs() < 1e-9, "{:?}", ls.theta);
-        }
-    }
-
-    #[test]
-    fn sandwich_regression_is_exact_at_the_true_parameters() {
-        let lin = LinearBlock::new(vec![0.8, 0.2], vec![0.2, -0.2]).unwrap();
-        let bl = GeneralBacklash::new(0.4, 0.5, vec![1.0, 0.1, 0.3], vec![0.75, 0.2, 0.6]).unwrap();
-        let out = LinearBlock::new(vec![1.0, 0.15], vec![-0.2, 0.35]).unwrap();
-        let u = input(1500);
-        let m = crate::SandwichModel::new(lin.clone(), bl.clone(), out.clone());
-        let w = m.simulate(&u, &m.rest_state()).unwrap();
-        let reg = sandwich_regression(&lin, &bl, &out, &u, &w, 0).unwrap();
-        let ls = solve(&reg.phi, reg.rows, reg.cols, &reg.target, &names(reg.cols)).unwrap();
-        // a1 a2 b1 b2 c1 mL2 mL3 mR1 c2 mR2 mR3 r2 s1 s2
-        let want = [
-            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.375, 0.2, 0.6, 0.15, -0.2, 0.35,
-        ];
-        for (g, w) in ls.theta.iter().zip(want) {
-            assert!((g - w).abs() < 1e-9, "{:?}", ls.theta);
-        }
-    }
+    use crate::linalg::lstsq::solve;
+    use crate::test_params::{
+        example1, example1_linear, example2, input, names, with_noise, EXAMPLE1_REGRESSION,
+        EXAMPLE2_REGRESSION,
+    };
 
     #[test]
     fn streamed_arx_equals_the_dense_one() {
-        let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
+        let lin = example1_linear();
         let u = input(5000);
         let mut x = lin.simulate(&u, &lin.rest_state()).unwrap();
         for (k, v) in x.iter_mut().enumerate() {
@@ -768,7 +685,7 @@ mod tests {
 
     #[test]
     fn arx_recovers_a_linear_block() {
-        let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
+        let lin = example1_linear();
         let u = input(300);
         let x = lin.simulate(&u, &lin.rest_state()).unwrap();
         let (phi, target) = arx_regression(&u, &x, 2, 2, 1, 0).unwrap();
@@ -776,11 +693,6 @@ mod tests {
         for (g, w) in ls.theta.iter().zip([0.7, 0.5, -0.2, 0.35]) {
             assert!((g - w).abs() < 1e-12);
         }
-    }
-
-    fn noisy(v: &[f64], level: f64) -> Vec<f64> {
-        let e = input(v.len() + 7);
-        v.iter().zip(&e[7..]).map(|(a, b)| a + level * b).collect()
     }
 
     fn assert_close(got: &LeastSquares, want: &LeastSquares, tol: f64) {
@@ -802,27 +714,12 @@ mod tests {
         }
     }
 
-    fn example1() -> (LinearBlock, GeneralBacklash) {
-        (
-            LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap(),
-            GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap(),
-        )
-    }
-
-    fn example2() -> (LinearBlock, GeneralBacklash, LinearBlock) {
-        (
-            LinearBlock::new(vec![0.8, 0.2], vec![0.2, -0.2]).unwrap(),
-            GeneralBacklash::new(0.4, 0.5, vec![1.0, 0.1, 0.3], vec![0.75, 0.2, 0.6]).unwrap(),
-            LinearBlock::new(vec![1.0, 0.15], vec![-0.2, 0.35]).unwrap(),
-        )
-    }
-
     #[test]
     fn cascade_iteration_is_the_factor_plus_the_estimate_s_own_simulation_rmse() {
         let (lin, bl) = example1();
         let u = input(3000);
         let x = lin.simulate(&u, &lin.rest_state()).unwrap();
-        let yn = noisy(&bl.simulate(&x, 0.0).unwrap(), 0.05);
+        let yn = with_noise(&bl.simulate(&x, 0.0).unwrap(), 0.05);
         let est =
             GeneralBacklash::from_estimate(0.5, 0.4, vec![1.0, -0.2, 0.25], vec![1.4, 0.3, 0.1])
                 .unwrap();
@@ -857,7 +754,7 @@ mod tests {
         let u = input(5000);
         let x = lin.simulate(&u, &lin.rest_state()).unwrap();
         let y = bl.simulate(&x, 0.0).unwrap();
-        let want = [0.7, 0.5, -0.2, 0.35, 0.6, -0.3, 0.3, 1.5, 0.75, 0.4, 0.2];
+        let want = EXAMPLE1_REGRESSION;
         for threads in [1, 2, 3] {
             let (f, moving) = cascade_factor_threads(&lin, &bl, &u, &y, &y, 0, threads).unwrap();
             let ls = solve_factor(&f, &names(11), moving).unwrap();
@@ -866,7 +763,7 @@ mod tests {
             }
         }
         // noisy data at a perturbed estimate, with a warm-up: the dense solution to rounding
-        let yn = noisy(&y, 0.05);
+        let yn = with_noise(&y, 0.05);
         let est =
             GeneralBacklash::from_estimate(0.5, 0.4, vec![1.0, -0.2, 0.25], vec![1.4, 0.3, 0.1])
                 .unwrap();
@@ -897,9 +794,7 @@ mod tests {
         let u = input(5000);
         let m = crate::SandwichModel::new(lin.clone(), bl.clone(), out.clone());
         let w = m.simulate(&u, &m.rest_state()).unwrap();
-        let want = [
-            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.375, 0.2, 0.6, 0.15, -0.2, 0.35,
-        ];
+        let want = EXAMPLE2_REGRESSION;
         for threads in [1, 2] {
             let (f, moving) = sandwich_factor_threads(&lin, &bl, &out, &u, &w, 0, threads).unwrap();
             let ls = solve_factor(&f, &names(14), moving).unwrap();
@@ -907,7 +802,7 @@ mod tests {
                 assert!((g - w).abs() < 1e-9, "{:?}", ls.theta);
             }
         }
-        let wn = noisy(&w, 0.02);
+        let wn = with_noise(&w, 0.02);
         for skip in [0, 1, 50] {
             let reg = sandwich_regression(&lin, &bl, &out, &u, &wn, skip).unwrap();
             let dense = reg.solve(&names(14), skip).unwrap();
