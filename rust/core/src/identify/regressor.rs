@@ -31,28 +31,28 @@ pub struct Regression {
 }
 
 impl Regression {
-    /// Fraction of samples from `skip` on where the estimate's backlash moves (f1 or f2).
-    pub fn moving_fraction(&self, skip: usize) -> f64 {
-        moving_fraction(&self.f1, &self.f2, skip)
+    /// Fraction of samples from `warmup` on where the estimate's backlash moves (f1 or f2).
+    pub fn moving_fraction(&self, warmup: usize) -> f64 {
+        moving_fraction(&self.f1, &self.f2, warmup)
     }
 
     /// The least-squares solution; when the data do not determine it, the error also says on
     /// how many samples the current estimate moves the backlash.
-    pub fn solve(&self, names: &[String], skip: usize) -> Result<LeastSquares> {
+    pub fn solve(&self, names: &[String], warmup: usize) -> Result<LeastSquares> {
         solve(&self.phi, self.rows, self.cols, &self.target, names)
-            .map_err(|e| with_moving_fraction(e, self.moving_fraction(skip)))
+            .map_err(|e| with_moving_fraction(e, self.moving_fraction(warmup)))
     }
 }
 
-/// Fraction of samples from `skip` on where the backlash moves (f1 or f2); 0 for none.
-pub fn moving_fraction(f1: &[bool], f2: &[bool], skip: usize) -> f64 {
-    let n = f1.len().min(f2.len()).saturating_sub(skip);
+/// Fraction of samples from `warmup` on where the backlash moves (f1 or f2); 0 for none.
+pub fn moving_fraction(f1: &[bool], f2: &[bool], warmup: usize) -> f64 {
+    let n = f1.len().min(f2.len()).saturating_sub(warmup);
     if n == 0 {
         return 0.0;
     }
-    let moving = f1[skip..]
+    let moving = f1[warmup..]
         .iter()
-        .zip(&f2[skip..])
+        .zip(&f2[warmup..])
         .filter(|(a, b)| **a || **b)
         .count();
     moving as f64 / n as f64
@@ -166,8 +166,8 @@ trait RowSource<'a>: Sync {
     fn part(&self) -> &BacklashColumns<'a>;
     fn into_part(self) -> BacklashColumns<'a>;
     fn cols(&self) -> usize;
-    /// The first usable row for a warm-up of `skip` samples.
-    fn first_row(&self, skip: usize) -> usize;
+    /// The first usable row for a warm-up of `warmup` samples.
+    fn first_row(&self, warmup: usize) -> usize;
     /// The row of sample t into `row`; returns its target.
     fn fill(&self, t: usize, row: &mut [f64]) -> f64;
 
@@ -176,9 +176,9 @@ trait RowSource<'a>: Sync {
     }
 }
 
-/// All rows from `skip` on as a dense row-major matrix.
-fn dense<'a, R: RowSource<'a>>(rows: R, skip: usize) -> Regression {
-    let (cols, start) = (rows.cols(), rows.first_row(skip).min(rows.len()));
+/// All rows from `warmup` on as a dense row-major matrix.
+fn dense<'a, R: RowSource<'a>>(rows: R, warmup: usize) -> Regression {
+    let (cols, start) = (rows.cols(), rows.first_row(warmup).min(rows.len()));
     let mut phi = vec![0.0; (rows.len() - start) * cols];
     let target: Vec<f64> = (start..rows.len())
         .map(|t| rows.fill(t, &mut phi[(t - start) * cols..(t - start + 1) * cols]))
@@ -195,15 +195,19 @@ fn dense<'a, R: RowSource<'a>>(rows: R, skip: usize) -> Regression {
     }
 }
 
-/// All rows from `skip` on folded into a triangular factor on `threads` threads, with the
+/// All rows from `warmup` on folded into a triangular factor on `threads` threads, with the
 /// moving fraction.
-fn factor<'a, R: RowSource<'a>>(rows: &R, skip: usize, threads: usize) -> (TriangularFactor, f64) {
-    let start = rows.first_row(skip).min(rows.len());
+fn factor<'a, R: RowSource<'a>>(
+    rows: &R,
+    warmup: usize,
+    threads: usize,
+) -> (TriangularFactor, f64) {
+    let start = rows.first_row(warmup).min(rows.len());
     let factor = fold_parallel(rows.len() - start, rows.cols(), threads, |i, row| {
         rows.fill(start + i, row)
     });
     let part = rows.part();
-    (factor, moving_fraction(&part.f1, &part.f2, skip))
+    (factor, moving_fraction(&part.f1, &part.f2, warmup))
 }
 
 /// The cascade's regression at an estimate: x by eq (22) and f1, f2 by eq (25)-(26) for
@@ -301,8 +305,8 @@ impl<'a> RowSource<'a> for CascadeRows<'a> {
         self.part.cols()
     }
 
-    fn first_row(&self, skip: usize) -> usize {
-        skip
+    fn first_row(&self, warmup: usize) -> usize {
+        warmup
     }
 
     /// phi(t) of eq (18) into `row`; returns the target y(t) - y(t-1)[1 - f1][1 - f2] (21).
@@ -317,32 +321,40 @@ impl<'a> RowSource<'a> for CascadeRows<'a> {
 
 /// Eq (18)-(21) at the current estimate: x by eq (22), f1, f2 by eq (25)-(26) with
 /// `y_switch(t-1)` (the measured output as the paper reads, or the model's simulated output),
-/// target y(t) - y(t-1)[1 - f1][1 - f2] with the measured y. Rows t < `skip` are left out.
+/// target y(t) - y(t-1)[1 - f1][1 - f2] with the measured y. Rows t < `warmup` are left out.
 pub fn cascade_regression(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
     u: &[f64],
     y: &[f64],
     y_switch: &[f64],
-    skip: usize,
+    warmup: usize,
 ) -> Result<Regression> {
     Ok(dense(
         CascadeRows::new(linear, backlash, u, y, y_switch)?,
-        skip,
+        warmup,
     ))
 }
 
 /// The rows of `cascade_regression` folded into a triangular factor on the default number
-/// of threads, without the N x p matrix; with the moving fraction from `skip` on.
+/// of threads, without the N x p matrix; with the moving fraction from `warmup` on.
 pub fn cascade_factor(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
     u: &[f64],
     y: &[f64],
     y_switch: &[f64],
-    skip: usize,
+    warmup: usize,
 ) -> Result<(TriangularFactor, f64)> {
-    cascade_factor_threads(linear, backlash, u, y, y_switch, skip, threads_for(u.len()))
+    cascade_factor_threads(
+        linear,
+        backlash,
+        u,
+        y,
+        y_switch,
+        warmup,
+        threads_for(u.len()),
+    )
 }
 
 /// `cascade_factor` on `threads` threads (the result depends on it only through rounding).
@@ -352,18 +364,18 @@ pub fn cascade_factor_threads(
     u: &[f64],
     y: &[f64],
     y_switch: &[f64],
-    skip: usize,
+    warmup: usize,
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     let rows = CascadeRows::without_switching(linear, backlash, u, y, y_switch)?;
     Ok(cascade_rows_factor(
-        &rows, backlash, y_switch, skip, threads,
+        &rows, backlash, y_switch, warmup, threads,
     ))
 }
 
 /// One iteration of the cascade algorithm in one pass over the record: the factor and moving
 /// fraction of `cascade_factor`, and the free-run simulation RMSE of the estimate itself
-/// (from rest, samples t >= `skip`; +inf if the simulation overflows), which the iterations
+/// (from rest, samples t >= `warmup`; +inf if the simulation overflows), which the iterations
 /// report for every iterate and which needs only the backlash run on the same x.
 pub fn cascade_iteration(
     linear: &LinearBlock,
@@ -371,29 +383,29 @@ pub fn cascade_iteration(
     u: &[f64],
     y: &[f64],
     y_switch: &[f64],
-    skip: usize,
+    warmup: usize,
 ) -> Result<(TriangularFactor, f64, f64)> {
     let rows = CascadeRows::without_switching(linear, backlash, u, y, y_switch)?;
     let rmse = match backlash.padded_step() {
-        Some(padded) => simulation_rmse(&rows.part.x, y, skip, padded),
-        None => simulation_rmse(&rows.part.x, y, skip, backlash),
+        Some(padded) => simulation_rmse(&rows.part.x, y, warmup, padded),
+        None => simulation_rmse(&rows.part.x, y, warmup, backlash),
     };
     let (factor, moving) =
-        cascade_rows_factor(&rows, backlash, y_switch, skip, threads_for(u.len()));
+        cascade_rows_factor(&rows, backlash, y_switch, warmup, threads_for(u.len()));
     Ok((factor, moving, rmse))
 }
 
-/// RMS of y(t) - y_sim(t) over t >= skip, y_sim the backlash output for x from y(0) = 0.
-fn simulation_rmse(x: &[f64], y: &[f64], skip: usize, step: impl Step) -> f64 {
+/// RMS of y(t) - y_sim(t) over t >= warmup, y_sim the backlash output for x from y(0) = 0.
+fn simulation_rmse(x: &[f64], y: &[f64], warmup: usize, step: impl Step) -> f64 {
     let (mut y_prev, mut sse) = (0.0, 0.0);
     for (t, (&xt, &yt)) in x.iter().zip(y).enumerate() {
         y_prev = step.step(xt, y_prev);
-        if t >= skip {
+        if t >= warmup {
             let e = yt - y_prev;
             sse += e * e;
         }
     }
-    let rmse = (sse / x.len().saturating_sub(skip).max(1) as f64).sqrt();
+    let rmse = (sse / x.len().saturating_sub(warmup).max(1) as f64).sqrt();
     if rmse.is_finite() {
         rmse
     } else {
@@ -401,19 +413,19 @@ fn simulation_rmse(x: &[f64], y: &[f64], skip: usize, step: impl Step) -> f64 {
     }
 }
 
-/// The factor of eq (18) for `rows` from `skip` on, split by branch, and the moving fraction.
+/// The factor of eq (18) for `rows` from `warmup` on, split by branch, and the moving fraction.
 fn cascade_rows_factor(
     rows: &CascadeRows,
     backlash: &GeneralBacklash,
     y_switch: &[f64],
-    skip: usize,
+    warmup: usize,
     threads: usize,
 ) -> (TriangularFactor, f64) {
     // Eq (18): a row has f1 times the left-branch columns or f2 times the right-branch ones
     // (f1 f2 = 0), never both, so A^T A is block diagonal and each branch folds on its own.
     // f1, f2 (eq 25-26) depend on x(t) and y_switch(t-1) only: the folding threads evaluate
     // them for their own rows.
-    let start = skip.min(rows.len());
+    let start = warmup.min(rows.len());
     let (factor, zero_rows) = match backlash.padded_step() {
         Some(padded) => fold_cascade_rows(rows, y_switch, start, threads, |x, y_prev| {
             padded.switching(x, y_prev)
@@ -497,8 +509,8 @@ impl<'a> RowSource<'a> for SandwichRows<'a> {
         self.part.cols() + self.nr.saturating_sub(1) + self.ns
     }
 
-    fn first_row(&self, skip: usize) -> usize {
-        skip.max(1) // eq (33) starts from the backlash at t - 1
+    fn first_row(&self, warmup: usize) -> usize {
+        warmup.max(1) // eq (33) starts from the backlash at t - 1
     }
 
     /// Phi(t) of eq (33) into `row` (t >= 1); returns the target of eq (34).
@@ -523,30 +535,30 @@ impl<'a> RowSource<'a> for SandwichRows<'a> {
 /// Eq (33)-(34) at the current estimate: x by eq (22), the backlash output y by eq (35)
 /// (the model's own, as y is not measured), f1, f2 from it; rows
 /// [backlash part at t-1, y(t-2)..y(t-nr), -w(t-1)..-w(t-ns)] with the measured w, target
-/// w(t) - y(t-2)[1 - f1(t-1)][1 - f2(t-1)]. Rows t < max(skip, 1) are left out.
+/// w(t) - y(t-2)[1 - f1(t-1)][1 - f2(t-1)]. Rows t < max(warmup, 1) are left out.
 pub fn sandwich_regression(
     input_linear: &LinearBlock,
     backlash: &GeneralBacklash,
     output_linear: &LinearBlock,
     u: &[f64],
     w: &[f64],
-    skip: usize,
+    warmup: usize,
 ) -> Result<Regression> {
     Ok(dense(
         SandwichRows::new(input_linear, backlash, output_linear, u, w)?,
-        skip,
+        warmup,
     ))
 }
 
 /// The rows of `sandwich_regression` folded into a triangular factor on the default number
-/// of threads, without the N x p matrix; with the moving fraction from `skip` on.
+/// of threads, without the N x p matrix; with the moving fraction from `warmup` on.
 pub fn sandwich_factor(
     input_linear: &LinearBlock,
     backlash: &GeneralBacklash,
     output_linear: &LinearBlock,
     u: &[f64],
     w: &[f64],
-    skip: usize,
+    warmup: usize,
 ) -> Result<(TriangularFactor, f64)> {
     sandwich_factor_threads(
         input_linear,
@@ -554,7 +566,7 @@ pub fn sandwich_factor(
         output_linear,
         u,
         w,
-        skip,
+        warmup,
         threads_for(u.len()),
     )
 }
@@ -566,15 +578,15 @@ pub fn sandwich_factor_threads(
     output_linear: &LinearBlock,
     u: &[f64],
     w: &[f64],
-    skip: usize,
+    warmup: usize,
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     let rows = SandwichRows::new(input_linear, backlash, output_linear, u, w)?;
-    Ok(factor(&rows, skip, threads))
+    Ok(factor(&rows, warmup, threads))
 }
 
 /// ARX regression y(t) = sum a_i u(t-delay+1-i) - sum b_j y(t-j): rows
-/// [u(t-delay)..u(t-delay-na+1), -y(t-1..t-nb)] for t >= skip, zero before the record.
+/// [u(t-delay)..u(t-delay-na+1), -y(t-1..t-nb)] for t >= warmup, zero before the record.
 /// Columns a_1..a_na, b_1..b_nb. The cascade has delay 1; the sandwich's two blocks delay 2.
 pub fn arx_regression(
     u: &[f64],
@@ -582,10 +594,10 @@ pub fn arx_regression(
     na: usize,
     nb: usize,
     delay: usize,
-    skip: usize,
+    warmup: usize,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
     let rows = ArxRows::new(u, y, na, nb, delay)?;
-    let start = skip.min(u.len());
+    let start = warmup.min(u.len());
     let mut phi = vec![0.0; (u.len() - start) * rows.cols];
     let target = (start..u.len())
         .map(|t| {
@@ -605,10 +617,10 @@ pub fn arx_factor(
     na: usize,
     nb: usize,
     delay: usize,
-    skip: usize,
+    warmup: usize,
 ) -> Result<TriangularFactor> {
     let rows = ArxRows::new(u, y, na, nb, delay)?;
-    let start = skip.min(u.len());
+    let start = warmup.min(u.len());
     Ok(fold_parallel(
         u.len() - start,
         rows.cols,
@@ -726,12 +738,12 @@ mod tests {
         let lin2 = LinearBlock::new(vec![0.6, 0.45], vec![-0.1, 0.3]).unwrap();
         let model = crate::CascadeModel::new(lin2.clone(), est.clone());
         let y_sim = model.simulate(&u, &model.rest_state()).unwrap();
-        for skip in [0, 250] {
-            let (f, moving, rmse) = cascade_iteration(&lin2, &est, &u, &yn, &yn, skip).unwrap();
-            let (want_f, want_moving) = cascade_factor(&lin2, &est, &u, &yn, &yn, skip).unwrap();
+        for warmup in [0, 250] {
+            let (f, moving, rmse) = cascade_iteration(&lin2, &est, &u, &yn, &yn, warmup).unwrap();
+            let (want_f, want_moving) = cascade_factor(&lin2, &est, &u, &yn, &yn, warmup).unwrap();
             assert_eq!((f, moving), (want_f, want_moving));
-            let sse: f64 = (skip..u.len()).map(|t| (yn[t] - y_sim[t]).powi(2)).sum();
-            let want = (sse / (u.len() - skip) as f64).sqrt();
+            let sse: f64 = (warmup..u.len()).map(|t| (yn[t] - y_sim[t]).powi(2)).sum();
+            let want = (sse / (u.len() - warmup) as f64).sqrt();
             assert!((rmse - want).abs() < 1e-12 * want, "{rmse} vs {want}");
         }
         // the degree-4 estimate takes the unpadded path, with the same result
@@ -768,14 +780,14 @@ mod tests {
             GeneralBacklash::from_estimate(0.5, 0.4, vec![1.0, -0.2, 0.25], vec![1.4, 0.3, 0.1])
                 .unwrap();
         let lin2 = LinearBlock::new(vec![0.6, 0.45], vec![-0.1, 0.3]).unwrap();
-        for skip in [0, 13] {
-            let reg = cascade_regression(&lin2, &est, &u, &yn, &yn, skip).unwrap();
-            let dense = reg.solve(&names(11), skip).unwrap();
+        for warmup in [0, 13] {
+            let reg = cascade_regression(&lin2, &est, &u, &yn, &yn, warmup).unwrap();
+            let dense = reg.solve(&names(11), warmup).unwrap();
             for threads in [1, 2] {
                 let (f, moving) =
-                    cascade_factor_threads(&lin2, &est, &u, &yn, &yn, skip, threads).unwrap();
+                    cascade_factor_threads(&lin2, &est, &u, &yn, &yn, warmup, threads).unwrap();
                 assert_eq!(f.rows(), reg.rows);
-                assert_eq!(moving, reg.moving_fraction(skip));
+                assert_eq!(moving, reg.moving_fraction(warmup));
                 assert_close(
                     &solve_factor(&f, &names(11), moving).unwrap(),
                     &dense,
@@ -803,14 +815,14 @@ mod tests {
             }
         }
         let wn = with_noise(&w, 0.02);
-        for skip in [0, 1, 50] {
-            let reg = sandwich_regression(&lin, &bl, &out, &u, &wn, skip).unwrap();
-            let dense = reg.solve(&names(14), skip).unwrap();
+        for warmup in [0, 1, 50] {
+            let reg = sandwich_regression(&lin, &bl, &out, &u, &wn, warmup).unwrap();
+            let dense = reg.solve(&names(14), warmup).unwrap();
             for threads in [1, 2] {
                 let (f, moving) =
-                    sandwich_factor_threads(&lin, &bl, &out, &u, &wn, skip, threads).unwrap();
+                    sandwich_factor_threads(&lin, &bl, &out, &u, &wn, warmup, threads).unwrap();
                 assert_eq!(f.rows(), reg.rows);
-                assert_eq!(moving, reg.moving_fraction(skip));
+                assert_eq!(moving, reg.moving_fraction(warmup));
                 assert_close(
                     &solve_factor(&f, &names(14), moving).unwrap(),
                     &dense,

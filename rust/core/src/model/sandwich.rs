@@ -148,16 +148,16 @@ impl SandwichModel {
         })
     }
 
-    /// How many samples t >= `skip` move the backlash (f1 or f2 of eq 12-13) on the run
+    /// How many samples t >= `warmup` move the backlash (f1 or f2 of eq 12-13) on the run
     /// from `state`: the flags of `simulate_internals`, counted without storing them.
-    pub fn moving_count(&self, u: &[f64], state: &SandwichState, skip: usize) -> Result<usize> {
+    pub fn moving_count(&self, u: &[f64], state: &SandwichState, warmup: usize) -> Result<usize> {
         let (x, y, _w) = self.run(u, state)?;
         Ok(moving_count(
             &self.backlash,
             &x,
             &y,
             state.output.u_past[0],
-            skip,
+            warmup,
         ))
     }
 }
@@ -225,15 +225,15 @@ mod tests {
     }
 
     #[test]
-    fn moving_count_counts_the_flags_after_skip() {
+    fn moving_count_counts_the_flags_after_warmup() {
         let m = example2();
         let u: Vec<f64> = (0..600).map(|k| ((k as f64) * 0.04).sin() * 1.5).collect();
         let s = m.simulate_internals(&u, &m.rest_state()).unwrap();
         let moving: Vec<bool> = s.f1.iter().zip(&s.f2).map(|(a, b)| a | b).collect();
         assert!(moving.iter().any(|&v| v) && moving.iter().any(|&v| !v));
-        for skip in [0, 10, 333, 600] {
-            let want = moving.iter().skip(skip).filter(|&&v| v).count();
-            assert_eq!(m.moving_count(&u, &m.rest_state(), skip).unwrap(), want);
+        for warmup in [0, 10, 333, 600] {
+            let want = moving.iter().skip(warmup).filter(|&&v| v).count();
+            assert_eq!(m.moving_count(&u, &m.rest_state(), warmup).unwrap(), want);
         }
     }
 }
