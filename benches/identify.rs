@@ -19,7 +19,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use backlashid_core::identify::cascade_oe_factor;
-use backlashid_core::identify::{arx_factor, cascade_factor, solve_factor};
+use backlashid_core::identify::{solve_factor, ArxRegression, CascadeRegression};
 use backlashid_core::linalg::default_threads;
 use backlashid_core::LeastSquares;
 use backlashid_core::{CascadeModel, GeneralBacklash, LinearBlock, TriangularFactor};
@@ -142,8 +142,9 @@ fn ls_names() -> Vec<String> {
 /// on the default threads, and its least-squares solution.
 fn iteration(est: &Estimate, data: &Data, names: &[String]) -> LeastSquares {
     let (factor, moving): (TriangularFactor, f64) =
-        cascade_factor(&est.linear, &est.backlash, &data.u, &data.y, &data.y, 0)
-            .expect("cascade_factor");
+        CascadeRegression::new(&est.linear, &est.backlash, &data.u, &data.y, &data.y)
+            .expect("cascade regression")
+            .factor(0);
     solve_factor(&factor, names, moving).expect("an iteration's least squares")
 }
 
@@ -173,8 +174,8 @@ fn from_ls(theta: &[f64]) -> Estimate {
 fn start(data: &Data) -> Estimate {
     let (na, nb) = (2, 2);
     let names = ["a_1", "a_2", "b_1", "b_2"].map(String::from);
-    let arx = arx_factor(&data.u, &data.y, na, nb, 1, 0)
-        .and_then(|f| f.solve(&names))
+    let arx = ArxRegression::new(&data.u, &data.y, na, nb, 1)
+        .and_then(|r| r.factor(0).solve(&names))
         .expect("ARX fit");
     let zeros = vec![0.0; DEGREE - 1];
     Estimate {

@@ -3,9 +3,7 @@
 //! streaming_speed [N...]
 use std::time::Instant;
 
-use backlashid_core::identify::regressor::{
-    cascade_factor_threads, cascade_regression, sandwich_factor_threads, sandwich_regression,
-};
+use backlashid_core::identify::regressor::{CascadeRegression, SandwichRegression};
 use backlashid_core::identify::sensitivity::{
     cascade_oe_factor_threads, cascade_sensitivity, sandwich_oe_factor_threads,
 };
@@ -65,17 +63,23 @@ fn main() {
         println!("N = {n:e}");
         if n <= 2_000_000 {
             let t = best(reps, n, || {
-                let reg = cascade_regression(&lin, &bl, &u, &y, &y, 0).unwrap();
+                let reg = CascadeRegression::new(&lin, &bl, &u, &y, &y)
+                    .unwrap()
+                    .dense(0);
                 reg.solve(&names[..11], 0).unwrap()
             });
             println!("  cascade dense (regression + lstsq::solve): {t:7.1}");
             let t = best(reps, n, || {
-                let reg = sandwich_regression(&l2, &b2, &o2, &u, &w, 0).unwrap();
+                let reg = SandwichRegression::new(&l2, &b2, &o2, &u, &w)
+                    .unwrap()
+                    .dense(0);
                 reg.solve(&names, 0).unwrap()
             });
             println!("  sandwich dense (regression + lstsq::solve): {t:6.1}");
             let t = best(reps, n, || {
-                let reg = cascade_regression(&lin, &bl, &u, &y, &y, 0).unwrap();
+                let reg = CascadeRegression::new(&lin, &bl, &u, &y, &y)
+                    .unwrap()
+                    .dense(0);
                 faer_dense(&reg.phi, reg.rows, reg.cols, &reg.target)
             });
             println!("  cascade dense, faer QR of N x p (before):  {t:7.1}");
@@ -84,14 +88,18 @@ fn main() {
         }
         for threads in [1, 2] {
             let t = best(reps, n, || {
-                let (f, _) = cascade_factor_threads(&lin, &bl, &u, &y, &y, 0, threads).unwrap();
+                let (f, _) = CascadeRegression::new(&lin, &bl, &u, &y, &y)
+                    .unwrap()
+                    .factor_threads(0, threads);
                 f.solve(&names[..11]).unwrap()
             });
             println!("  cascade_factor + solve, {threads} thread(s):    {t:7.1}");
         }
         for threads in [1, 2] {
             let t = best(reps, n, || {
-                let (f, _) = sandwich_factor_threads(&l2, &b2, &o2, &u, &w, 0, threads).unwrap();
+                let (f, _) = SandwichRegression::new(&l2, &b2, &o2, &u, &w)
+                    .unwrap()
+                    .factor_threads(0, threads);
                 f.solve(&names).unwrap()
             });
             println!("  sandwich_factor + solve, {threads} thread(s):   {t:7.1}");

@@ -18,8 +18,8 @@ extern crate self as backlashid_core;
 pub use augmented::{simulate_augmented, Effects};
 pub use error::{Error, Result};
 pub use identify::{
-    arx_factor, cascade_iteration, cascade_oe_factor, cascade_oe_gradient, sandwich_factor,
-    sandwich_oe_factor, sandwich_oe_gradient, solve_factor, OeGradient,
+    cascade_oe_factor, cascade_oe_gradient, sandwich_oe_factor, sandwich_oe_gradient, solve_factor,
+    ArxRegression, CascadeRegression, OeGradient, SandwichRegression,
 };
 pub use linalg::{fold_parallel, LeastSquares, TriangularFactor};
 pub use model::{

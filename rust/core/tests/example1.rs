@@ -6,7 +6,7 @@
 
 mod common;
 
-use backlashid_core::identify::{cascade_regression, cascade_sensitivity};
+use backlashid_core::identify::{cascade_sensitivity, CascadeRegression};
 use backlashid_core::linalg::lstsq::solve;
 use backlashid_core::CascadeModel;
 use common::{
@@ -42,7 +42,9 @@ fn cascade_regression_is_exact_at_the_true_parameters() {
     let u = input(1500);
     let x = lin.simulate(&u, &lin.rest_state()).unwrap();
     let y = bl.simulate(&x, 0.0).unwrap();
-    let reg = cascade_regression(&lin, &bl, &u, &y, &y, 0).unwrap();
+    let reg = CascadeRegression::new(&lin, &bl, &u, &y, &y)
+        .unwrap()
+        .dense(0);
     let ls = solve(&reg.phi, reg.rows, reg.cols, &reg.target, &names(reg.cols)).unwrap();
     // theta = a1 a2 b1 b2 c1 mL2 mL3 mR1 c2 mR2 mR3 with c2 = mR1 cR
     let want = EXAMPLE1_REGRESSION;

@@ -6,7 +6,7 @@
 
 mod common;
 
-use backlashid_core::identify::{sandwich_regression, sandwich_sensitivity};
+use backlashid_core::identify::{sandwich_sensitivity, SandwichRegression};
 use backlashid_core::linalg::lstsq::solve;
 use backlashid_core::{switching_form, SandwichModel};
 use common::{
@@ -52,7 +52,9 @@ fn sandwich_regression_is_exact_at_the_true_parameters() {
     let u = input(1500);
     let m = SandwichModel::new(lin.clone(), bl.clone(), out.clone());
     let w = m.simulate(&u, &m.rest_state()).unwrap();
-    let reg = sandwich_regression(&lin, &bl, &out, &u, &w, 0).unwrap();
+    let reg = SandwichRegression::new(&lin, &bl, &out, &u, &w)
+        .unwrap()
+        .dense(0);
     let ls = solve(&reg.phi, reg.rows, reg.cols, &reg.target, &names(reg.cols)).unwrap();
     // a1 a2 b1 b2 c1 mL2 mL3 mR1 c2 mR2 mR3 r2 s1 s2
     let want = EXAMPLE2_REGRESSION;

@@ -112,7 +112,8 @@ estimate_fn! {
         let (u, y, ys) = (signal(py, "u", &u)?, signal(py, "y", &y)?, signal(py, "y_switch", &y_switch)?);
         let (ls, moving, rmse) = run(py, || {
             let (lin, bl) = est.blocks()?;
-            let (factor, moving, rmse) = core::cascade_iteration(&lin, &bl, &u, &y, &ys, warmup)?;
+            let regression = core::CascadeRegression::new(&lin, &bl, &u, &y, &ys)?;
+            let (factor, moving, rmse) = regression.iteration(warmup);
             Ok((core::solve_factor(&factor, &names, moving)?, moving, rmse))
         })?;
         Ok((ls_out(py, ls)?, moving, rmse))
@@ -137,7 +138,8 @@ estimate_fn! {
         let (ls, moving) = run(py, || {
             let (lin, bl) = est.blocks()?;
             let out = core::LinearBlock::new(r, s)?;
-            let (factor, moving) = core::sandwich_factor(&lin, &bl, &out, &u, &w, warmup)?;
+            let regression = core::SandwichRegression::new(&lin, &bl, &out, &u, &w)?;
+            let (factor, moving) = regression.factor(warmup);
             Ok((core::solve_factor(&factor, &names, moving)?, moving))
         })?;
         Ok((ls_out(py, ls)?, moving))
@@ -161,7 +163,9 @@ fn arx<'py>(
         .chain((1..=nb).map(|j| format!("b{j}")))
         .collect();
     let ls = run(py, || {
-        core::arx_factor(&u, &y, na, nb, delay, warmup)?.solve(&names)
+        core::ArxRegression::new(&u, &y, na, nb, delay)?
+            .factor(warmup)
+            .solve(&names)
     })?;
     ls_out(py, ls)
 }

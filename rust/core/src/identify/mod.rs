@@ -10,8 +10,7 @@ pub mod sensitivity;
 
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
 pub use regressor::{
-    arx_factor, arx_regression, cascade_factor, cascade_iteration, cascade_regression,
-    sandwich_factor, sandwich_regression, solve_factor, Regression,
+    solve_factor, ArxRegression, CascadeRegression, Regression, SandwichRegression,
 };
 pub use sensitivity::{
     cascade_oe_factor, cascade_sensitivity, sandwich_oe_factor, sandwich_sensitivity, Sensitivity,

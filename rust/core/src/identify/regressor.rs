@@ -215,33 +215,18 @@ fn factor<'a, R: RowSource<'a>>(
 struct CascadeRows<'a> {
     part: BacklashColumns<'a>,
     y: &'a [f64],
+    y_switch: &'a [f64],
 }
 
 impl<'a> CascadeRows<'a> {
+    /// x by eq (22) only; f1 and f2 are left empty (`with_switching`, or the folding threads
+    /// evaluate them).
     fn new(
         linear: &LinearBlock,
         backlash: &'a GeneralBacklash,
         u: &'a [f64],
         y: &'a [f64],
-        y_switch: &[f64],
-    ) -> Result<Self> {
-        let mut rows = Self::without_switching(linear, backlash, u, y, y_switch)?;
-        (rows.part.f1, rows.part.f2) = (0..u.len())
-            .map(|t| {
-                let ys_prev = if t > 0 { y_switch[t - 1] } else { 0.0 };
-                switching(backlash, rows.part.x[t], ys_prev) // eq (25)-(26)
-            })
-            .unzip();
-        Ok(rows)
-    }
-
-    /// x by eq (22) only; f1 and f2 are left empty (the caller evaluates the switching).
-    fn without_switching(
-        linear: &LinearBlock,
-        backlash: &'a GeneralBacklash,
-        u: &'a [f64],
-        y: &'a [f64],
-        y_switch: &[f64],
+        y_switch: &'a [f64],
     ) -> Result<Self> {
         check_signal("u", u)?;
         check_signal("y", y)?;
@@ -250,7 +235,20 @@ impl<'a> CascadeRows<'a> {
         Ok(Self {
             part: BacklashColumns::new(linear, backlash, u)?,
             y,
+            y_switch,
         })
+    }
+
+    /// With f1, f2 of eq (25)-(26) for every sample.
+    fn with_switching(mut self) -> Self {
+        let (part, y_switch) = (&self.part, self.y_switch);
+        (self.part.f1, self.part.f2) = (0..part.u.len())
+            .map(|t| {
+                let ys_prev = if t > 0 { y_switch[t - 1] } else { 0.0 };
+                switching(part.backlash, part.x[t], ys_prev) // eq (25)-(26)
+            })
+            .unzip();
+        self
     }
 
     /// phi(t) of eq (18) restricted to the columns its switching selects: the left part
@@ -319,80 +317,54 @@ impl<'a> RowSource<'a> for CascadeRows<'a> {
     }
 }
 
-/// Eq (18)-(21) at the current estimate: x by eq (22), f1, f2 by eq (25)-(26) with
-/// `y_switch(t-1)` (the measured output as the paper reads, or the model's simulated output),
-/// target y(t) - y(t-1)[1 - f1][1 - f2] with the measured y. Rows t < `warmup` are left out.
-pub fn cascade_regression(
-    linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    u: &[f64],
-    y: &[f64],
-    y_switch: &[f64],
-    warmup: usize,
-) -> Result<Regression> {
-    Ok(dense(
-        CascadeRows::new(linear, backlash, u, y, y_switch)?,
-        warmup,
-    ))
-}
+/// The cascade's regression at an estimate, eq (18)-(21): x by eq (22), f1, f2 by
+/// eq (25)-(26) with `y_switch(t-1)` (the measured output as the paper reads, or the model's
+/// simulated output), target y(t) - y(t-1)[1 - f1][1 - f2] with the measured y. The inputs
+/// are checked and x simulated on construction; the rows are built on demand, as a dense
+/// matrix or folded into a triangular factor. Rows t < `warmup` are left out.
+pub struct CascadeRegression<'a>(CascadeRows<'a>);
 
-/// The rows of `cascade_regression` folded into a triangular factor on the default number
-/// of threads, without the N x p matrix; with the moving fraction from `warmup` on.
-pub fn cascade_factor(
-    linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    u: &[f64],
-    y: &[f64],
-    y_switch: &[f64],
-    warmup: usize,
-) -> Result<(TriangularFactor, f64)> {
-    cascade_factor_threads(
-        linear,
-        backlash,
-        u,
-        y,
-        y_switch,
-        warmup,
-        threads_for(u.len()),
-    )
-}
+impl<'a> CascadeRegression<'a> {
+    pub fn new(
+        linear: &LinearBlock,
+        backlash: &'a GeneralBacklash,
+        u: &'a [f64],
+        y: &'a [f64],
+        y_switch: &'a [f64],
+    ) -> Result<Self> {
+        CascadeRows::new(linear, backlash, u, y, y_switch).map(Self)
+    }
 
-/// `cascade_factor` on `threads` threads (the result depends on it only through rounding).
-pub fn cascade_factor_threads(
-    linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    u: &[f64],
-    y: &[f64],
-    y_switch: &[f64],
-    warmup: usize,
-    threads: usize,
-) -> Result<(TriangularFactor, f64)> {
-    let rows = CascadeRows::without_switching(linear, backlash, u, y, y_switch)?;
-    Ok(cascade_rows_factor(
-        &rows, backlash, y_switch, warmup, threads,
-    ))
-}
+    /// All rows from `warmup` on as a dense row-major matrix, with x, f1 and f2.
+    pub fn dense(self, warmup: usize) -> Regression {
+        dense(self.0.with_switching(), warmup)
+    }
 
-/// One iteration of the cascade algorithm in one pass over the record: the factor and moving
-/// fraction of `cascade_factor`, and the free-run simulation RMSE of the estimate itself
-/// (from rest, samples t >= `warmup`; +inf if the simulation overflows), which the iterations
-/// report for every iterate and which needs only the backlash run on the same x.
-pub fn cascade_iteration(
-    linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    u: &[f64],
-    y: &[f64],
-    y_switch: &[f64],
-    warmup: usize,
-) -> Result<(TriangularFactor, f64, f64)> {
-    let rows = CascadeRows::without_switching(linear, backlash, u, y, y_switch)?;
-    let rmse = match backlash.padded_step() {
-        Some(padded) => simulation_rmse(&rows.part.x, y, warmup, padded),
-        None => simulation_rmse(&rows.part.x, y, warmup, backlash),
-    };
-    let (factor, moving) =
-        cascade_rows_factor(&rows, backlash, y_switch, warmup, threads_for(u.len()));
-    Ok((factor, moving, rmse))
+    /// The rows folded into a triangular factor on the default number of threads, without
+    /// the N x p matrix; with the moving fraction from `warmup` on.
+    pub fn factor(&self, warmup: usize) -> (TriangularFactor, f64) {
+        self.factor_threads(warmup, threads_for(self.0.len()))
+    }
+
+    /// `factor` on `threads` threads (the result depends on it only through rounding).
+    pub fn factor_threads(&self, warmup: usize, threads: usize) -> (TriangularFactor, f64) {
+        cascade_rows_factor(&self.0, warmup, threads)
+    }
+
+    /// One iteration of the cascade algorithm in one pass over the record: the factor and
+    /// moving fraction of `factor`, and the free-run simulation RMSE of the estimate itself
+    /// (from rest, samples t >= `warmup`; +inf if the simulation overflows), which the
+    /// iterations report for every iterate and which needs only the backlash run on the
+    /// same x.
+    pub fn iteration(&self, warmup: usize) -> (TriangularFactor, f64, f64) {
+        let (rows, backlash) = (&self.0, self.0.part.backlash);
+        let rmse = match backlash.padded_step() {
+            Some(padded) => simulation_rmse(&rows.part.x, rows.y, warmup, padded),
+            None => simulation_rmse(&rows.part.x, rows.y, warmup, backlash),
+        };
+        let (factor, moving) = self.factor(warmup);
+        (factor, moving, rmse)
+    }
 }
 
 /// RMS of y(t) - y_sim(t) over t >= warmup, y_sim the backlash output for x from y(0) = 0.
@@ -416,8 +388,6 @@ fn simulation_rmse(x: &[f64], y: &[f64], warmup: usize, step: impl Step) -> f64 
 /// The factor of eq (18) for `rows` from `warmup` on, split by branch, and the moving fraction.
 fn cascade_rows_factor(
     rows: &CascadeRows,
-    backlash: &GeneralBacklash,
-    y_switch: &[f64],
     warmup: usize,
     threads: usize,
 ) -> (TriangularFactor, f64) {
@@ -425,12 +395,12 @@ fn cascade_rows_factor(
     // (f1 f2 = 0), never both, so A^T A is block diagonal and each branch folds on its own.
     // f1, f2 (eq 25-26) depend on x(t) and y_switch(t-1) only: the folding threads evaluate
     // them for their own rows.
-    let start = warmup.min(rows.len());
+    let (start, backlash) = (warmup.min(rows.len()), rows.part.backlash);
     let (factor, zero_rows) = match backlash.padded_step() {
-        Some(padded) => fold_cascade_rows(rows, y_switch, start, threads, |x, y_prev| {
+        Some(padded) => fold_cascade_rows(rows, start, threads, |x, y_prev| {
             padded.switching(x, y_prev)
         }),
-        None => fold_cascade_rows(rows, y_switch, start, threads, |x, y_prev| {
+        None => fold_cascade_rows(rows, start, threads, |x, y_prev| {
             switching(backlash, x, y_prev)
         }),
     };
@@ -447,12 +417,11 @@ fn cascade_rows_factor(
 /// of eq (25)-(26) by `cases(x(t), y_switch(t-1))`.
 fn fold_cascade_rows(
     rows: &CascadeRows,
-    y_switch: &[f64],
     start: usize,
     threads: usize,
     cases: impl Fn(f64, f64) -> (bool, bool) + Sync,
 ) -> (TriangularFactor, usize) {
-    let part = &rows.part;
+    let (part, y_switch) = (&rows.part, rows.y_switch);
     let (left, right) = (part.na + part.nb + part.n, part.n + 1);
     fold_parallel_split(rows.len() - start, &[left, right], threads, |i, split| {
         let t = start + i;
@@ -532,105 +501,46 @@ impl<'a> RowSource<'a> for SandwichRows<'a> {
     }
 }
 
-/// Eq (33)-(34) at the current estimate: x by eq (22), the backlash output y by eq (35)
-/// (the model's own, as y is not measured), f1, f2 from it; rows
+/// The sandwich's regression at an estimate, eq (33)-(34): x by eq (22), the backlash
+/// output y by eq (35) (the model's own, as y is not measured), f1, f2 from it; rows
 /// [backlash part at t-1, y(t-2)..y(t-nr), -w(t-1)..-w(t-ns)] with the measured w, target
-/// w(t) - y(t-2)[1 - f1(t-1)][1 - f2(t-1)]. Rows t < max(warmup, 1) are left out.
-pub fn sandwich_regression(
-    input_linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    output_linear: &LinearBlock,
-    u: &[f64],
-    w: &[f64],
-    warmup: usize,
-) -> Result<Regression> {
-    Ok(dense(
-        SandwichRows::new(input_linear, backlash, output_linear, u, w)?,
-        warmup,
-    ))
-}
+/// w(t) - y(t-2)[1 - f1(t-1)][1 - f2(t-1)]. Checked and simulated on construction; rows
+/// t < max(warmup, 1) are left out.
+pub struct SandwichRegression<'a>(SandwichRows<'a>);
 
-/// The rows of `sandwich_regression` folded into a triangular factor on the default number
-/// of threads, without the N x p matrix; with the moving fraction from `warmup` on.
-pub fn sandwich_factor(
-    input_linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    output_linear: &LinearBlock,
-    u: &[f64],
-    w: &[f64],
-    warmup: usize,
-) -> Result<(TriangularFactor, f64)> {
-    sandwich_factor_threads(
-        input_linear,
-        backlash,
-        output_linear,
-        u,
-        w,
-        warmup,
-        threads_for(u.len()),
-    )
-}
+impl<'a> SandwichRegression<'a> {
+    pub fn new(
+        input_linear: &LinearBlock,
+        backlash: &'a GeneralBacklash,
+        output_linear: &LinearBlock,
+        u: &'a [f64],
+        w: &'a [f64],
+    ) -> Result<Self> {
+        SandwichRows::new(input_linear, backlash, output_linear, u, w).map(Self)
+    }
 
-/// `sandwich_factor` on `threads` threads (the result depends on it only through rounding).
-pub fn sandwich_factor_threads(
-    input_linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    output_linear: &LinearBlock,
-    u: &[f64],
-    w: &[f64],
-    warmup: usize,
-    threads: usize,
-) -> Result<(TriangularFactor, f64)> {
-    let rows = SandwichRows::new(input_linear, backlash, output_linear, u, w)?;
-    Ok(factor(&rows, warmup, threads))
+    /// All rows from `warmup` on as a dense row-major matrix, with x, f1 and f2.
+    pub fn dense(self, warmup: usize) -> Regression {
+        dense(self.0, warmup)
+    }
+
+    /// The rows folded into a triangular factor on the default number of threads, without
+    /// the N x p matrix; with the moving fraction from `warmup` on.
+    pub fn factor(&self, warmup: usize) -> (TriangularFactor, f64) {
+        self.factor_threads(warmup, threads_for(self.0.len()))
+    }
+
+    /// `factor` on `threads` threads (the result depends on it only through rounding).
+    pub fn factor_threads(&self, warmup: usize, threads: usize) -> (TriangularFactor, f64) {
+        factor(&self.0, warmup, threads)
+    }
 }
 
 /// ARX regression y(t) = sum a_i u(t-delay+1-i) - sum b_j y(t-j): rows
-/// [u(t-delay)..u(t-delay-na+1), -y(t-1..t-nb)] for t >= warmup, zero before the record.
-/// Columns a_1..a_na, b_1..b_nb. The cascade has delay 1; the sandwich's two blocks delay 2.
-pub fn arx_regression(
-    u: &[f64],
-    y: &[f64],
-    na: usize,
-    nb: usize,
-    delay: usize,
-    warmup: usize,
-) -> Result<(Vec<f64>, Vec<f64>)> {
-    let rows = ArxRows::new(u, y, na, nb, delay)?;
-    let start = warmup.min(u.len());
-    let mut phi = vec![0.0; (u.len() - start) * rows.cols];
-    let target = (start..u.len())
-        .map(|t| {
-            rows.fill(
-                t,
-                &mut phi[(t - start) * rows.cols..(t - start + 1) * rows.cols],
-            )
-        })
-        .collect();
-    Ok((phi, target))
-}
-
-/// The rows of `arx_regression` folded into a triangular factor (no N x (na + nb) matrix).
-pub fn arx_factor(
-    u: &[f64],
-    y: &[f64],
-    na: usize,
-    nb: usize,
-    delay: usize,
-    warmup: usize,
-) -> Result<TriangularFactor> {
-    let rows = ArxRows::new(u, y, na, nb, delay)?;
-    let start = warmup.min(u.len());
-    Ok(fold_parallel(
-        u.len() - start,
-        rows.cols,
-        threads_for(u.len()),
-        |i, row| rows.fill(start + i, row),
-    ))
-}
-
-/// ARX rows [u(t-delay)..u(t-delay-na+1), -y(t-1..t-nb)] with target y(t).
-struct ArxRows<'a> {
+/// [u(t-delay)..u(t-delay-na+1), -y(t-1..t-nb)] for t >= warmup, zero before the record,
+/// target y(t). Columns a_1..a_na, b_1..b_nb. The cascade has delay 1; the sandwich's two
+/// blocks delay 2.
+pub struct ArxRegression<'a> {
     u: &'a [f64],
     y: &'a [f64],
     na: usize,
@@ -639,12 +549,12 @@ struct ArxRows<'a> {
     cols: usize,
 }
 
-impl<'a> ArxRows<'a> {
-    fn new(u: &'a [f64], y: &'a [f64], na: usize, nb: usize, delay: usize) -> Result<Self> {
+impl<'a> ArxRegression<'a> {
+    pub fn new(u: &'a [f64], y: &'a [f64], na: usize, nb: usize, delay: usize) -> Result<Self> {
         check_signal("u", u)?;
         check_signal("y", y)?;
         check_same_length(u, y, "y")?;
-        Ok(ArxRows {
+        Ok(Self {
             u,
             y,
             na,
@@ -652,6 +562,27 @@ impl<'a> ArxRows<'a> {
             delay,
             cols: na + nb,
         })
+    }
+
+    /// The rows from `warmup` on as a dense row-major matrix, and the targets.
+    pub fn dense(&self, warmup: usize) -> (Vec<f64>, Vec<f64>) {
+        let (start, cols) = (warmup.min(self.u.len()), self.cols);
+        let mut phi = vec![0.0; (self.u.len() - start) * cols];
+        let target = (start..self.u.len())
+            .map(|t| self.fill(t, &mut phi[(t - start) * cols..(t - start + 1) * cols]))
+            .collect();
+        (phi, target)
+    }
+
+    /// The rows from `warmup` on folded into a triangular factor (no N x (na + nb) matrix).
+    pub fn factor(&self, warmup: usize) -> TriangularFactor {
+        let start = warmup.min(self.u.len());
+        fold_parallel(
+            self.u.len() - start,
+            self.cols,
+            threads_for(self.u.len()),
+            |i, row| self.fill(start + i, row),
+        )
     }
 
     fn fill(&self, t: usize, row: &mut [f64]) -> f64 {
@@ -683,10 +614,11 @@ mod tests {
         for (k, v) in x.iter_mut().enumerate() {
             *v += 0.01 * ((k * 7919 % 101) as f64 - 50.0) / 50.0; // deterministic "noise"
         }
-        let (phi, target) = arx_regression(&u, &x, 2, 2, 2, 3).unwrap();
+        let (phi, target) = ArxRegression::new(&u, &x, 2, 2, 2).unwrap().dense(3);
         let dense = solve(&phi, target.len(), 4, &target, &names(4)).unwrap();
-        let streamed = arx_factor(&u, &x, 2, 2, 2, 3)
+        let streamed = ArxRegression::new(&u, &x, 2, 2, 2)
             .unwrap()
+            .factor(3)
             .solve(&names(4))
             .unwrap();
         for (d, s) in dense.theta.iter().zip(&streamed.theta) {
@@ -700,7 +632,7 @@ mod tests {
         let lin = example1_linear();
         let u = input(300);
         let x = lin.simulate(&u, &lin.rest_state()).unwrap();
-        let (phi, target) = arx_regression(&u, &x, 2, 2, 1, 0).unwrap();
+        let (phi, target) = ArxRegression::new(&u, &x, 2, 2, 1).unwrap().dense(0);
         let ls = solve(&phi, target.len(), 4, &target, &names(4)).unwrap();
         for (g, w) in ls.theta.iter().zip([0.7, 0.5, -0.2, 0.35]) {
             assert!((g - w).abs() < 1e-12);
@@ -739,8 +671,12 @@ mod tests {
         let model = crate::CascadeModel::new(lin2.clone(), est.clone());
         let y_sim = model.simulate(&u, &model.rest_state()).unwrap();
         for warmup in [0, 250] {
-            let (f, moving, rmse) = cascade_iteration(&lin2, &est, &u, &yn, &yn, warmup).unwrap();
-            let (want_f, want_moving) = cascade_factor(&lin2, &est, &u, &yn, &yn, warmup).unwrap();
+            let (f, moving, rmse) = CascadeRegression::new(&lin2, &est, &u, &yn, &yn)
+                .unwrap()
+                .iteration(warmup);
+            let (want_f, want_moving) = CascadeRegression::new(&lin2, &est, &u, &yn, &yn)
+                .unwrap()
+                .factor(warmup);
             assert_eq!((f, moving), (want_f, want_moving));
             let sse: f64 = (warmup..u.len()).map(|t| (yn[t] - y_sim[t]).powi(2)).sum();
             let want = (sse / (u.len() - warmup) as f64).sqrt();
@@ -754,8 +690,12 @@ mod tests {
             vec![1.4, 0.3, 0.1, 0.0],
         )
         .unwrap();
-        let (_, moving4, rmse4) = cascade_iteration(&lin2, &wide, &u, &yn, &yn, 0).unwrap();
-        let (_, moving3, rmse3) = cascade_iteration(&lin2, &est, &u, &yn, &yn, 0).unwrap();
+        let (_, moving4, rmse4) = CascadeRegression::new(&lin2, &wide, &u, &yn, &yn)
+            .unwrap()
+            .iteration(0);
+        let (_, moving3, rmse3) = CascadeRegression::new(&lin2, &est, &u, &yn, &yn)
+            .unwrap()
+            .iteration(0);
         assert_eq!(moving4, moving3);
         assert!((rmse4 - rmse3).abs() < 1e-12 * rmse3);
     }
@@ -768,7 +708,9 @@ mod tests {
         let y = bl.simulate(&x, 0.0).unwrap();
         let want = EXAMPLE1_REGRESSION;
         for threads in [1, 2, 3] {
-            let (f, moving) = cascade_factor_threads(&lin, &bl, &u, &y, &y, 0, threads).unwrap();
+            let (f, moving) = CascadeRegression::new(&lin, &bl, &u, &y, &y)
+                .unwrap()
+                .factor_threads(0, threads);
             let ls = solve_factor(&f, &names(11), moving).unwrap();
             for (g, w) in ls.theta.iter().zip(want) {
                 assert!((g - w).abs() < 1e-9, "{:?}", ls.theta);
@@ -781,11 +723,14 @@ mod tests {
                 .unwrap();
         let lin2 = LinearBlock::new(vec![0.6, 0.45], vec![-0.1, 0.3]).unwrap();
         for warmup in [0, 13] {
-            let reg = cascade_regression(&lin2, &est, &u, &yn, &yn, warmup).unwrap();
+            let reg = CascadeRegression::new(&lin2, &est, &u, &yn, &yn)
+                .unwrap()
+                .dense(warmup);
             let dense = reg.solve(&names(11), warmup).unwrap();
             for threads in [1, 2] {
-                let (f, moving) =
-                    cascade_factor_threads(&lin2, &est, &u, &yn, &yn, warmup, threads).unwrap();
+                let (f, moving) = CascadeRegression::new(&lin2, &est, &u, &yn, &yn)
+                    .unwrap()
+                    .factor_threads(warmup, threads);
                 assert_eq!(f.rows(), reg.rows);
                 assert_eq!(moving, reg.moving_fraction(warmup));
                 assert_close(
@@ -795,7 +740,9 @@ mod tests {
                 );
             }
         }
-        let (f, m) = cascade_factor(&lin, &bl, &u, &y, &y, 0).unwrap();
+        let (f, m) = CascadeRegression::new(&lin, &bl, &u, &y, &y)
+            .unwrap()
+            .factor(0);
         assert!(m > 0.0 && m < 1.0);
         assert_eq!(f.cols(), 11);
     }
@@ -808,7 +755,9 @@ mod tests {
         let w = m.simulate(&u, &m.rest_state()).unwrap();
         let want = EXAMPLE2_REGRESSION;
         for threads in [1, 2] {
-            let (f, moving) = sandwich_factor_threads(&lin, &bl, &out, &u, &w, 0, threads).unwrap();
+            let (f, moving) = SandwichRegression::new(&lin, &bl, &out, &u, &w)
+                .unwrap()
+                .factor_threads(0, threads);
             let ls = solve_factor(&f, &names(14), moving).unwrap();
             for (g, w) in ls.theta.iter().zip(want) {
                 assert!((g - w).abs() < 1e-9, "{:?}", ls.theta);
@@ -816,11 +765,14 @@ mod tests {
         }
         let wn = with_noise(&w, 0.02);
         for warmup in [0, 1, 50] {
-            let reg = sandwich_regression(&lin, &bl, &out, &u, &wn, warmup).unwrap();
+            let reg = SandwichRegression::new(&lin, &bl, &out, &u, &wn)
+                .unwrap()
+                .dense(warmup);
             let dense = reg.solve(&names(14), warmup).unwrap();
             for threads in [1, 2] {
-                let (f, moving) =
-                    sandwich_factor_threads(&lin, &bl, &out, &u, &wn, warmup, threads).unwrap();
+                let (f, moving) = SandwichRegression::new(&lin, &bl, &out, &u, &wn)
+                    .unwrap()
+                    .factor_threads(warmup, threads);
                 assert_eq!(f.rows(), reg.rows);
                 assert_eq!(moving, reg.moving_fraction(warmup));
                 assert_close(
@@ -839,10 +791,13 @@ mod tests {
         let wide = GeneralBacklash::new(50.0, 50.0, vec![1.0, 0.0], vec![1.0, 0.0]).unwrap();
         let u = input(800);
         let y = input(900)[100..].to_vec();
-        let (f, moving) = cascade_factor(&lin, &wide, &u, &y, &y, 0).unwrap();
-        assert_eq!(moving, 0.0);
-        let dense = cascade_regression(&lin, &wide, &u, &y, &y, 0)
+        let (f, moving) = CascadeRegression::new(&lin, &wide, &u, &y, &y)
             .unwrap()
+            .factor(0);
+        assert_eq!(moving, 0.0);
+        let dense = CascadeRegression::new(&lin, &wide, &u, &y, &y)
+            .unwrap()
+            .dense(0)
             .solve(&names(7), 0);
         for got in [solve_factor(&f, &names(7), moving), dense] {
             match got {
@@ -857,19 +812,23 @@ mod tests {
         }
         // bad inputs are errors, not panics
         assert!(matches!(
-            cascade_factor(&lin, &wide, &u, &y[..10], &y, 0),
+            CascadeRegression::new(&lin, &wide, &u, &y[..10], &y).map(|r| r.factor(0)),
             Err(Error::Data(_))
         ));
         let mut bad = u.clone();
         bad[3] = f64::NAN;
         assert!(matches!(
-            cascade_factor(&lin, &wide, &bad, &y, &y, 0),
+            CascadeRegression::new(&lin, &wide, &bad, &y, &y).map(|r| r.factor(0)),
             Err(Error::Data(_))
         ));
-        let (f, _) = cascade_factor(&lin, &wide, &u, &y, &y, 10_000).unwrap();
+        let (f, _) = CascadeRegression::new(&lin, &wide, &u, &y, &y)
+            .unwrap()
+            .factor(10_000);
         assert_eq!(f.rows(), 0);
         let (l2, b2, o2) = example2();
-        let (f, m) = sandwich_factor(&l2, &b2, &o2, &u, &y, 10_000).unwrap();
+        let (f, m) = SandwichRegression::new(&l2, &b2, &o2, &u, &y)
+            .unwrap()
+            .factor(10_000);
         assert_eq!((f.rows(), m), (0, 0.0));
         assert!(matches!(
             solve_factor(&f, &names(14), m),
@@ -877,7 +836,7 @@ mod tests {
         ));
         let uneven = GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0], vec![1.0, 0.2]).unwrap();
         assert!(matches!(
-            sandwich_factor(&l2, &uneven, &o2, &u, &y, 0),
+            SandwichRegression::new(&l2, &uneven, &o2, &u, &y).map(|r| r.factor(0)),
             Err(Error::Model(_))
         ));
     }
