@@ -2,11 +2,11 @@
 //! noisy data (uniform u in (-1, 1), output noise at SNR 25, seeded):
 //!
 //! - "iteration": one iteration of the cascade algorithm at a perturbed estimate:
-//!   `regressor::cascade_factor` (y_switch = the measured y, no warm-up) + `solve_factor`;
+//!   `CascadeRegression::factor` (y_switch = the measured y, no warm-up) + `solve_factor`;
 //! - "fit": the paper's whole algorithm driven from here: ARX start, m_R1 = 1,
 //!   c_L = c_R = 0.001, higher terms 0, then `ITERATIONS` iterations; the estimate must end
 //!   within `MAX_ERROR` of the truth, so the bench cannot silently time a diverged fit;
-//! - "oe_factor": one `sensitivity::cascade_oe_factor` at the true parameters (the cost of
+//! - "oe_factor": one `identify::cascade_oe_factor` at the true parameters (the cost of
 //!   one Levenberg-Marquardt Jacobian, folded).
 //!
 //! `cargo bench -p backlashid-core --bench identify` runs the criterion groups (N = 1e4 to
@@ -26,6 +26,9 @@ use backlashid_core::{CascadeModel, GeneralBacklash, LinearBlock, TriangularFact
 use criterion::{BenchmarkId, Criterion, SamplingMode, Throughput};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+
+#[path = "../rust/core/src/test_params.rs"]
+mod test_params;
 
 const CRITERION_SIZES: [usize; 3] = [10_000, 100_000, 1_000_000];
 const TABLE_SIZES: [usize; 5] = [10_000, 100_000, 1_000_000, 10_000_000, 100_000_000];
@@ -81,11 +84,8 @@ impl Estimate {
 
 /// Example 1 of the paper.
 fn truth() -> Estimate {
-    Estimate {
-        linear: LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap(),
-        backlash: GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2])
-            .unwrap(),
-    }
+    let (linear, backlash) = test_params::example1();
+    Estimate { linear, backlash }
 }
 
 /// Example 1 a little off: where an iteration of a fit in progress would be.

@@ -3,6 +3,17 @@
 //! Models of Vörös, "Modeling and identification of nonlinear cascade and sandwich systems
 //! with general backlash": the general backlash (eq 1-15), the cascade linear block ->
 //! backlash (eq 16-17) and the sandwich linear -> backlash -> linear (eq 29).
+//!
+//! Layout, following the data path u -> x -> f1/f2 -> regressor -> QR -> parameters:
+//! - `model`: the blocks and their simulation (linear block, general backlash and its
+//!   switching form, cascade, sandwich) and the checks on signals and coefficients;
+//! - `identify`: the paper's regressions at an estimate (`CascadeRegression`,
+//!   `SandwichRegression`, the ARX start), the output-error sensitivities, factor and
+//!   gradient;
+//! - `linalg`: least squares by QR and the streaming triangular factor;
+//! - `augmented`: the cascade with the diagnosis catalogue's effects.
+//!
+//! The items below are the API the Python binding and the benches use.
 
 pub mod augmented;
 pub mod error;
