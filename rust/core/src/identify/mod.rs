@@ -6,11 +6,12 @@
 
 pub mod gradient;
 pub mod regressor;
+mod rows;
 pub mod sensitivity;
 
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
 pub use regressor::{
-    solve_factor, ArxRegression, CascadeRegression, Regression, SandwichRegression,
+    solve_factor, ArxRegression, CascadeRegression, Regression, RowRegression, SandwichRegression,
 };
 pub use sensitivity::{
     cascade_oe_factor, cascade_sensitivity, sandwich_oe_factor, sandwich_sensitivity, Sensitivity,
