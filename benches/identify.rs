@@ -2,11 +2,11 @@
 //! noisy data (uniform u in (-1, 1), output noise at SNR 25, seeded):
 //!
 //! - "iteration": one iteration of the cascade algorithm at a perturbed estimate:
-//!   `regressor::cascade_factor` (y_switch = the measured y, no warm-up) + `solve_factor`;
+//!   `CascadeRegression::factor` (y_switch = the measured y, no warm-up) + `solve_factor`;
 //! - "fit": the paper's whole algorithm driven from here: ARX start, m_R1 = 1,
 //!   c_L = c_R = 0.001, higher terms 0, then `ITERATIONS` iterations; the estimate must end
 //!   within `MAX_ERROR` of the truth, so the bench cannot silently time a diverged fit;
-//! - "oe_factor": one `sensitivity::cascade_oe_factor` at the true parameters (the cost of
+//! - "oe_factor": one `identify::cascade_oe_factor` at the true parameters (the cost of
 //!   one Levenberg-Marquardt Jacobian, folded).
 //!
 //! `cargo bench -p backlashid-core --bench identify` runs the criterion groups (N = 1e4 to
@@ -18,14 +18,17 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use backlashid_core::lstsq::LeastSquares;
-use backlashid_core::regressor::{arx_factor, cascade_factor, solve_factor};
-use backlashid_core::sensitivity::cascade_oe_factor;
-use backlashid_core::streaming::default_threads;
+use backlashid_core::identify::cascade_oe_factor;
+use backlashid_core::identify::{solve_factor, ArxRegression, CascadeRegression};
+use backlashid_core::linalg::default_threads;
+use backlashid_core::LeastSquares;
 use backlashid_core::{CascadeModel, GeneralBacklash, LinearBlock, TriangularFactor};
 use criterion::{BenchmarkId, Criterion, SamplingMode, Throughput};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+
+#[path = "../rust/core/src/test_params.rs"]
+mod test_params;
 
 const CRITERION_SIZES: [usize; 3] = [10_000, 100_000, 1_000_000];
 const TABLE_SIZES: [usize; 5] = [10_000, 100_000, 1_000_000, 10_000_000, 100_000_000];
@@ -81,11 +84,8 @@ impl Estimate {
 
 /// Example 1 of the paper.
 fn truth() -> Estimate {
-    Estimate {
-        linear: LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap(),
-        backlash: GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2])
-            .unwrap(),
-    }
+    let (linear, backlash) = test_params::example1();
+    Estimate { linear, backlash }
 }
 
 /// Example 1 a little off: where an iteration of a fit in progress would be.
@@ -142,8 +142,9 @@ fn ls_names() -> Vec<String> {
 /// on the default threads, and its least-squares solution.
 fn iteration(est: &Estimate, data: &Data, names: &[String]) -> LeastSquares {
     let (factor, moving): (TriangularFactor, f64) =
-        cascade_factor(&est.linear, &est.backlash, &data.u, &data.y, &data.y, 0)
-            .expect("cascade_factor");
+        CascadeRegression::new(&est.linear, &est.backlash, &data.u, &data.y, &data.y)
+            .expect("cascade regression")
+            .factor(0);
     solve_factor(&factor, names, moving).expect("an iteration's least squares")
 }
 
@@ -173,8 +174,8 @@ fn from_ls(theta: &[f64]) -> Estimate {
 fn start(data: &Data) -> Estimate {
     let (na, nb) = (2, 2);
     let names = ["a_1", "a_2", "b_1", "b_2"].map(String::from);
-    let arx = arx_factor(&data.u, &data.y, na, nb, 1, 0)
-        .and_then(|f| f.solve(&names))
+    let arx = ArxRegression::new(&data.u, &data.y, na, nb, 1)
+        .and_then(|r| r.factor(0).solve(&names))
         .expect("ARX fit");
     let zeros = vec![0.0; DEGREE - 1];
     Estimate {

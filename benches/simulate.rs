@@ -8,7 +8,7 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use backlashid_core::{CascadeModel, GeneralBacklash, LinearBlock, SandwichModel};
+use backlashid_core::{CascadeModel, SandwichModel};
 use criterion::{BenchmarkId, Criterion, SamplingMode, Throughput};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -16,20 +16,9 @@ use rand::{Rng, SeedableRng};
 const SIZES: [usize; 4] = [10_000, 100_000, 1_000_000, 10_000_000];
 const TABLE_RUNS: usize = 7;
 
-fn example1() -> CascadeModel {
-    CascadeModel::new(
-        LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap(),
-        GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap(),
-    )
-}
-
-fn example2() -> SandwichModel {
-    SandwichModel::new(
-        LinearBlock::new(vec![0.8, 0.2], vec![0.2, -0.2]).unwrap(),
-        GeneralBacklash::new(0.4, 0.5, vec![1.0, 0.1, 0.3], vec![0.75, 0.2, 0.6]).unwrap(),
-        LinearBlock::new(vec![1.0, 0.15], vec![-0.2, 0.35]).unwrap(),
-    )
-}
+#[path = "../rust/core/src/test_params.rs"]
+mod test_params;
+use test_params::{example1_model as example1, example2_model as example2};
 
 /// The input: uniform in (-1, 1), from a seeded rng (the same record every run).
 fn input(n: usize) -> Vec<f64> {

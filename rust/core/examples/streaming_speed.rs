@@ -3,25 +3,15 @@
 //! streaming_speed [N...]
 use std::time::Instant;
 
-use backlashid_core::regressor::{
-    cascade_factor_threads, cascade_regression, sandwich_factor_threads, sandwich_regression,
-};
-use backlashid_core::sensitivity::{
+use backlashid_core::identify::regressor::{CascadeRegression, SandwichRegression};
+use backlashid_core::identify::sensitivity::{
     cascade_oe_factor_threads, cascade_sensitivity, sandwich_oe_factor_threads,
 };
-use backlashid_core::{CascadeModel, GeneralBacklash, LinearBlock, SandwichModel};
+use backlashid_core::{CascadeModel, SandwichModel};
 
-fn input(n: usize) -> Vec<f64> {
-    let mut s = 12345u64;
-    (0..n)
-        .map(|_| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        })
-        .collect()
-}
+#[path = "../src/test_params.rs"]
+mod test_params;
+use test_params::{example1, example2, input, names};
 
 /// The solve before this change: column-scaled N x p matrix, faer QR, explicit residual.
 fn faer_dense(a: &[f64], rows: usize, p: usize, b: &[f64]) -> Vec<f64> {
@@ -59,14 +49,9 @@ fn main() {
     } else {
         sizes
     };
-    let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
-    let bl = GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap();
-    let (l2, b2, o2) = (
-        LinearBlock::new(vec![0.8, 0.2], vec![0.2, -0.2]).unwrap(),
-        GeneralBacklash::new(0.4, 0.5, vec![1.0, 0.1, 0.3], vec![0.75, 0.2, 0.6]).unwrap(),
-        LinearBlock::new(vec![1.0, 0.15], vec![-0.2, 0.35]).unwrap(),
-    );
-    let names: Vec<String> = (0..14).map(|j| format!("p{j}")).collect();
+    let (lin, bl) = example1();
+    let (l2, b2, o2) = example2();
+    let names = names(14);
     println!("ns per sample (best of reps); cascade p = 11, sandwich p = 14");
     for &n in &sizes {
         let u = input(n);
@@ -78,17 +63,23 @@ fn main() {
         println!("N = {n:e}");
         if n <= 2_000_000 {
             let t = best(reps, n, || {
-                let reg = cascade_regression(&lin, &bl, &u, &y, &y, 0).unwrap();
+                let reg = CascadeRegression::new(&lin, &bl, &u, &y, &y)
+                    .unwrap()
+                    .dense(0);
                 reg.solve(&names[..11], 0).unwrap()
             });
             println!("  cascade dense (regression + lstsq::solve): {t:7.1}");
             let t = best(reps, n, || {
-                let reg = sandwich_regression(&l2, &b2, &o2, &u, &w, 0).unwrap();
+                let reg = SandwichRegression::new(&l2, &b2, &o2, &u, &w)
+                    .unwrap()
+                    .dense(0);
                 reg.solve(&names, 0).unwrap()
             });
             println!("  sandwich dense (regression + lstsq::solve): {t:6.1}");
             let t = best(reps, n, || {
-                let reg = cascade_regression(&lin, &bl, &u, &y, &y, 0).unwrap();
+                let reg = CascadeRegression::new(&lin, &bl, &u, &y, &y)
+                    .unwrap()
+                    .dense(0);
                 faer_dense(&reg.phi, reg.rows, reg.cols, &reg.target)
             });
             println!("  cascade dense, faer QR of N x p (before):  {t:7.1}");
@@ -97,14 +88,18 @@ fn main() {
         }
         for threads in [1, 2] {
             let t = best(reps, n, || {
-                let (f, _) = cascade_factor_threads(&lin, &bl, &u, &y, &y, 0, threads).unwrap();
+                let (f, _) = CascadeRegression::new(&lin, &bl, &u, &y, &y)
+                    .unwrap()
+                    .factor_threads(0, threads);
                 f.solve(&names[..11]).unwrap()
             });
             println!("  cascade_factor + solve, {threads} thread(s):    {t:7.1}");
         }
         for threads in [1, 2] {
             let t = best(reps, n, || {
-                let (f, _) = sandwich_factor_threads(&l2, &b2, &o2, &u, &w, 0, threads).unwrap();
+                let (f, _) = SandwichRegression::new(&l2, &b2, &o2, &u, &w)
+                    .unwrap()
+                    .factor_threads(0, threads);
                 f.solve(&names).unwrap()
             });
             println!("  sandwich_factor + solve, {threads} thread(s):   {t:7.1}");

@@ -11,11 +11,11 @@
 //! Time t is 0-based within the record; `t0` places the record in a longer continuous one
 //! (the validation record follows the estimation record), tau = (t0 + t) / time_scale.
 
-use crate::backlash::{check_memory, GeneralBacklash};
-use crate::cascade::{CascadeModel, CascadeState};
 use crate::effects::{AnyEffect, Sample, Stage};
 use crate::error::{Error, Result};
-use crate::signal::check_signal;
+use crate::model::backlash::{check_memory, GeneralBacklash};
+use crate::model::cascade::{CascadeModel, CascadeState};
+use crate::model::signal::check_signal;
 
 /// Default samples per time unit of the drifts.
 pub const TIME_SCALE: f64 = 1000.0;
@@ -143,7 +143,7 @@ pub fn simulate_augmented(
 mod tests {
     use super::*;
     use crate::effects::from_parameters;
-    use crate::linear::LinearBlock;
+    use crate::model::linear::LinearBlock;
 
     fn model(degree3: bool) -> CascadeModel {
         let (ml, mr) = if degree3 {

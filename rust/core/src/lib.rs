@@ -3,29 +3,41 @@
 //! Models of Vörös, "Modeling and identification of nonlinear cascade and sandwich systems
 //! with general backlash": the general backlash (eq 1-15), the cascade linear block ->
 //! backlash (eq 16-17) and the sandwich linear -> backlash -> linear (eq 29).
+//!
+//! Layout, following the data path u -> x -> f1/f2 -> regressor -> QR -> parameters:
+//! - `model`: the blocks and their simulation (linear block, general backlash and its
+//!   switching form, cascade, sandwich) and the checks on signals and coefficients;
+//! - `identify`: the paper's regressions at an estimate (`CascadeRegression`,
+//!   `SandwichRegression`, the ARX start), the output-error sensitivities, factor and
+//!   gradient;
+//! - `linalg`: least squares by QR and the streaming triangular factor;
+//! - `effects`: the diagnosis catalogue's effects, one module each over the `Effect` trait;
+//! - `augmented`: the cascade with those effects, simulated in one fused pass.
+//!
+//! The items below are the API the Python binding and the benches use.
 
 pub mod augmented;
 pub mod effects;
-pub mod backlash;
-pub mod cascade;
 pub mod error;
-pub mod gradient;
-pub mod linear;
-pub mod lstsq;
-pub mod polynomial;
-pub mod regressor;
-pub mod sandwich;
-pub mod sensitivity;
-pub mod signal;
-pub mod streaming;
-pub mod switching;
+pub mod identify;
+pub mod linalg;
+pub mod model;
+#[cfg(test)]
+pub(crate) mod test_params;
+// `test_params` names this crate as the integration tests do.
+#[cfg(test)]
+extern crate self as backlashid_core;
 
 pub use augmented::simulate_augmented;
 pub use effects::{AnyEffect, Effect};
-pub use backlash::{Branch, BranchCheck, GeneralBacklash};
-pub use cascade::{CascadeModel, CascadeSimulation, CascadeState};
 pub use error::{Error, Result};
-pub use linear::{LinearBlock, LinearState};
-pub use sandwich::{SandwichModel, SandwichSimulation, SandwichState};
-pub use streaming::{fold_parallel, TriangularFactor};
-pub use switching::{switching, switching_form, SwitchingSignals};
+pub use identify::{
+    cascade_oe_factor, cascade_oe_gradient, sandwich_oe_factor, sandwich_oe_gradient, solve_factor,
+    ArxRegression, CascadeRegression, OeGradient, SandwichRegression,
+};
+pub use linalg::{fold_parallel, LeastSquares, TriangularFactor};
+pub use model::{
+    spectral_radius, switching, switching_form, Branch, BranchCheck, CascadeModel,
+    CascadeSimulation, CascadeState, GeneralBacklash, LinearBlock, LinearState, SandwichModel,
+    SandwichSimulation, SandwichState, SwitchingSignals,
+};

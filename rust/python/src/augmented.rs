@@ -7,50 +7,47 @@ use backlashid_core as core;
 use numpy::PyReadonlyArrayDyn;
 use pyo3::prelude::*;
 
-use crate::{estimate, run, signal, vec_f64, SignalOut};
+use crate::identify::estimate_fn;
+use crate::{run, signal, vec_f64, SignalOut};
 
-/// Output of the augmented cascade (an estimate: no branch-shape checks) for `u`, with
-/// `effects` a sequence of (name, parameters) in the catalogue's parameter order, from the
-/// state (u_past of the effective input, x_past, y_prev; empty pasts mean rest).
-#[pyfunction]
-#[pyo3(signature = (
-    a, b, c_left, c_right, m_left, m_right, u, *, effects = vec![], t0 = 0.0,
-    time_scale = core::augmented::TIME_SCALE, u_past = None, x_past = None, y_prev = 0.0
-))]
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn simulate_augmented<'py>(
-    py: Python<'py>,
-    a: Vec<f64>,
-    b: Vec<f64>,
-    c_left: f64,
-    c_right: f64,
-    m_left: Vec<f64>,
-    m_right: Vec<f64>,
-    u: PyReadonlyArrayDyn<'py, f64>,
-    effects: Vec<(String, Vec<f64>)>,
-    t0: f64,
-    time_scale: f64,
-    u_past: Option<Vec<f64>>,
-    x_past: Option<Vec<f64>>,
-    y_prev: f64,
-) -> PyResult<SignalOut<'py>> {
-    let u = signal(py, "u", &u)?;
-    let out = run(py, || {
-        let effects = effects
-            .iter()
-            .map(|(name, p)| core::effects::from_parameters(name, p))
-            .collect::<core::Result<Vec<_>>>()?;
-        let (na, nb) = (a.len(), b.len());
-        let (lin, bl) = estimate(a, b, c_left, c_right, m_left, m_right)?;
-        let model = core::CascadeModel::new(lin, bl);
-        let state = core::CascadeState {
-            linear: core::LinearState {
-                u_past: u_past.unwrap_or_else(|| vec![0.0; na]),
-                x_past: x_past.unwrap_or_else(|| vec![0.0; nb]),
-            },
-            y_prev,
-        };
-        core::simulate_augmented(&model, &effects, &u, t0, time_scale, &state)
-    })?;
-    Ok(vec_f64(py, out))
+estimate_fn! {
+    /// Output of the augmented cascade (an estimate: no branch-shape checks) for `u`, with
+    /// `effects` a sequence of (name, parameters) in the catalogue's parameter order, from the
+    /// state (u_past of the effective input, x_past, y_prev; empty pasts mean rest).
+    #[pyfunction]
+    #[pyo3(signature = (
+        a, b, c_left, c_right, m_left, m_right, u, *, effects = vec![], t0 = 0.0,
+        time_scale = core::augmented::TIME_SCALE, u_past = None, x_past = None, y_prev = 0.0
+    ))]
+    pub(crate) fn simulate_augmented<'py>(
+        est,
+        py: Python<'py>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        effects: Vec<(String, Vec<f64>)>,
+        t0: f64,
+        time_scale: f64,
+        u_past: Option<Vec<f64>>,
+        x_past: Option<Vec<f64>>,
+        y_prev: f64,
+    ) -> PyResult<SignalOut<'py>> {
+        let u = signal("u", &u)?;
+        let out = run(py, || {
+            let effects = effects
+                .iter()
+                .map(|(name, p)| core::effects::from_parameters(name, p))
+                .collect::<core::Result<Vec<_>>>()?;
+            let (na, nb) = (est.linear.0.len(), est.linear.1.len());
+            let (lin, bl) = est.blocks()?;
+            let model = core::CascadeModel::new(lin, bl);
+            let state = core::CascadeState {
+                linear: core::LinearState {
+                    u_past: u_past.unwrap_or_else(|| vec![0.0; na]),
+                    x_past: x_past.unwrap_or_else(|| vec![0.0; nb]),
+                },
+                y_prev,
+            };
+            core::simulate_augmented(&model, &effects, &u, t0, time_scale, &state)
+        })?;
+        Ok(vec_f64(py, out))
+    }
 }

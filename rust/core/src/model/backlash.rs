@@ -3,7 +3,7 @@
 //! and the output moves along L or R, or holds y(t-1) inside the dead band (eq 1).
 
 use crate::error::{Error, Result};
-use crate::signal::{check_coefficients, check_signal};
+use crate::model::signal::{check_coefficients, check_signal};
 
 /// One branch: value(x) = sum_{i>=1} m_i (x + shift)^i, so shift = c_L for L and -c_R for R.
 #[derive(Debug, Clone, PartialEq)]
@@ -259,7 +259,7 @@ impl Step for &GeneralBacklash {
 
     #[inline(always)]
     fn moves(&self, x: f64, y_prev: f64) -> bool {
-        let (f1, f2) = crate::switching::switching(self, x, y_prev);
+        let (f1, f2) = crate::model::switching::switching(self, x, y_prev);
         f1 | f2
     }
 }
@@ -425,9 +425,7 @@ fn intervals_where_nonpositive(f: impl Fn(f64) -> f64, lo: f64, hi: f64) -> Vec<
 mod tests {
     use super::*;
 
-    fn example1() -> GeneralBacklash {
-        GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap()
-    }
+    use crate::test_params::example1_backlash as example1;
 
     #[test]
     fn branches_cross_the_axis_at_minus_c_left_and_c_right() {

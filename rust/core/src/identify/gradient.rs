@@ -16,13 +16,13 @@
 //! filter mixes the rows of every lag, so its gradient sums the forward rows of
 //! `sensitivity::walk_sandwich` instead.
 
-use crate::backlash::GeneralBacklash;
 use crate::error::Result;
-use crate::linear::LinearBlock;
-use crate::sensitivity::{
+use crate::identify::sensitivity::{
     branch_degree, cascade_cols, check_pair, overflowed, sandwich_cols, walk_sandwich,
 };
-use crate::switching::switching;
+use crate::model::backlash::GeneralBacklash;
+use crate::model::linear::LinearBlock;
+use crate::model::switching::switching;
 
 /// g = J^T r over the samples t >= warmup and the cost sum r^2.
 #[derive(Debug, Clone, PartialEq)]
@@ -185,9 +185,11 @@ pub fn sandwich_oe_gradient(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::error::Error;
-    use crate::sensitivity::tests::{input, noisy, sandwich_from};
-    use crate::sensitivity::{cascade_sensitivity, sandwich_sensitivity, Sensitivity};
+    use crate::identify::sensitivity::tests::check_bad_records;
+    use crate::identify::sensitivity::{cascade_sensitivity, sandwich_sensitivity, Sensitivity};
+    use crate::test_params::{
+        example1, noisy, perturbed, sandwich_from, smooth_input as input, EXAMPLE2_THETA,
+    };
     use crate::CascadeModel;
 
     /// J^T r and the cost from the dense sensitivity written out.
@@ -219,8 +221,7 @@ mod tests {
 
     #[test]
     fn cascade_gradient_is_the_dense_jacobian_times_the_residual() {
-        let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
-        let bl = GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap();
+        let (lin, bl) = example1();
         let u = input(3000);
         let m = CascadeModel::new(lin.clone(), bl.clone());
         let y = noisy(&m.simulate(&u, &m.rest_state()).unwrap(), 3);
@@ -259,16 +260,9 @@ mod tests {
     #[test]
     fn sandwich_gradient_is_the_dense_jacobian_times_the_residual() {
         let u = input(3000);
-        let theta = [
-            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.5, 0.2, 0.6, 0.15, -0.2, 0.35,
-        ];
-        let (l2, b2, o2) = sandwich_from(&theta);
+        let (l2, b2, o2) = sandwich_from(&EXAMPLE2_THETA);
         let w = noisy(&sandwich_sensitivity(&l2, &b2, &o2, &u).unwrap().output, 5);
-        let mut est = theta;
-        for (k, v) in est.iter_mut().enumerate() {
-            *v *= 1.0 + 0.03 * ((k % 3) as f64 - 1.0);
-        }
-        let (l3, b3, o3) = sandwich_from(&est);
+        let (l3, b3, o3) = sandwich_from(&perturbed(EXAMPLE2_THETA));
         let sens = sandwich_sensitivity(&l3, &b3, &o3, &u).unwrap();
         for warmup in [0, 2, 700] {
             let g = sandwich_oe_gradient(&l3, &b3, &o3, &u, &w, warmup).unwrap();
@@ -278,36 +272,9 @@ mod tests {
 
     #[test]
     fn gradients_report_overflow_and_bad_data() {
-        let lin = LinearBlock::new(vec![1.0], vec![]).unwrap();
-        let cubic =
-            GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0, 0.0, 1.0], vec![1.0, 0.0, 1.0])
-                .unwrap();
-        let mut u = input(100);
-        u[50] = 1e150;
-        let y = input(100);
-        assert!(matches!(
-            cascade_oe_gradient(&lin, &cubic, &u, &y, 0),
-            Err(Error::Model(_))
-        ));
-        let u = input(100);
-        assert!(matches!(
-            cascade_oe_gradient(&lin, &cubic, &u, &y[..99], 0),
-            Err(Error::Data(_))
-        ));
-        let mut bad = y.clone();
-        bad[7] = f64::NAN;
-        assert!(matches!(
-            cascade_oe_gradient(&lin, &cubic, &u, &bad, 0),
-            Err(Error::Data(_))
-        ));
-        let uneven = GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0], vec![1.0, 0.2]).unwrap();
-        assert!(matches!(
-            cascade_oe_gradient(&lin, &uneven, &u, &y, 0),
-            Err(Error::Model(_))
-        ));
-        assert!(matches!(
-            sandwich_oe_gradient(&lin, &uneven, &lin, &u, &y, 0),
-            Err(Error::Model(_))
-        ));
+        check_bad_records(
+            |lin, bl, u, y| cascade_oe_gradient(lin, bl, u, y, 0),
+            |lin, bl, out, u, w| sandwich_oe_gradient(lin, bl, out, u, w, 0),
+        );
     }
 }

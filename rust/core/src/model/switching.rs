@@ -6,9 +6,9 @@
 //! and eq (15) gives y(t). Eq (14) lets f1 = f2 = 1 when the branches cross; we keep the case
 //! order of eq (1): f1 wins, so f2 := f2 and not f1 (NOTES.md, item 2).
 
-use crate::backlash::{check_memory, GeneralBacklash};
 use crate::error::Result;
-use crate::signal::check_signal;
+use crate::model::backlash::{check_memory, GeneralBacklash};
+use crate::model::signal::check_signal;
 
 /// Internal signals of eq (9)-(15) for one record.
 #[derive(Debug, Clone, PartialEq)]
@@ -91,25 +91,4 @@ pub fn switching_form(backlash: &GeneralBacklash, x: &[f64], y0: f64) -> Result<
         y_prev = y;
     }
     Ok(out)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn eq15_matches_eq1_on_example2_backlash() {
-        let bl = GeneralBacklash::new(0.4, 0.5, vec![1.0, 0.1, 0.3], vec![0.75, 0.2, 0.6]).unwrap();
-        let x: Vec<f64> = (0..3000)
-            .map(|k| 1.2 * ((k as f64) * 0.11).sin() * ((k as f64) * 0.013).cos())
-            .collect();
-        let s = switching_form(&bl, &x, 0.0).unwrap();
-        let y = bl.simulate(&x, 0.0).unwrap();
-        for (ys, yt) in s.y.iter().zip(&y) {
-            assert!((ys - yt).abs() < 1e-12);
-        }
-        assert!(s.f1.iter().zip(&s.f2).all(|(a, b)| !(a & b)));
-        assert!(s.f1.iter().any(|&f| f) && s.f2.iter().any(|&f| f));
-        assert!(s.f1.iter().zip(&s.f2).any(|(a, b)| !a && !b));
-    }
 }

@@ -8,11 +8,11 @@
 //! Column order: a_1..a_na, b_1..b_nb, c_L, m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn, then for the
 //! sandwich r_2..r_nr, s_1..s_ns (m_L1 = 1 and r_1 = 1 are fixed).
 
-use crate::backlash::GeneralBacklash;
 use crate::error::{Error, Result};
-use crate::linear::LinearBlock;
-use crate::signal::{check_same_length, check_signal};
-use crate::streaming::{default_threads, fold_stream, fold_stream_parts, TriangularFactor};
+use crate::linalg::streaming::{default_threads, fold_stream, fold_stream_parts, TriangularFactor};
+use crate::model::backlash::GeneralBacklash;
+use crate::model::linear::LinearBlock;
+use crate::model::signal::{check_same_length, check_signal};
 
 /// Samples from which the default output-error factors fold on a second thread. The
 /// sequential sensitivity recursion is the larger part of the work, so the hand-over only
@@ -203,7 +203,7 @@ impl<'a> ChainStepper<'a> {
             }
         };
         if !yt.is_finite() {
-            return Err(crate::backlash::output_overflow(t, xt));
+            return Err(crate::model::backlash::output_overflow(t, xt));
         }
         if mv != Move::Hold {
             let dy = &mut self.dy;
@@ -511,7 +511,7 @@ pub(crate) fn walk_sandwich(
             }
         }
         if !wt.is_finite() {
-            return Err(crate::linear::overflow(output_linear, "w", t));
+            return Err(crate::model::linear::overflow(output_linear, "w", t));
         }
         w_ring[cw] = wt;
         visit(t, wt, dw)?;
@@ -522,83 +522,51 @@ pub(crate) fn walk_sandwich(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::test_params::{
+        example1, noisy, perturbed, sandwich_from, smooth_input as input, EXAMPLE2_THETA,
+    };
 
-    pub(crate) fn input(n: usize) -> Vec<f64> {
-        (0..n)
-            .map(|k| ((k as f64) * 0.61).sin() * 0.9 + ((k as f64) * 0.17).cos() * 0.3)
-            .collect()
-    }
-
-    /// Parameter vector in the column order, and a model from it.
-    pub(crate) fn sandwich_from(theta: &[f64]) -> (LinearBlock, GeneralBacklash, LinearBlock) {
-        let lin = LinearBlock::new(theta[0..2].to_vec(), theta[2..4].to_vec()).unwrap();
-        let bl = GeneralBacklash::from_estimate(
-            theta[4],
-            theta[8],
-            vec![1.0, theta[5], theta[6]],
-            vec![theta[7], theta[9], theta[10]],
-        )
-        .unwrap();
-        let out = LinearBlock::new(vec![1.0, theta[11]], theta[12..14].to_vec()).unwrap();
-        (lin, bl, out)
-    }
-
-    #[test]
-    fn sandwich_jacobian_matches_central_differences() {
-        // Example 2's parameters: a1 a2 b1 b2 cL mL2 mL3 mR1 cR mR2 mR3 r2 s1 s2
-        let theta = [
-            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.5, 0.2, 0.6, 0.15, -0.2, 0.35,
-        ];
-        let u = input(400);
-        let (lin, bl, out) = sandwich_from(&theta);
-        let sens = sandwich_sensitivity(&lin, &bl, &out, &u).unwrap();
-        assert_eq!(sens.cols, theta.len());
-        let h = 1e-7;
-        for k in 0..theta.len() {
-            let (mut up, mut dn) = (theta, theta);
-            up[k] += h;
-            dn[k] -= h;
-            let (l1, b1, o1) = sandwich_from(&up);
-            let (l2, b2, o2) = sandwich_from(&dn);
-            let w1 = sandwich_sensitivity(&l1, &b1, &o1, &u).unwrap().output;
-            let w2 = sandwich_sensitivity(&l2, &b2, &o2, &u).unwrap().output;
-            // Samples where a switch moves between +h and -h differ; most must agree closely.
-            let mut close = 0;
-            for t in 0..u.len() {
-                let fd = (w1[t] - w2[t]) / (2.0 * h);
-                if (fd - sens.jacobian[t * sens.cols + k]).abs() < 1e-5 {
-                    close += 1;
-                }
-            }
-            assert!(
-                close >= u.len() * 97 / 100,
-                "parameter {k}: {close} of {}",
-                u.len()
-            );
+    /// The records every output-error pass (factor or gradient) refuses: a cubic estimate
+    /// that overflows, an output of the wrong length, a non-finite output, branches of two
+    /// degrees. `cascade(linear, backlash, u, y)` and `sandwich(input, backlash, output, u,
+    /// w)` run the pass under test.
+    pub(crate) fn check_bad_records<T: std::fmt::Debug>(
+        cascade: impl Fn(&LinearBlock, &GeneralBacklash, &[f64], &[f64]) -> Result<T>,
+        sandwich: impl Fn(&LinearBlock, &GeneralBacklash, &LinearBlock, &[f64], &[f64]) -> Result<T>,
+    ) {
+        let lin = LinearBlock::new(vec![1.0], vec![]).unwrap();
+        let cubic =
+            GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0, 0.0, 1.0], vec![1.0, 0.0, 1.0])
+                .unwrap();
+        let mut u = input(100);
+        u[50] = 1e150;
+        let y = input(100);
+        match cascade(&lin, &cubic, &u, &y) {
+            Err(Error::Model(m)) => assert!(m.contains("overflowed"), "{m}"),
+            other => panic!("{other:?}"),
         }
-    }
-
-    #[test]
-    fn cascade_output_equals_the_model_simulation() {
-        let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
-        let bl = GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap();
-        let u = input(500);
-        let m = crate::CascadeModel::new(lin.clone(), bl.clone());
-        let sens = cascade_sensitivity(&lin, &bl, &u).unwrap();
-        assert_eq!(sens.output, m.simulate(&u, &m.rest_state()).unwrap());
-        assert_eq!(sens.cols, 11);
-    }
-
-    pub(crate) fn noisy(v: &[f64], seed: u64) -> Vec<f64> {
-        let mut g = seed;
-        v.iter()
-            .map(|a| {
-                g = g
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                a + 0.05 * (((g >> 11) as f64 / (1u64 << 53) as f64) - 0.5)
-            })
-            .collect()
+        let u = input(100);
+        assert!(matches!(
+            cascade(&lin, &cubic, &u, &y[..99]),
+            Err(Error::Data(_))
+        ));
+        for nonfinite in [f64::NAN, f64::INFINITY] {
+            let mut bad = y.clone();
+            bad[7] = nonfinite;
+            assert!(matches!(
+                cascade(&lin, &cubic, &u, &bad),
+                Err(Error::Data(_))
+            ));
+        }
+        let uneven = GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0], vec![1.0, 0.2]).unwrap();
+        assert!(matches!(
+            cascade(&lin, &uneven, &u, &y),
+            Err(Error::Model(_))
+        ));
+        assert!(matches!(
+            sandwich(&lin, &uneven, &lin, &u, &y),
+            Err(Error::Model(_))
+        ));
     }
 
     /// R_aug^T R_aug against [J r]^T [J r] of the dense sensitivity, and the cost.
@@ -648,8 +616,7 @@ pub(crate) mod tests {
 
     #[test]
     fn cascade_oe_factor_is_the_factor_of_the_dense_jacobian() {
-        let lin = LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap();
-        let bl = GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap();
+        let (lin, bl) = example1();
         let u = input(3000);
         let m = crate::CascadeModel::new(lin.clone(), bl.clone());
         let y = noisy(&m.simulate(&u, &m.rest_state()).unwrap(), 3);
@@ -678,20 +645,13 @@ pub(crate) mod tests {
 
     #[test]
     fn sandwich_oe_factor_is_the_factor_of_the_dense_jacobian() {
-        let theta = [
-            0.8, 0.2, 0.2, -0.2, 0.4, 0.1, 0.3, 0.75, 0.5, 0.2, 0.6, 0.15, -0.2, 0.35,
-        ];
         let u = input(3000);
-        let (lin, bl, out) = sandwich_from(&theta);
+        let (lin, bl, out) = sandwich_from(&EXAMPLE2_THETA);
         let w = noisy(
             &sandwich_sensitivity(&lin, &bl, &out, &u).unwrap().output,
             5,
         );
-        let mut est = theta;
-        for (k, v) in est.iter_mut().enumerate() {
-            *v *= 1.0 + 0.03 * ((k % 3) as f64 - 1.0);
-        }
-        let (l2, b2, o2) = sandwich_from(&est);
+        let (l2, b2, o2) = sandwich_from(&perturbed(EXAMPLE2_THETA));
         let sens = sandwich_sensitivity(&l2, &b2, &o2, &u).unwrap();
         for warmup in [0, 2, 700] {
             let (f, cost) = sandwich_oe_factor(&l2, &b2, &o2, &u, &w, warmup).unwrap();
@@ -715,18 +675,14 @@ pub(crate) mod tests {
 
     #[test]
     fn oe_factors_report_overflow_and_bad_data() {
+        check_bad_records(
+            |lin, bl, u, y| cascade_oe_factor(lin, bl, u, y, 0),
+            |lin, bl, out, u, w| sandwich_oe_factor(lin, bl, out, u, w, 0),
+        );
         let lin = LinearBlock::new(vec![1.0], vec![]).unwrap();
         let cubic =
             GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0, 0.0, 1.0], vec![1.0, 0.0, 1.0])
                 .unwrap();
-        let mut u = input(100);
-        u[50] = 1e150;
-        let y = input(100);
-        match cascade_oe_factor(&lin, &cubic, &u, &y, 0) {
-            Err(Error::Model(m)) => assert!(m.contains("overflowed"), "{m}"),
-            other => panic!("{other:?}"),
-        }
-        let u = input(100);
         let unstable = LinearBlock::new(vec![1.0], vec![-3.0]).unwrap();
         let big: Vec<f64> = input(2000).iter().map(|v| v + 1.0).collect();
         let w = vec![0.0; 2000];
@@ -735,23 +691,8 @@ pub(crate) mod tests {
             other => panic!("{other:?}"),
         }
         assert!(matches!(
-            cascade_oe_factor(&lin, &cubic, &u, &y[..99], 0),
-            Err(Error::Data(_))
-        ));
-        assert!(matches!(
             cascade_oe_factor(&lin, &cubic, &[], &[], 0),
             Err(Error::Data(_))
-        ));
-        let mut bad = y.clone();
-        bad[7] = f64::INFINITY;
-        assert!(matches!(
-            cascade_oe_factor(&lin, &cubic, &u, &bad, 0),
-            Err(Error::Data(_))
-        ));
-        let uneven = GeneralBacklash::from_estimate(0.1, 0.1, vec![1.0], vec![1.0, 0.2]).unwrap();
-        assert!(matches!(
-            sandwich_oe_factor(&lin, &uneven, &lin, &u, &y, 0),
-            Err(Error::Model(_))
         ));
     }
 }

@@ -5,8 +5,8 @@
 //! feedthrough r_0) is the same block.
 
 use crate::error::{Error, Result};
-use crate::polynomial::{monic_roots, Root};
-use crate::signal::check_coefficients;
+use crate::model::polynomial::{monic_roots, Root};
+use crate::model::signal::check_coefficients;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct LinearBlock {
@@ -75,7 +75,7 @@ impl LinearBlock {
 
     /// Largest pole modulus (0 for an FIR block).
     pub fn spectral_radius(&self) -> f64 {
-        crate::polynomial::spectral_radius(&self.b)
+        crate::model::polynomial::spectral_radius(&self.b)
     }
 
     /// All poles strictly inside the unit circle.
@@ -147,7 +147,7 @@ impl LinearBlock {
 
     /// Simulate eq (16) from `state`; fails on non-finite input or if the output overflows.
     pub fn simulate(&self, u: &[f64], state: &LinearState) -> Result<Vec<f64>> {
-        crate::signal::check_signal("u", u)?;
+        crate::model::signal::check_signal("u", u)?;
         self.check_state(state, "state")?;
         let x = self.with_recursion(state, Outputs(u));
         check_no_overflow(self, &x, "x")?;
@@ -363,22 +363,7 @@ pub(crate) fn overflow(block: &LinearBlock, name: &str, i: usize) -> Error {
 mod tests {
     use super::*;
 
-    fn example1() -> LinearBlock {
-        LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap()
-    }
-
-    #[test]
-    fn impulse_response_follows_eq16() {
-        let g = example1();
-        let mut u = vec![0.0; 5];
-        u[0] = 1.0;
-        let x = g.simulate(&u, &g.rest_state()).unwrap();
-        // x1 = 0, x2 = 0.7, x3 = 0.5 + 0.2*0.7 = 0.64, x4 = 0.2*0.64 - 0.35*0.7
-        assert_eq!(x[0], 0.0);
-        assert!((x[1] - 0.7).abs() < 1e-15);
-        assert!((x[2] - 0.64).abs() < 1e-15);
-        assert!((x[3] - (0.2 * 0.64 - 0.35 * 0.7)).abs() < 1e-15);
-    }
+    use crate::test_params::example1_linear as example1;
 
     #[test]
     fn continuing_from_the_final_state_equals_one_long_run() {

@@ -1,10 +1,12 @@
 //! The cascade of Section 3 (Fig. 2): the linear block (16) followed by a general backlash (1).
 
-use crate::backlash::{check_memory, GeneralBacklash, Step};
 use crate::error::{Error, Result};
-use crate::linear::{blame_feeding_block, LinearBlock, LinearState, Recursion, RecursionUser};
-use crate::signal::check_signal;
-use crate::switching::switching;
+use crate::model::backlash::{check_memory, GeneralBacklash, Step};
+use crate::model::linear::{
+    blame_feeding_block, LinearBlock, LinearState, Recursion, RecursionUser,
+};
+use crate::model::signal::check_signal;
+use crate::model::switching::switching;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct CascadeModel {
@@ -105,15 +107,15 @@ impl CascadeModel {
         Ok(())
     }
 
-    /// How many samples t >= `skip` move the backlash (f1 or f2 of eq 12-13) on the run
+    /// How many samples t >= `warmup` move the backlash (f1 or f2 of eq 12-13) on the run
     /// from `state`: the flags of `simulate_internals`, counted in the loop of `simulate`.
-    pub fn moving_count(&self, u: &[f64], state: &CascadeState, skip: usize) -> Result<usize> {
+    pub fn moving_count(&self, u: &[f64], state: &CascadeState, warmup: usize) -> Result<usize> {
         self.check_start(u, state)?;
         let count = CascadeCount {
             backlash: &self.backlash,
             u,
             y0: state.y_prev,
-            skip,
+            warmup,
         };
         match self.linear.with_recursion(&state.linear, count) {
             (moving, true) if u.last().is_some_and(|v| v.is_finite()) => Ok(moving),
@@ -128,7 +130,7 @@ struct CascadeCount<'a> {
     backlash: &'a GeneralBacklash,
     u: &'a [f64],
     y0: f64,
-    skip: usize,
+    warmup: usize,
 }
 
 impl RecursionUser for CascadeCount<'_> {
@@ -145,8 +147,8 @@ impl RecursionUser for CascadeCount<'_> {
 impl CascadeCount<'_> {
     fn count_with<R: Recursion, S: Step>(&self, mut linear: R, backlash: S) -> (usize, bool) {
         let (mut finite, mut y_prev, mut moving) = (true, self.y0, 0);
-        let (warmup, counted) = self.u.split_at(self.skip.min(self.u.len()));
-        for &ut in warmup {
+        let (head, counted) = self.u.split_at(self.warmup.min(self.u.len()));
+        for &ut in head {
             let xt = linear.next(ut);
             y_prev = backlash.step(xt, y_prev);
             finite &= xt.is_finite() & y_prev.is_finite();
@@ -222,16 +224,16 @@ pub(crate) fn switching_flags(
     }
 }
 
-/// The number of t >= skip with f1(t) or f2(t) along a simulated record (`switching_flags`
+/// The number of t >= warmup with f1(t) or f2(t) along a simulated record (`switching_flags`
 /// counted).
 pub(crate) fn moving_count(
     backlash: &GeneralBacklash,
     x: &[f64],
     y: &[f64],
     y0: f64,
-    skip: usize,
+    warmup: usize,
 ) -> usize {
-    let start = skip.min(x.len());
+    let start = warmup.min(x.len());
     let y0 = if start == 0 { y0 } else { y[start - 1] };
     let (x, y) = (&x[start..], &y[start..]);
     let moves = |(f1, f2): &(bool, bool)| f1 | f2;
@@ -264,24 +266,10 @@ fn flags_along<'a>(
 mod tests {
     use super::*;
 
-    pub(crate) fn example1() -> CascadeModel {
-        CascadeModel::new(
-            LinearBlock::new(vec![0.7, 0.5], vec![-0.2, 0.35]).unwrap(),
-            GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap(),
-        )
-    }
+    use crate::test_params::example1_model as example1;
 
     #[test]
-    fn equals_the_blocks_run_one_after_the_other() {
-        let m = example1();
-        let u: Vec<f64> = (0..500).map(|k| ((k as f64) * 0.7).sin()).collect();
-        let x = m.linear.simulate(&u, &m.linear.rest_state()).unwrap();
-        let y = m.backlash.simulate(&x, 0.0).unwrap();
-        assert_eq!(m.simulate(&u, &m.rest_state()).unwrap(), y);
-    }
-
-    #[test]
-    fn moving_count_counts_the_flags_after_skip() {
+    fn moving_count_counts_the_flags_after_warmup() {
         // branches of degree 3 (the padded step) and 5 (the general one)
         let quintic = CascadeModel::new(
             example1().linear,
@@ -302,12 +290,12 @@ mod tests {
             let s = m.simulate_internals(&u, &state).unwrap();
             let moving: Vec<bool> = s.f1.iter().zip(&s.f2).map(|(a, b)| a | b).collect();
             assert!(moving.iter().any(|&v| v) && moving.iter().any(|&v| !v));
-            for skip in [0, 1, 77, 699, 700, 5000] {
-                let want = moving.iter().skip(skip).filter(|&&v| v).count();
+            for warmup in [0, 1, 77, 699, 700, 5000] {
+                let want = moving.iter().skip(warmup).filter(|&&v| v).count();
                 assert_eq!(
-                    m.moving_count(&u, &state, skip).unwrap(),
+                    m.moving_count(&u, &state, warmup).unwrap(),
                     want,
-                    "skip {skip}"
+                    "warmup {warmup}"
                 );
             }
             assert!(m.moving_count(&[0.1, f64::NAN], &state, 0).is_err());

@@ -1,14 +1,14 @@
 //! The sandwich of Section 4 (Fig. 3): the input block (16), a general backlash (1) and the
 //! output block (29): w(t) = sum_{i=1}^{nr} r_i y(t-i) - sum_{j=1}^{ns} s_j w(t-j).
 
-use crate::backlash::{GeneralBacklash, Step};
-use crate::cascade::{moving_count, switching_flags, unreachable_error};
 use crate::error::{Error, Result};
-use crate::linear::{
+use crate::model::backlash::{GeneralBacklash, Step};
+use crate::model::cascade::{moving_count, switching_flags, unreachable_error};
+use crate::model::linear::{
     blame_feeding_block, check_no_overflow, Boxed, LinearBlock, LinearState, Outputs, Recursion,
     RecursionUser,
 };
-use crate::signal::check_signal;
+use crate::model::signal::check_signal;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct SandwichModel {
@@ -148,16 +148,16 @@ impl SandwichModel {
         })
     }
 
-    /// How many samples t >= `skip` move the backlash (f1 or f2 of eq 12-13) on the run
+    /// How many samples t >= `warmup` move the backlash (f1 or f2 of eq 12-13) on the run
     /// from `state`: the flags of `simulate_internals`, counted without storing them.
-    pub fn moving_count(&self, u: &[f64], state: &SandwichState, skip: usize) -> Result<usize> {
+    pub fn moving_count(&self, u: &[f64], state: &SandwichState, warmup: usize) -> Result<usize> {
         let (x, y, _w) = self.run(u, state)?;
         Ok(moving_count(
             &self.backlash,
             &x,
             &y,
             state.output.u_past[0],
-            skip,
+            warmup,
         ))
     }
 }
@@ -212,31 +212,7 @@ impl<'a> RecursionUser for XyBlocks<'a> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
-
-    fn example2() -> SandwichModel {
-        SandwichModel::new(
-            LinearBlock::new(vec![0.8, 0.2], vec![0.2, -0.2]).unwrap(),
-            GeneralBacklash::new(0.4, 0.5, vec![1.0, 0.1, 0.3], vec![0.75, 0.2, 0.6]).unwrap(),
-            LinearBlock::new(vec![1.0, 0.15], vec![-0.2, 0.35]).unwrap(),
-        )
-    }
-
-    #[test]
-    fn equals_the_three_blocks_run_one_after_the_other() {
-        let m = example2();
-        let u: Vec<f64> = (0..700).map(|k| ((k as f64) * 0.9).sin() * 0.95).collect();
-        let x = m
-            .input_linear
-            .simulate(&u, &m.input_linear.rest_state())
-            .unwrap();
-        let y = m.backlash.simulate(&x, 0.0).unwrap();
-        let w = m
-            .output_linear
-            .simulate(&y, &m.output_linear.rest_state())
-            .unwrap();
-        assert_eq!(m.simulate(&u, &m.rest_state()).unwrap(), w);
-    }
+    use crate::test_params::example2_model as example2;
 
     #[test]
     fn continuing_from_the_final_state_equals_one_long_run() {
@@ -249,15 +225,15 @@ mod tests {
     }
 
     #[test]
-    fn moving_count_counts_the_flags_after_skip() {
+    fn moving_count_counts_the_flags_after_warmup() {
         let m = example2();
         let u: Vec<f64> = (0..600).map(|k| ((k as f64) * 0.04).sin() * 1.5).collect();
         let s = m.simulate_internals(&u, &m.rest_state()).unwrap();
         let moving: Vec<bool> = s.f1.iter().zip(&s.f2).map(|(a, b)| a | b).collect();
         assert!(moving.iter().any(|&v| v) && moving.iter().any(|&v| !v));
-        for skip in [0, 10, 333, 600] {
-            let want = moving.iter().skip(skip).filter(|&&v| v).count();
-            assert_eq!(m.moving_count(&u, &m.rest_state(), skip).unwrap(), want);
+        for warmup in [0, 10, 333, 600] {
+            let want = moving.iter().skip(warmup).filter(|&&v| v).count();
+            assert_eq!(m.moving_count(&u, &m.rest_state(), warmup).unwrap(), want);
         }
     }
 }

@@ -9,7 +9,7 @@
 //! step); two partial factors merge by folding the rows of one into the other.
 
 use crate::error::{Error, Result};
-use crate::lstsq::{solve_triangular, LeastSquares};
+use crate::linalg::lstsq::{solve_triangular, LeastSquares};
 
 /// Rows folded per Householder sweep: the stacked [R_aug; block] (p+1 columns) stays in the
 /// core's L2 cache. Measured on p = 11 at N = 1e5 (faer's unblocked QR): 256 to 4096 rows are
@@ -792,20 +792,15 @@ pub fn fold_stream_parts(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lstsq::solve;
+    use crate::linalg::lstsq::solve;
 
-    fn names(p: usize) -> Vec<String> {
-        (0..p).map(|j| format!("p{j}")).collect()
-    }
+    use crate::test_params::{lcg_unit, names};
 
+    /// Uniform in (-1, 1) from the tests' generator.
     struct Lcg(u64);
     impl Lcg {
         fn next(&mut self) -> f64 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+            lcg_unit(&mut self.0) * 2.0 - 1.0
         }
     }
 
@@ -878,7 +873,7 @@ mod tests {
         LeastSquares {
             theta,
             rss,
-            unscaled_covariance: crate::lstsq::inverse_gram(&rrow, &scale),
+            unscaled_covariance: crate::linalg::lstsq::inverse_gram(&rrow, &scale),
             rcond: min / max,
         }
     }

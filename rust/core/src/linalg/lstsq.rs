@@ -6,7 +6,7 @@
 //! conditioning do not depend on the units of the regressors (powers of xi up to degree 25).
 
 use crate::error::{Error, Result};
-use crate::streaming::TriangularFactor;
+use crate::linalg::streaming::TriangularFactor;
 
 /// The solution of min ||A theta - b|| and what is needed for standard errors.
 #[derive(Debug, Clone, PartialEq)]
