@@ -65,3 +65,12 @@ BacklashIdError
 
 PLOT = AXES + "\n\n" + PYPLOT
 """``ax``, ``title``, Returns and Raises of a plotting function (``{plot}``)."""
+
+
+TO_DICT = """JSON-safe dict of the fields (NaN and inf as None).
+
+Returns
+-------
+dict
+    ``json.dumps`` works on it."""
+"""The whole docstring of a result's ``to_dict`` that only converts its fields (``{to_dict}``)."""

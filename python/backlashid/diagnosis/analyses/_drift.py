@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
+from ..._docstrings import TO_DICT, fill
 from ..._json import json_float
 from ..._validation import check_signals
 from .._statistics import snap_constant
@@ -71,13 +72,10 @@ class ChangePoint:
     before: float  # mean (kind "mean") or standard deviation (kind "variance") before
     after: float  # the same after
 
+    @fill(to_dict=TO_DICT)
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict of the fields (NaN and inf as None).
-
-        Returns
-        -------
-        dict
-            ``json.dumps`` works on it.
+        """
+        {to_dict}
         """
         return {
             "index": int(self.index),
@@ -166,13 +164,10 @@ class TimeAnalysis:
         ps = [4 * self.mean_p, 4 * self.rms_p] + [4 * c.p_value for c in self.change_points]
         return float(min(1.0, min(ps)))
 
+    @fill(to_dict=TO_DICT)
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict of the fields (NaN and inf as None).
-
-        Returns
-        -------
-        dict
-            ``json.dumps`` works on it.
+        """
+        {to_dict}
         """
         return {
             "n": self.n,

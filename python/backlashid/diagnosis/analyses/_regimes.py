@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..._docstrings import TO_DICT, fill
 from ..._json import json_float
 from ..._validation import check_signals
 from ...errors import DataError
@@ -127,13 +128,10 @@ class RegimeShare:
         """Significantly more error here than elsewhere."""
         return self.significant and self.mse > self.mse_rest
 
+    @fill(to_dict=TO_DICT)
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict of the fields (NaN and inf as None).
-
-        Returns
-        -------
-        dict
-            ``json.dumps`` works on it.
+        """
+        {to_dict}
         """
         return {
             "name": self.name,
@@ -215,13 +213,10 @@ class RegimeShares:
         lab[self.masks["right_branch"]] = 2
         return lab
 
+    @fill(to_dict=TO_DICT)
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict of the fields (NaN and inf as None).
-
-        Returns
-        -------
-        dict
-            ``json.dumps`` works on it.
+        """
+        {to_dict}
         """
         return {
             "n": self.n,

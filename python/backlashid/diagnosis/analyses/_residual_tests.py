@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import linalg, stats
 
+from ..._docstrings import TO_DICT, fill
 from ..._validation import check_signals
 from ...errors import DataError
 from .._statistics import holm, same_length, snap_constant
@@ -165,13 +166,10 @@ class CorrelationTest:
         """The lag of the largest absolute correlation."""
         return int(self.lags[int(np.argmax(np.abs(self.values)))])
 
+    @fill(to_dict=TO_DICT)
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict of the fields (NaN and inf as None).
-
-        Returns
-        -------
-        dict
-            ``json.dumps`` works on it.
+        """
+        {to_dict}
         """
         return {
             "name": self.name,
@@ -259,13 +257,10 @@ class ResidualTests:
     def __contains__(self, name: object) -> bool:
         return name in self.names
 
+    @fill(to_dict=TO_DICT)
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict of the fields (NaN and inf as None).
-
-        Returns
-        -------
-        dict
-            ``json.dumps`` works on it.
+        """
+        {to_dict}
         """
         return {
             "n": self.n,

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal, stats
 
+from ..._docstrings import TO_DICT, fill
 from ..._json import json_float
 from ..._validation import check_signals
 from ...errors import DataError
@@ -116,13 +117,10 @@ class Band:
         """``ratio`` in decibels."""
         return float(10.0 * np.log10(self.ratio)) if self.ratio > 0 else float("-inf")
 
+    @fill(to_dict=TO_DICT)
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict of the fields (NaN and inf as None).
-
-        Returns
-        -------
-        dict
-            ``json.dumps`` works on it.
+        """
+        {to_dict}
         """
         return {
             "lo": self.lo,
@@ -221,13 +219,10 @@ class FrequencyAnalysis:
         bins = sum(b.n_bins for b in self.bands)
         return float(total / bins / self.floor) if bins and self.floor > 0 else float("nan")
 
+    @fill(to_dict=TO_DICT)
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict of the fields (NaN and inf as None).
-
-        Returns
-        -------
-        dict
-            ``json.dumps`` works on it.
+        """
+        {to_dict}
         """
         return {
             "n": self.n,
