@@ -349,3 +349,13 @@ def test_benchmark_script_tabulates_a_contract_shaped_report(monkeypatch, capsys
     assert level["rank1"] == 1.0 and level["top3"] == 1.0 and level["median_gap_closed_correct"] == pytest.approx(0.8)
     assert level["out_of_catalogue_unexplained"] == 1.0 and summary["false_alarms"] == 0.0
     assert "rank-1 accuracy (catalogue): 100.0 %" in out and "dead_time" in out
+
+
+def test_the_catalogue_is_the_diagnosers_effects_that_have_a_generator():
+    """An effect counts in the benchmark only with a generator of its own; a name without one
+    is refused, never simulated as the nominal model under that name."""
+    assert W.CATALOGUE == tuple(e for e in bid.EFFECTS if e in W._GENERATORS)
+    assert set(W.CATALOGUE) == set(bid.EFFECTS)  # today every catalogue effect has one
+    u = np.zeros(20)
+    with pytest.raises(bid.DataError, match="unknown effect 'no_such_effect'"):
+        W.simulate_true(bid.example1(), "no_such_effect", {}, u, np.arange(20.0), 20.0)

@@ -56,11 +56,6 @@ __all__ = [
     "simulate_true",
 ]
 
-# The diagnoser's catalogue of effect names; how each is generated is this module's own truth
-# (_GENERATORS), independent of the diagnoser's parametrisation.
-CATALOGUE: tuple[str, ...] = EFFECTS
-OUT_OF_CATALOGUE = ("output_gain_drift", "input_gain_drift")
-ALL_EFFECTS = ("none",) + CATALOGUE + OUT_OF_CATALOGUE
 
 PREROLL = 500  # samples simulated from rest and dropped
 MIN_MOVING = 0.3  # share of recorded samples on which the nominal backlash must move
@@ -146,9 +141,11 @@ def simulate_true(
     >>> bool(np.allclose(y, bid.example1().simulate(u)))
     True
     """
+    if effect not in ALL_EFFECTS:
+        raise DataError(f"unknown effect {effect!r}: choose one of {', '.join(ALL_EFFECTS)}")
     if isinstance(nom, CascadeModel):
         nom = _Nominal.of(nom)
-    g = _GENERATORS.get(effect, _NOMINAL)
+    g = _NOMINAL if effect == "none" else _GENERATORS[effect]
     p = params
     u = np.asarray(u, dtype=np.float64)
     if g.drive is not None:  # input stage
@@ -687,6 +684,13 @@ _GENERATORS: dict[str, _Generator] = {
     "input_gain_drift": _Generator(_shape_gain_drift, _params_gain_drift, drive=_input_gain_drive),
 }
 
+# The diagnoser's effects that this module can generate, in the catalogue's order (an effect
+# added to the catalogue joins the benchmark once it has a generator here); how each is
+# generated is this module's own truth, independent of the diagnoser's parametrisation.
+CATALOGUE: tuple[str, ...] = tuple(e for e in EFFECTS if e in _GENERATORS)
+OUT_OF_CATALOGUE = ("output_gain_drift", "input_gain_drift")
+ALL_EFFECTS = ("none",) + CATALOGUE + OUT_OF_CATALOGUE
+
 
 def _draw(effect: str, level: float, rng: np.random.Generator, n_est: int, n_val: int, noise_ratio: float, preroll: int) -> dict[str, Any]:
     n_rec = n_est + n_val
@@ -716,7 +720,7 @@ def _draw(effect: str, level: float, rng: np.random.Generator, n_est: int, n_val
         raise _Redraw(f"the backlash moves on {moving:.2f} of the samples only")
     sigma = noise_ratio * float(y_nom[rec].std())
     ctx = _Context(rng, nom, nominal, u, t, horizon, rec, x_nom, y_nom)
-    g = _GENERATORS.get(effect, _NOMINAL)
+    g = _NOMINAL if effect == "none" else _GENERATORS[effect]
     params, size, change, sigma, by = g.draw(g, ctx, effect, level, sigma)
     e = sigma * rng.standard_normal(m)
     y = y_nom + change + e
