@@ -190,7 +190,8 @@ def test_missing_dask_says_how_to_install(records, monkeypatch):
 
 def test_errors_cross_the_process_boundary_with_their_attributes(monkeypatch):
     """NotConvergedError.best (not in args) survives the trip back from a worker."""
-    best = {"parameters": {"a1": 0.5}, "history": np.arange(4.0)}
+    data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+    best = bid.fit_cascade(data.u, data.noisy, na=2, nb=2, degree=3)  # what the failed fit carries
 
     def diverges(u, y, **options):
         raise NotConvergedError("the identification diverged", best)
@@ -199,7 +200,8 @@ def test_errors_cross_the_process_boundary_with_their_attributes(monkeypatch):
     payload = pickle.loads(pickle.dumps(parallel._fit_one((np.zeros(3), np.zeros(3)), "cascade", {})))
     exc = payload
     assert type(exc) is NotConvergedError and str(exc) == "the identification diverged"
-    assert exc.best["parameters"] == best["parameters"] and np.array_equal(exc.best["history"], best["history"])
+    assert isinstance(exc.best, FitResult)
+    assert exc.best.parameters == best.parameters and np.array_equal(exc.best.history, best.history)
 
 
 # -- diagnoses -----------------------------------------------------------------------------------
