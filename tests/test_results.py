@@ -33,7 +33,15 @@ def wh_fit():
 
 
 @pytest.fixture(scope="module")
-def results(cascade_fit, wh_fit):
+def diagnosis():
+    from backlashid.benchmarks import make_case
+
+    case = make_case("friction", 3.0, 0, n_est=1500, n_val=1500)
+    return bid.diagnose(case.nominal, estimation=(case.u_est, case.y_est), validation=(case.u_val, case.y_val))
+
+
+@pytest.fixture(scope="module")
+def results(cascade_fit, wh_fit, diagnosis):
     """One of each result class, with the arguments its plot() takes."""
     data, fit = cascade_fit
     u, y, wh = wh_fit
@@ -46,10 +54,17 @@ def results(cascade_fit, wh_fit):
         LinearBaseline: (wh.baseline, (u, y), {"warmup": 20}),
         bid.CascadeSimulation: (fit.model.simulate(data.u, internals=True), None, None),
         bid.SandwichSimulation: (sandwich, None, None),
+        bid.DiagnosisReport: (diagnosis, None, None),  # its plot() is a whole dashboard: tested below
     }
 
 
-CLASSES = [bid.FitResult, Metrics, WienerHammersteinFit, LinearBaseline, bid.CascadeSimulation, bid.SandwichSimulation]
+CLASSES = [bid.FitResult, Metrics, WienerHammersteinFit, LinearBaseline, bid.CascadeSimulation, bid.SandwichSimulation, bid.DiagnosisReport]
+
+
+def results_drawn_on_axes(cls: type) -> bool:
+    """The results whose plot() draws on one axes (the simulations draw nothing, the diagnosis a
+    whole figure)."""
+    return "Simulation" not in cls.__name__ and cls is not bid.DiagnosisReport
 
 
 @pytest.mark.parametrize("cls", CLASSES, ids=lambda c: c.__name__)
@@ -71,7 +86,7 @@ def test_summary_is_text_and_to_dict_is_json(results, cls):
     assert set(json.loads(json.dumps(data))) == set(data)
 
 
-@pytest.mark.parametrize("cls", [c for c in CLASSES if "Simulation" not in c.__name__], ids=lambda c: c.__name__)
+@pytest.mark.parametrize("cls", [c for c in CLASSES if results_drawn_on_axes(c)], ids=lambda c: c.__name__)
 def test_plot_draws_with_the_app_layer(results, cls):
     result, args, kwargs = results[cls]
     drawn = result.plot(*args, **kwargs)
@@ -124,3 +139,16 @@ def test_not_converged_error_carries_a_picklable_fit_result():
     assert type(again) is bid.NotConvergedError and str(again) == str(info.value)
     assert isinstance(again.best, bid.FitResult) and again.best.parameters == best.parameters
     np.testing.assert_array_equal(again.best.history, best.history)
+
+
+def test_diagnosis_report_plot_is_the_app_dashboard(diagnosis, tmp_path):
+    from backlashid.app import plot_diagnosis
+
+    figure = diagnosis.plot()
+    assert isinstance(figure, matplotlib.figure.Figure) and len(figure.axes) >= 5
+    assert all(ax.lines or ax.collections or ax.patches or ax.texts for ax in figure.axes)
+    path = tmp_path / "dashboard.png"
+    diagnosis.plot(path)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(plot_diagnosis(diagnosis).axes) == len(figure.axes)
+    plt.close("all")
