@@ -5,16 +5,27 @@ Plain Python loops over the samples (this is a reference, not a fast path): the 
 friction, the branches (eq 4-5) by Horner's rule, the general backlash (eq 1) in its case
 order, and the play operator. The withheld-effect generator builds its true systems from these,
 independently of the Rust core, and ``benches/numpy_reference.py`` simulates with them.
+
+The augmented cascade of the diagnosis catalogue (``augmented_cascade``) is built the same way,
+one function per effect from its definition (``rust/core/src/effects/*.rs``): the drive stage
+(dead time, saturation, friction) on the linear block's input, the width drift on the
+dead-band widths, then the output stage in its order (compliance, extra plays, output offset
+and drift, quantiser); ``ar_prediction`` is the colored-noise model's one-step prediction.
+``tests/diagnosis/test_effects_compliance.py`` checks the Rust simulation against it.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["backlash", "branch", "difference_equation", "linear_with_friction", "play"]
+__all__ = [
+    "ar_prediction", "augmented_cascade", "backlash", "branch", "compliance", "dead_time", "difference_equation",
+    "linear_with_friction", "output_offset", "play", "plays", "quantiser", "saturation", "width_drift",
+]  # fmt: skip
 
 Array = NDArray[np.float64]
 
@@ -36,13 +47,23 @@ def difference_equation(num: Sequence[float], den: Sequence[float], u: Array) ->
     return np.array(yy[kd:], dtype=np.float64)
 
 
-def linear_with_friction(a: Sequence[float], b: Sequence[float], u: Array, f_c: float, f_v: float) -> Array:
+def linear_with_friction(
+    a: Sequence[float],
+    b: Sequence[float],
+    u: Array,
+    f_c: float,
+    f_v: float,
+    u_past: Sequence[float] = (),
+    x_past: Sequence[float] = (),
+) -> Array:
     """Eq (16) driven by u_eff(t) = u(t) - F_c sign(v(t)) - F_v v(t), v(t) = x(t) - x(t-1)
-    (sign(0) = 0): x(t) needs u_eff up to t - 1 only, so u_eff(t) follows x(t)."""
+    (sign(0) = 0): x(t) needs u_eff up to t - 1 only, so u_eff(t) follows x(t). From rest, or
+    from the past u_past = [u(-1), u(-2), ..] and x_past = [x(-1), x(-2), ..] (x(-1) is also
+    x(t-1) of v at t = 0; 0 without it)."""
     a, b = [float(v) for v in a], [float(v) for v in b]
     na, nb = len(a), len(b)
-    ue = [0.0] * na  # u_eff(t-na) .. u_eff(t-1), oldest first
-    xx = [0.0] * max(nb, 1)
+    ue = [float(v) for v in reversed(u_past)] if len(u_past) else [0.0] * na  # u_eff(t-na) .. u_eff(t-1), oldest first
+    xx = [float(v) for v in reversed(x_past)] if len(x_past) else [0.0] * max(nb, 1)
     out = np.empty(len(u))
     for t, ut in enumerate(u.tolist()):
         x = 0.0
@@ -52,7 +73,7 @@ def linear_with_friction(a: Sequence[float], b: Sequence[float], u: Array, f_c: 
             x -= b[j - 1] * xx[-j]
         v = x - xx[-1]
         sign = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
-        ue.append(ut - f_c * sign - f_v * v)
+        ue.append(ut - (f_c * sign + f_v * v))
         xx.append(x)
         out[t] = x
     return out
@@ -79,10 +100,121 @@ def backlash(left: Array, right: Array, y0: float = 0.0) -> Array:
     return out
 
 
-def play(x: Array, r: float) -> Array:
-    """Play operator of radius r: p(t) = max(x(t) - r, min(x(t) + r, p(t-1))), p = 0 at rest."""
-    p, out = 0.0, np.empty(len(x))
+def play(x: Array, r: float, p0: float = 0.0) -> Array:
+    """Play operator of radius r: p(t) = max(x(t) - r, min(x(t) + r, p(t-1))), p(-1) = p0
+    (0 at rest)."""
+    p, out = float(p0), np.empty(len(x))
     for t, xt in enumerate(x.tolist()):
         p = max(xt - r, min(xt + r, p))
         out[t] = p
+    return out
+
+
+# -- the augmented cascade of the diagnosis catalogue ---------------------------------------------
+
+
+def dead_time(u: Array, d: int) -> Array:
+    """u(t - d), 0 before the record (rest)."""
+    return np.concatenate([np.zeros(min(d, len(u))), u[: max(len(u) - d, 0)]])
+
+
+def saturation(u: Array, lo: float, hi: float) -> Array:
+    """The drive input clipped to [lo, hi]."""
+    return np.array([lo if v < lo else (hi if v > hi else v) for v in u.tolist()])
+
+
+def width_drift(c: float, dc: float, tau: Array) -> Array:
+    """A dead-band width drifting linearly in time: c(t) = c + dc tau(t)."""
+    return c + dc * tau
+
+
+def compliance(f: Array, k: float, omega: float, zeta: float, f0: float = 0.0) -> Array:
+    """y = (1 - k) f + k H(q) f, H(q) = g / (1 + d1 q^-1 + d2 q^-2) with the poles
+    exp(omega (-zeta +- j sqrt(1 - zeta^2))) and unit DC gain g = 1 + d1 + d2, its memory at
+    rest on f(-1) = f0."""
+    rho = math.exp(-zeta * omega)
+    d1, d2 = -2.0 * rho * math.cos(omega * math.sqrt(1.0 - zeta * zeta)), rho * rho
+    g = 1.0 + d1 + d2
+    h1 = h2 = float(f0)
+    out = np.empty(len(f))
+    for t, ft in enumerate(f.tolist()):
+        h = g * ft - d1 * h1 - d2 * h2
+        h1, h2 = h, h1
+        out[t] = (1.0 - k) * ft + k * h
+    return out
+
+
+def plays(y: Array, x: Array, pairs: Sequence[tuple[float, float]], x0: float = 0.0) -> Array:
+    """y + sum_k w_k play_{r_k}(x), each play at rest on x(-1) = x0."""
+    out = y.copy()
+    for r, w in pairs:
+        out = out + w * play(x, r, x0)
+    return out
+
+
+def output_offset(y: Array, o_0: float, o_1: float, tau: Array) -> Array:
+    """y + o_0 + o_1 tau(t)."""
+    return y + (o_0 + o_1 * tau)
+
+
+def quantiser(y: Array, q: float) -> Array:
+    """q round(y / q), halves away from zero (q = 0: none)."""
+    if q == 0.0:
+        return y.copy()
+    return np.array([q * math.copysign(math.floor(abs(v / q) + 0.5), v / q) for v in y.tolist()])
+
+
+def augmented_cascade(
+    a: Sequence[float],
+    b: Sequence[float],
+    c_left: float,
+    c_right: float,
+    m_left: Sequence[float],
+    m_right: Sequence[float],
+    u: Array,
+    effects: Sequence[tuple[str, Sequence[float]]] = (),
+    t0: float = 0.0,
+    time_scale: float = 1000.0,
+    u_past: Sequence[float] = (),
+    x_past: Sequence[float] = (),
+    y_prev: float = 0.0,
+) -> Array:
+    """The nominal cascade (eq 16 -> eq 1) with the catalogue's effects, each given as
+    (name, parameters) in the Python catalogue's order: u(t - d), clipped to [lo, hi], through
+    friction into eq (16) from its past; the backlash (eq 1) on x(t) with the widths
+    c + dc tau(t), tau(t) = (t0 + t) / time_scale, from y(0) = y_prev; then compliance, the
+    extra plays (at rest on x_past[0]), the output offset and drift, and the quantiser."""
+    p = {name: [float(v) for v in params] for name, params in effects}
+    known = {"dead_time", "saturation", "friction", "width_drift", "compliance", "hysteresis_memory", "output_offset", "quantization"}
+    if set(p) - known:
+        raise ValueError(f"no reference for {sorted(set(p) - known)}")
+    tau = (t0 + np.arange(len(u), dtype=np.float64)) / time_scale
+    v = dead_time(u, int(p["dead_time"][0])) if "dead_time" in p else u
+    v = saturation(v, *p["saturation"]) if "saturation" in p else v
+    f_c, f_v = p.get("friction", (0.0, 0.0))
+    x = linear_with_friction(a, b, v, f_c, f_v, u_past, x_past)
+    dc_l, dc_r = p.get("width_drift", (0.0, 0.0))
+    left = branch(m_left, x + width_drift(c_left, dc_l, tau))
+    right = branch(m_right, x - width_drift(c_right, dc_r, tau))
+    y = backlash(left, right, y_prev)
+    if "compliance" in p and p["compliance"][0] != 0.0:
+        y = compliance(y, *p["compliance"], f0=y_prev)
+    if "hysteresis_memory" in p:
+        hm = p["hysteresis_memory"]
+        y = plays(y, x, list(zip(hm[0::2], hm[1::2])), float(x_past[0]) if len(x_past) else 0.0)
+    if "output_offset" in p:
+        y = output_offset(y, *p["output_offset"], tau)
+    if "quantization" in p:
+        y = quantiser(y, p["quantization"][0])
+    return y
+
+
+def ar_prediction(residual: Array, phi: Sequence[float]) -> Array:
+    """One-step prediction of an AR process, sum_k phi_k r(t - k), 0 before the record."""
+    r, out = residual.tolist(), np.empty(len(residual))
+    for t in range(len(r)):
+        acc = 0.0
+        for k, c in enumerate(phi, 1):
+            acc += float(c) * r[t - k] if t >= k else 0.0
+        out[t] = acc
     return out
