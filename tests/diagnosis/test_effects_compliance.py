@@ -3,8 +3,8 @@
 ``test_algos_python_compliance.py``. For every effect of the registry (and every pair of them):
 random nominal cascades (orders 1-2, branch degree 1-3, increasing branches), random parameters
 inside the effect's bounds, several input classes and record lengths (down to one sample), from
-rest and from a held, non-rest state; the augmented model as the diagnosis simulates it
-(``AugmentedModel``) equals the reference to 1e-10 relative."""
+rest, from the input held before the record and from a random past; the augmented model as the diagnosis simulates it
+(``AugmentedModel``, or the core simulator it calls from a random past) equals the reference to 1e-10 relative."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ import pytest
 from scipy import signal
 
 import backlashid as bx
+from backlashid import _core
 from backlashid.benchmarks import _reference as ref
 from backlashid.diagnosis import effects as fx
 from backlashid.diagnosis.effects import _base
@@ -55,8 +56,9 @@ class Case:
         n = int(rng.choice(LENGTHS))
         self.u = _input(rng, str(rng.choice(INPUTS)), n)
         self.t0 = float(rng.integers(0, 3000))
-        self.held = bool(rng.random() < 0.5)
-        self.y_prev = float(rng.uniform(-1.0, 1.0)) if self.held else 0.0
+        self.start = str(rng.choice(["rest", "held", "past"]))  # past: a random state of the core simulator
+        self.y_prev = float(rng.uniform(-1.0, 1.0)) if self.start != "rest" else 0.0
+        self.u_past, self.x_past = list(rng.standard_normal(self.na)), list(rng.standard_normal(self.nb))
         self.core: list[tuple[str, tuple[float, ...]]] = []
         self.ar = np.zeros(0)
 
@@ -81,8 +83,11 @@ class Case:
         return _base.Problem(self.structure(), self.u, y, 0, self.t0)
 
     def state(self) -> tuple[list[float], list[float]]:
-        """u_past, x_past of the start: rest, or the input u[0] held before the record."""
-        if not self.held:
+        """u_past, x_past of the start: rest, the input u[0] held before the record, or a random
+        past (extended with zeros where linear_order lengthened the block)."""
+        if self.start == "past":
+            return self.u_past + [0.0] * (len(self.a) - self.na), self.x_past + [0.0] * (len(self.b) - self.nb)
+        if self.start == "rest":
             return [0.0] * len(self.a), [0.0] * len(self.b)
         x_eq = _base.held_x(bx.LinearBlock(self.a, self.b), float(self.u[0]))
         return [float(self.u[0])] * len(self.a), [x_eq] * len(self.b)
@@ -195,12 +200,19 @@ def _check(case: Case, label: str) -> None:
     the one-step prediction (the noise model on the output error) from rest."""
     model = case.model()
     want = case.reference()
-    got = model.simulate(case.u, case.t0, y_prev=case.y_prev, held=case.held)
+    if case.start == "past":  # the core simulator AugmentedModel calls, from any state
+        u_past, x_past = case.state()
+        chain = (case.a, case.b, case.c_left, case.c_right, case.m_left, case.m_right)
+        got = _core.simulate_augmented(
+            *chain, case.u, effects=case.core, t0=case.t0, time_scale=_base.TIME_SCALE, u_past=u_past, x_past=x_past, y_prev=case.y_prev
+        )
+    else:
+        got = model.simulate(case.u, case.t0, y_prev=case.y_prev, held=case.start == "held")
     scale = max(1.0, float(np.max(np.abs(want))))
     np.testing.assert_allclose(got, want, rtol=RTOL, atol=RTOL * scale, err_msg=f"{label}: simulation")
-    held, y_prev, case.held, case.y_prev = case.held, case.y_prev, False, 0.0
+    start, y_prev, case.start, case.y_prev = case.start, case.y_prev, "rest", 0.0
     sim = case.reference()
-    case.held, case.y_prev = held, y_prev
+    case.start, case.y_prev = start, y_prev
     y = sim + 0.1 * case.rng.standard_normal(sim.size)
     want = sim + ref.ar_prediction(y - sim, case.ar)
     scale = max(1.0, float(np.max(np.abs(want))))
@@ -223,7 +235,7 @@ def test_each_effect_equals_the_reference(effect: str) -> None:
     for i in range(CASES_ALONE):
         case = Case(rng)
         PUT[effect](case)
-        _check(case, f"{effect} case {i} (na={case.na}, nb={case.nb}, n={case.degree}, N={case.u.size}, held={case.held})")
+        _check(case, f"{effect} case {i} (na={case.na}, nb={case.nb}, n={case.degree}, N={case.u.size}, start={case.start})")
 
 
 @pytest.mark.parametrize("pair", list(itertools.combinations(fx.EFFECTS, 2)), ids="+".join)
@@ -236,4 +248,4 @@ def test_effects_two_at_a_time_equal_the_reference(pair: tuple[str, str]) -> Non
         case = Case(rng)
         for effect in pair:
             PUT[effect](case)
-        _check(case, f"{'+'.join(pair)} case {i} (N={case.u.size}, held={case.held})")
+        _check(case, f"{'+'.join(pair)} case {i} (N={case.u.size}, start={case.start})")

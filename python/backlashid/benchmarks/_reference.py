@@ -73,7 +73,7 @@ def linear_with_friction(
             x -= b[j - 1] * xx[-j]
         v = x - xx[-1]
         sign = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
-        ue.append(ut - (f_c * sign + f_v * v))
+        ue.append(ut - f_c * sign - f_v * v)
         xx.append(x)
         out[t] = x
     return out
