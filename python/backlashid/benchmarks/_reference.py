@@ -161,7 +161,8 @@ def quantiser(y: Array, q: float) -> Array:
     """q round(y / q), halves away from zero (q = 0: none)."""
     if q == 0.0:
         return y.copy()
-    return np.array([q * math.copysign(math.floor(abs(v / q) + 0.5), v / q) for v in y.tolist()])
+    z = y / q
+    return q * np.copysign(np.floor(np.abs(z) + 0.5), z)
 
 
 def augmented_cascade(
