@@ -188,7 +188,9 @@ def augmented_cascade(
     p = {name: [float(v) for v in params] for name, params in effects}
     known = {"dead_time", "saturation", "friction", "width_drift", "compliance", "hysteresis_memory", "output_offset", "quantization"}
     if set(p) - known:
-        raise ValueError(f"no reference for {sorted(set(p) - known)}")
+        raise ValueError(
+            f"no reference for {sorted(set(p) - known)}: add each effect's function here, from its definition, and its place below"
+        )
     tau = (t0 + np.arange(len(u), dtype=np.float64)) / time_scale
     v = dead_time(u, int(p["dead_time"][0])) if "dead_time" in p else u
     v = saturation(v, *p["saturation"]) if "saturation" in p else v
