@@ -343,6 +343,28 @@ pub fn cascade_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, y, "y")?;
+    cascade_oe_factor_on(linear, backlash, u, y, warmup, threads)
+}
+
+/// `cascade_oe_factor` of a record checked before (`Problem`).
+pub(crate) fn cascade_oe_factor_unchecked(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+) -> Result<(TriangularFactor, f64)> {
+    cascade_oe_factor_on(linear, backlash, u, y, warmup, oe_threads(u.len()))
+}
+
+fn cascade_oe_factor_on(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
     let cols = cascade_cols(linear, backlash);
     let nl = linear.na() + linear.nb();
     // L's rows: a, b, c_L, m_L2..m_Ln; R's rows: a, b, m_R1, c_R, m_R2..m_Rn
@@ -433,6 +455,31 @@ pub fn sandwich_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, w, "w")?;
+    sandwich_oe_factor_on(input_linear, backlash, output_linear, u, w, warmup, threads)
+}
+
+/// `sandwich_oe_factor` of a record checked before (`Problem`).
+pub(crate) fn sandwich_oe_factor_unchecked(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+) -> Result<(TriangularFactor, f64)> {
+    let threads = oe_threads(u.len());
+    sandwich_oe_factor_on(input_linear, backlash, output_linear, u, w, warmup, threads)
+}
+
+fn sandwich_oe_factor_on(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
     let cols = sandwich_cols(input_linear, backlash, output_linear);
     finish(fold_stream(cols, threads, |sink| {
         walk_sandwich(
