@@ -15,7 +15,10 @@ use crate::errors::{run, DataError};
 /// message of `_validation.check_whole`.
 fn whole(value: &Bound<'_, PyAny>, name: &str, least: usize) -> PyResult<usize> {
     let bad = || {
-        let text = value.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into());
+        let text = value
+            .repr()
+            .map(|r| r.to_string())
+            .unwrap_or_else(|_| "?".into());
         DataError::new_err(format!("{name} = {text}: give a whole number >= {least}"))
     };
     if value.is_instance_of::<PyBool>() {
@@ -27,11 +30,12 @@ fn whole(value: &Bound<'_, PyAny>, name: &str, least: usize) -> PyResult<usize> 
     }
 }
 
-/// The warm-up: a whole number 0 <= warmup < n, with `_validation.check_warmup`'s message.
+/// The warm-up: a whole number >= 0, with `_validation.check_warmup`'s message (the core
+/// checks warmup < n after the signals).
 fn warmup_of(value: &Bound<'_, PyAny>, n: usize) -> PyResult<usize> {
     let ok = !value.is_instance_of::<PyBool>();
     match value.extract::<i64>() {
-        Ok(v) if ok && v >= 0 && (v as usize) < n => Ok(v as usize),
+        Ok(v) if ok && v >= 0 => Ok(v as usize),
         _ => {
             let text = value.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into());
             Err(DataError::new_err(format!(

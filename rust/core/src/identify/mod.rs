@@ -10,8 +10,8 @@ pub mod regressor;
 mod rows;
 pub mod sensitivity;
 
-pub use problem::{Iteration, Problem, Structure};
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
+pub use problem::{Iteration, Problem, Structure};
 pub use regressor::{
     solve_factor, ArxRegression, CascadeRegression, Regression, RowRegression, SandwichRegression,
 };

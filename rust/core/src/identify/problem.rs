@@ -12,8 +12,8 @@
 //! record is not checked again.
 
 use crate::error::{Error, Result};
-use crate::identify::gradient::{cascade_oe_gradient_unchecked, sandwich_oe_gradient_unchecked};
 use crate::identify::gradient::OeGradient;
+use crate::identify::gradient::{cascade_oe_gradient_unchecked, sandwich_oe_gradient_unchecked};
 use crate::identify::regressor::solve_factor;
 use crate::identify::sensitivity::{cascade_oe_factor_unchecked, sandwich_oe_factor_unchecked};
 use crate::identify::{CascadeRegression, SandwichRegression};
@@ -124,7 +124,12 @@ impl Structure {
 
     /// The number of parameters p.
     pub fn size(&self) -> usize {
-        self.r() + if self.is_sandwich() { self.n_r() - 1 + self.ns } else { 0 }
+        self.r()
+            + if self.is_sandwich() {
+                self.n_r() - 1 + self.ns
+            } else {
+                0
+            }
     }
 
     /// The parameter names in the order of theta.
@@ -169,13 +174,22 @@ impl Structure {
         }
         let n = self.degree;
         let (c_l, m_r1, c_r, r) = (self.c_l(), self.m_r1(), self.c_r(), self.r());
-        let linear = LinearBlock::new(theta[..self.n_a()].to_vec(), theta[self.n_a()..c_l].to_vec())?;
-        let m_left: Vec<f64> = std::iter::once(1.0).chain(theta[c_l + 1..c_l + n].iter().copied()).collect();
-        let m_right: Vec<f64> = std::iter::once(theta[m_r1]).chain(theta[c_r + 1..r].iter().copied()).collect();
+        let linear = LinearBlock::new(
+            theta[..self.n_a()].to_vec(),
+            theta[self.n_a()..c_l].to_vec(),
+        )?;
+        let m_left: Vec<f64> = std::iter::once(1.0)
+            .chain(theta[c_l + 1..c_l + n].iter().copied())
+            .collect();
+        let m_right: Vec<f64> = std::iter::once(theta[m_r1])
+            .chain(theta[c_r + 1..r].iter().copied())
+            .collect();
         let backlash = GeneralBacklash::from_estimate(theta[c_l], theta[c_r], m_left, m_right)?;
         let output = if self.is_sandwich() {
             let s0 = r + self.n_r() - 1;
-            let rs: Vec<f64> = std::iter::once(1.0).chain(theta[r..s0].iter().copied()).collect();
+            let rs: Vec<f64> = std::iter::once(1.0)
+                .chain(theta[r..s0].iter().copied())
+                .collect();
             Some(LinearBlock::new(rs, theta[s0..].to_vec())?)
         } else {
             None
@@ -320,7 +334,9 @@ impl Problem {
     pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
         let b = self.structure.unpack(theta)?;
         match &b.output {
-            None => cascade_oe_factor_unchecked(&b.linear, &b.backlash, &self.u, &self.y, self.warmup),
+            None => {
+                cascade_oe_factor_unchecked(&b.linear, &b.backlash, &self.u, &self.y, self.warmup)
+            }
             Some(out) => sandwich_oe_factor_unchecked(
                 &b.linear,
                 &b.backlash,
@@ -336,7 +352,9 @@ impl Problem {
     pub fn gradient(&self, theta: &[f64]) -> Result<OeGradient> {
         let b = self.structure.unpack(theta)?;
         match &b.output {
-            None => cascade_oe_gradient_unchecked(&b.linear, &b.backlash, &self.u, &self.y, self.warmup),
+            None => {
+                cascade_oe_gradient_unchecked(&b.linear, &b.backlash, &self.u, &self.y, self.warmup)
+            }
             Some(out) => sandwich_oe_gradient_unchecked(
                 &b.linear,
                 &b.backlash,
