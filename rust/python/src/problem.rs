@@ -37,7 +37,10 @@ fn warmup_of(value: &Bound<'_, PyAny>, n: usize) -> PyResult<usize> {
     match value.extract::<i64>() {
         Ok(v) if ok && v >= 0 => Ok(v as usize),
         _ => {
-            let text = value.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into());
+            let text = value
+                .repr()
+                .map(|r| r.to_string())
+                .unwrap_or_else(|_| "?".into());
             Err(DataError::new_err(format!(
                 "warmup = {text}: give a whole number of samples, 0 <= warmup < {n} (the record \
                  length)"

@@ -37,6 +37,40 @@ pub struct Structure {
     pub output_feedthrough: bool,
 }
 
+/// The positions in theta of the input block's and the backlash's parameters (the
+/// sensitivities' columns too): a (na of them, a_0.. with feedthrough), b, c_L, m_L2..m_Ln,
+/// m_R1, c_R, m_R2..m_Rn; the sandwich's r and s follow.
+pub(crate) struct Layout {
+    pub(crate) na: usize,
+    pub(crate) nb: usize,
+    pub(crate) n: usize,
+}
+
+impl Layout {
+    pub(crate) fn linear(&self) -> usize {
+        self.na + self.nb
+    }
+    pub(crate) fn c_l(&self) -> usize {
+        self.linear()
+    }
+    pub(crate) fn m_l(&self, i: usize) -> usize {
+        self.c_l() + i - 1 // i = 2..n
+    }
+    pub(crate) fn m_r1(&self) -> usize {
+        self.linear() + self.n
+    }
+    pub(crate) fn c_r(&self) -> usize {
+        self.m_r1() + 1
+    }
+    pub(crate) fn m_r(&self, i: usize) -> usize {
+        self.c_r() + i - 1 // i = 2..n
+    }
+    /// The first output-block coefficient, after m_Rn.
+    pub(crate) fn r(&self) -> usize {
+        self.m_r(self.n) + 1
+    }
+}
+
 /// The blocks of a parameter vector: input block, backlash (as an estimate: no branch-shape
 /// checks), and the sandwich's output block.
 pub struct Blocks {
@@ -102,29 +136,18 @@ impl Structure {
         }
     }
 
-    /// Position of c_L in theta (after a and b).
-    fn c_l(&self) -> usize {
-        self.n_a() + self.nb
-    }
-
-    /// Position of m_R1.
-    fn m_r1(&self) -> usize {
-        self.c_l() + self.degree
-    }
-
-    /// Position of c_R.
-    fn c_r(&self) -> usize {
-        self.m_r1() + 1
-    }
-
-    /// Position of the first output-block coefficient (r_2, or r_1 with feedthrough).
-    fn r(&self) -> usize {
-        self.c_l() + 2 * self.degree + 1
+    /// The positions of the input block's and the backlash's parameters in theta.
+    pub(crate) fn layout(&self) -> Layout {
+        Layout {
+            na: self.n_a(),
+            nb: self.nb,
+            n: self.degree,
+        }
     }
 
     /// The number of parameters p.
     pub fn size(&self) -> usize {
-        self.r()
+        self.layout().r()
             + if self.is_sandwich() {
                 self.n_r() - 1 + self.ns
             } else {
@@ -173,7 +196,8 @@ impl Structure {
             )));
         }
         let n = self.degree;
-        let (c_l, m_r1, c_r, r) = (self.c_l(), self.m_r1(), self.c_r(), self.r());
+        let lay = self.layout();
+        let (c_l, m_r1, c_r, r) = (lay.c_l(), lay.m_r1(), lay.c_r(), lay.r());
         let linear = LinearBlock::new(
             theta[..self.n_a()].to_vec(),
             theta[self.n_a()..c_l].to_vec(),
