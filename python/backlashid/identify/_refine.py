@@ -3,7 +3,8 @@
 Each Jacobian is folded, row block by row block, into the triangular factor R_aug of [J | r]
 by the core (streaming QR, no N x p matrix); a damped step then solves the small problem
 [R; sqrt(lambda) D] delta = [Q^T r; 0] (faer QR), since ||r - J delta||^2 =
-||Q^T r - R delta||^2 + rho^2.
+||Q^T r - R delta||^2 + rho^2. The record is the core's compiled ``Problem`` (built once per
+record by :func:`problem`): each trial passes theta only.
 """
 
 from __future__ import annotations
