@@ -1,4 +1,4 @@
-# Type stubs of the Rust extension (rust/python/src: models.rs, identify.rs, augmented.rs),
+# Type stubs of the Rust extension (rust/python/src: models.rs, problem.rs, identify.rs, augmented.rs),
 # checked against the built module by `python -m mypy.stubtest backlashid._core`.
 # Errors raised are those of backlashid.errors: DataError for bad signals, ModelError for bad
 # parameters or divergence, NotIdentifiableError for a rank-deficient regression.
@@ -14,15 +14,10 @@ __all__ = [
     "GeneralBacklash",
     "CascadeModel",
     "SandwichModel",
+    "Problem",
     "lstsq",
-    "simulate_estimate",
     "arx",
-    "cascade_iteration",
-    "sandwich_iteration",
-    "cascade_oe_factor",
     "spectral_radius",
-    "sandwich_oe_factor",
-    "oe_gradient",
     "simulate_augmented",
 ]
 
@@ -70,42 +65,41 @@ class SandwichModel:
     ) -> int: ...
 
 # -- identification (one call per iteration; Python drives the iterations) -------------------
-# An estimate crosses as (a, b, c_left, c_right, m_left, m_right), plus (r, s) for the
-# sandwich's output block (r empty: a cascade).
 _LS = tuple[_F, float, _F, float]  # theta, rss, (A^T A)^-1, rcond
+
+# An identification problem compiled once (rust/core/src/identify/problem.rs): the structure
+# (orders, degree, feedthroughs; nr = 0 for a cascade) and the record, u and y checked once
+# (DataError naming the argument). Rust owns the layout of theta and its names (the paper's
+# order, eq 19 / 31). Every method takes theta only and releases the GIL.
+@final
+class Problem:
+    def __new__(
+        cls, u: _F, y: _F, na: int, nb: int, degree: int, nr: int, ns: int,
+        feedthrough: bool = False, output_feedthrough: bool = False, warmup: int | None = None,
+    ) -> Self: ...
+    @staticmethod
+    def layout(
+        na: int, nb: int, degree: int, nr: int, ns: int, feedthrough: bool = False, output_feedthrough: bool = False
+    ) -> list[str]: ...  # the names of theta of a structure, no record needed
+    @property
+    def names(self) -> list[str]: ...
+    @property
+    def ls_names(self) -> list[str]: ...  # c_1, c_2 in place of c_L, c_R (eq 20, 32)
+    @property
+    def samples(self) -> int: ...
+    @property
+    def warmup(self) -> int: ...
+    def simulate(self, theta: _F) -> _F: ...  # free run from rest
+    # the paper's step (cascade eq 18-28, sandwich eq 33-36): (ls, moving_fraction, the
+    # estimate's own simulation RMSE over t >= warmup for the cascade, None for the sandwich)
+    def iteration(self, theta: _F, simulated_switching: bool = False) -> tuple[_LS, float, float | None]: ...
+    # (R_aug, cost) with R_aug^T R_aug = [J | r]^T [J | r] over t >= warmup, streamed
+    def oe_factor(self, theta: _F) -> tuple[_F, float]: ...
+    def gradient(self, theta: _F) -> tuple[_F, float]: ...  # (J^T r, cost), one pass, no factor
 
 def lstsq(a: _F, b: _F, names: list[str]) -> _LS: ...
 def arx(u: _F, y: _F, na: int, nb: int, delay: int, warmup: int) -> _LS: ...
 def spectral_radius(den: list[float]) -> float: ...
-def simulate_estimate(
-    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
-    r: list[float], s: list[float], u: _F,
-) -> _F: ...
-def cascade_iteration(
-    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
-    u: _F, y: _F, y_switch: _F, warmup: int, names: list[str],
-) -> tuple[_LS, float, float]: ...  # (ls, moving_fraction, simulation RMSE of the estimate from rest over t >= warmup); rows streamed into a QR factor
-def sandwich_iteration(
-    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
-    r: list[float], s: list[float], u: _F, w: _F, warmup: int, names: list[str],
-) -> tuple[_LS, float]: ...  # (ls, moving_fraction)
-
-# Output-error problem in factored form, streamed (no N x p Jacobian): (R_aug, cost) with
-# R_aug ((p+1) x (p+1), upper triangular) satisfying R_aug^T R_aug = [J | r]^T [J | r] over
-# t >= warmup, J = d output / d theta (the columns of the core's sensitivity functions),
-# r = measured - simulated, cost = sum r^2.
-def cascade_oe_factor(
-    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
-    u: _F, y: _F, warmup: int,
-) -> tuple[_F, float]: ...
-def sandwich_oe_factor(
-    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
-    r: list[float], s: list[float], u: _F, w: _F, warmup: int,
-) -> tuple[_F, float]: ...
-def oe_gradient(
-    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
-    r: list[float], s: list[float], u: _F, y: _F, warmup: int,
-) -> tuple[_F, float]: ...  # (J^T r, cost) over t >= warmup; cascade when r is empty; one pass, no factor
 
 # Augmented cascade of the diagnosis (rust/core/src/augmented.rs): the nominal cascade plus the
 # catalogue's effects, each exactly nominal at zero size. Time of u[0] in the continuous record

@@ -23,7 +23,7 @@ from .._docstrings import AXES, fill
 from .._validation import identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
-from ._refine import OutputErrorFit, is_stable, refine_output_error, simulate, spectral_radius
+from ._refine import OutputErrorFit, is_stable, problem, refine_output_error, spectral_radius
 from ._structure import Structure
 
 __all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
@@ -278,9 +278,10 @@ class _Run:
         return int(np.nanargmin(self.rmse))
 
 
-def _rmse(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int) -> float:
+def _rmse(prob: _core.Problem, theta: NDArray[np.float64], y: NDArray[np.float64]) -> float:
+    warmup = prob.warmup
     try:
-        e = y[warmup:] - simulate(structure, theta, u)[warmup:]
+        e = y[warmup:] - prob.simulate(theta)[warmup:]
     except BacklashIdError:
         return float("inf")
     with np.errstate(over="ignore", invalid="ignore"):
@@ -315,25 +316,19 @@ def _initial_theta(structure: Structure, u: NDArray[np.float64], y: NDArray[np.f
     return theta
 
 
-def _iteration(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], switching: Switching, warmup: int) -> tuple[Any, float, float | None]:
+def _iteration(prob: _core.Problem, theta: NDArray[np.float64], switching: Switching) -> tuple[Any, float, float | None]:
     """One iteration in the core (streaming QR, no N x p matrix): the least-squares solution,
     the fraction of samples on which the estimate moves the backlash, and the free-run
     simulation RMSE of ``theta`` itself when the core computed it on the way (cascade), else
     None."""
-    p = structure.unpack(theta)
-    names = structure.ls_names
-    if structure.is_sandwich:
-        ls, moving = _core.sandwich_iteration(*p.chain(), p.r, p.s, u, y, warmup, names)
-        return ls, moving, None
-    y_switch = y if switching == "measured" else simulate(structure, theta, u)
-    return _core.cascade_iteration(*p.chain(), u, y, y_switch, warmup, names)
+    return prob.iteration(theta, switching == "simulated")
 
 
 def _relative_change(new: NDArray[np.float64], old: NDArray[np.float64]) -> float:
     return float(np.max(np.abs(new - old) / np.maximum(np.abs(new), 1e-3)))
 
 
-def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], start: Start, *, max_iter: int, tol: float, switching: Switching, step: float, reflect: bool, warmup: int) -> _Run:
+def _run(structure: Structure, prob: _core.Problem, u: NDArray[np.float64], y: NDArray[np.float64], start: Start, *, max_iter: int, tol: float, switching: Switching, step: float, reflect: bool, warmup: int) -> _Run:
     s = structure
     theta = _initial_theta(s, u, y, start, warmup, literal=not reflect)
     # run.rmse[k] is the free-run simulation RMSE of run.history[k]. The cascade's core
@@ -344,14 +339,14 @@ def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], s
     was_cycling = False
     for _ in range(2, max_iter + 1):
         try:
-            (theta_ls, rss, cov, _rcond), moving, rmse_now = _iteration(s, theta, u, y, switching, warmup)
+            (theta_ls, rss, cov, _rcond), moving, rmse_now = _iteration(prob, theta, switching)
         except NotIdentifiableError as exc:
             run.reason, run.error = "diverged", exc
             break
         except ModelError as exc:  # the estimate overflowed in simulation
             run.reason, run.error = "diverged", exc
             break
-        run.rmse.append(rmse_now if rmse_now is not None else _rmse(s, theta, u, y, warmup))
+        run.rmse.append(rmse_now if rmse_now is not None else _rmse(prob, theta, y))
         if len(run.history) > 1 and not np.isfinite(run.rmse[-1]) and np.max(np.abs(theta)) > 1e6:
             run.reason = "diverged"
             break
@@ -381,7 +376,7 @@ def _run(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], s
             run.reason = "2-cycle"
             break
         was_cycling = cycling
-    run.rmse += [_rmse(s, th, u, y, warmup) for th in run.history[len(run.rmse) :]]
+    run.rmse += [_rmse(prob, th, y) for th in run.history[len(run.rmse) :]]
     return run
 
 
@@ -435,6 +430,7 @@ def _coarse_samples(structure: Structure, rows: int, coarse: int | None) -> int:
 
 def _search(
     structure: Structure,
+    prob: _core.Problem,
     u_arr: NDArray[np.float64],
     y_arr: NDArray[np.float64],
     starts: Sequence[Start],
@@ -446,10 +442,10 @@ def _search(
     seed: int,
     **iterations: Any,
 ) -> tuple[_Run, int, OutputErrorFit | None]:
-    """The iterations from every start, the chosen iterate (index k of the run's history),
+    """The iterations from every start on the record of ``prob`` (u_arr, y_arr), the chosen iterate (index k of the run's history),
     and unless ``refine`` is off its output-error refinement: LM from the best iterate and
     from the ARX start of every run, the cheapest valid result, then the seeded restarts."""
-    runs = [_run(structure, u_arr, y_arr, start, **iterations) for start in starts]
+    runs = [_run(structure, prob, u_arr, y_arr, start, **iterations) for start in starts]
     usable = [r for r in runs if r.last_ls is not None]
     if not usable:
         raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
@@ -463,12 +459,11 @@ def _search(
         k = run.best()
     if not refine:
         return run, k, None
-    warmup = iterations["warmup"]
     candidates = []
     for r in usable:
         for th in {id(x): x for x in (r.history[r.best()], r.history[0])}.values():
             try:
-                candidates.append(refine_output_error(structure, u_arr, y_arr, th, warmup=warmup))
+                candidates.append(refine_output_error(structure, prob, y_arr, th))
             except BacklashIdError:
                 continue
     if not candidates:
@@ -482,7 +477,7 @@ def _search(
     for _ in range(restarts):
         start = refined.theta + perturbation * rng.standard_normal(structure.size)
         try:
-            trial = refine_output_error(structure, u_arr, y_arr, start, warmup=warmup)
+            trial = refine_output_error(structure, prob, y_arr, start)
         except BacklashIdError:
             continue
         if (not _is_valid(structure, trial.theta), trial.cost) < (not _is_valid(structure, refined.theta), refined.cost):
@@ -543,9 +538,14 @@ def _fit(
     if restarts is None:  # kinks and shallow minima matter on short records only
         restarts = RESTARTS if len(u_arr) - warmup <= RESTARTS_UP_TO else 0
 
+    # one compiled problem per record: the whole record, and the coarse stage's segment
+    whole = problem(structure, u_arr, y_arr, warmup)
+
     def search(end: int) -> tuple[_Run, int, OutputErrorFit | None]:
+        u_end, y_end = u_arr[:end], y_arr[:end]
+        prob = whole if end == len(u_arr) else problem(structure, u_end, y_end, warmup)
         return _search(
-            structure, u_arr[:end], y_arr[:end], starts, paper=paper, refine=refine, restarts=restarts,
+            structure, prob, u_end, y_end, starts, paper=paper, refine=refine, restarts=restarts,
             perturbation=perturbation, seed=seed, max_iter=max_iter, tol=tol, switching=switching, step=step,
             reflect=reflect, warmup=warmup,
         )
@@ -560,7 +560,7 @@ def _fit(
             run, k, refined = search(end)
             # a segment that hardly moves the backlash says nothing about its branches
             if refined is not None and _moving(structure, refined.theta, u_arr[:end], user_warmup) >= min_moving:
-                refined = refine_output_error(structure, u_arr, y_arr, refined.theta, warmup=warmup)
+                refined = refine_output_error(structure, whole, y_arr, refined.theta)
                 found = run, k, refined
         except BacklashIdError:  # the segment is not enough: search the whole record
             pass

@@ -3,7 +3,8 @@
 Each Jacobian is folded, row block by row block, into the triangular factor R_aug of [J | r]
 by the core (streaming QR, no N x p matrix); a damped step then solves the small problem
 [R; sqrt(lambda) D] delta = [Q^T r; 0] (faer QR), since ||r - J delta||^2 =
-||Q^T r - R delta||^2 + rho^2.
+||Q^T r - R delta||^2 + rho^2. The record is the core's compiled ``Problem`` (built once per
+record by :func:`problem`): each trial passes theta only.
 """
 
 from __future__ import annotations
@@ -45,42 +46,26 @@ def is_stable(structure: Structure, theta: NDArray[np.float64]) -> bool:
     return all(spectral_radius(np.asarray(d)) < 1.0 for d in (p.b, p.s))
 
 
-def simulate(structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Free-run output of an estimate from rest (no shape checks on the branches)."""
-    p = structure.unpack(theta)
-    return _core.simulate_estimate(*p.chain(), p.r, p.s, u)
-
-
-def oe_factor(
-    structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int
-) -> tuple[NDArray[np.float64], float]:
-    """R_aug of [J | y - y_sim] over t >= warmup, and the cost sum (y - y_sim)^2."""
-    p = structure.unpack(theta)
-    if structure.is_sandwich:
-        return _core.sandwich_oe_factor(*p.chain(), p.r, p.s, u, y, warmup)
-    return _core.cascade_oe_factor(*p.chain(), u, y, warmup)
-
-
-def oe_gradient(
-    structure: Structure, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int
-) -> tuple[NDArray[np.float64], float]:
-    """g = J^T (y - y_sim) over t >= warmup and the cost sum (y - y_sim)^2: one pass, no fold."""
-    p = structure.unpack(theta)
-    return _core.oe_gradient(*p.chain(), p.r, p.s, u, y, warmup)
+def problem(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int = 0) -> _core.Problem:
+    """The core's compiled problem of a structure and a record (u and y checked once); its
+    methods take only theta: ``simulate``, ``iteration``, ``oe_factor``, ``gradient``."""
+    s = structure
+    return _core.Problem(u, y, s.na, s.nb, s.degree, s.nr, s.ns, s.feedthrough, s.output_feedthrough, warmup)
 
 
 def refine_output_error(
     structure: Structure,
-    u: NDArray[np.float64],
+    problem: _core.Problem,
     y: NDArray[np.float64],
     theta0: NDArray[np.float64],
     *,
-    warmup: int = 0,
     max_iter: int = 200,
     se_tol: float = 1e-2,
     xtol: float = 1e-12,
 ) -> OutputErrorFit:
-    """Minimise sum_t (y(t) - y_sim(t, theta))^2 over t >= warmup from theta0; steps that make
+    """Minimise sum_t (y(t) - y_sim(t, theta))^2 over t >= warmup from theta0 (``problem``
+    holds the record and the warm-up; ``y`` is its output, for the residuals of a plain
+    simulation); steps that make
     a linear block unstable or overflow the simulation are rejected (the damping grows).
 
     Stops when a step would move the parameters by less than ``se_tol`` standard errors: the
@@ -100,6 +85,7 @@ def refine_output_error(
     """
     names = structure.names
     n_par = structure.size
+    warmup = problem.warmup
     dof = max(len(y) - warmup - n_par, 1)
 
     def cost_at(theta: NDArray[np.float64], gradient: bool) -> tuple[float, NDArray[np.float64] | None]:
@@ -108,9 +94,9 @@ def refine_output_error(
             return np.inf, None
         try:
             if gradient:
-                g, c = oe_gradient(structure, theta, u, y, warmup)
+                g, c = problem.gradient(theta)
             else:
-                g, r = None, y[warmup:] - simulate(structure, theta, u)[warmup:]
+                g, r = None, y[warmup:] - problem.simulate(theta)[warmup:]
                 with np.errstate(over="ignore", invalid="ignore"):
                     c = float(r @ r)
         except BacklashIdError:
@@ -122,7 +108,7 @@ def refine_output_error(
     if not is_stable(structure, theta):
         raise unusable
     try:  # the factor's pass simulates the start: an overflow is a ModelError
-        r_aug, cost = oe_factor(structure, theta, u, y, warmup)
+        r_aug, cost = problem.oe_factor(theta)
     except BacklashIdError:
         raise unusable from None
     scale = np.zeros(n_par)
@@ -162,7 +148,7 @@ def refine_output_error(
                     r_aug = np.vstack([np.column_stack([r_mat, q_near]), np.zeros(n_par + 1)])
                     r_aug[n_par, n_par] = np.sqrt(max(cost - float(q_near @ q_near), 0.0))
                 else:
-                    r_aug, cost = oe_factor(structure, theta, u, y, warmup)
+                    r_aug, cost = problem.oe_factor(theta)
                 lam = max(lam / 3.0, 1e-12)
                 break
             rejected = True

@@ -17,12 +17,15 @@ first output coefficient = 1 (r_0 with output feedthrough) hold in both readings
 
 from __future__ import annotations
 
+import functools
+import re
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import _core
 from .._docstrings import fill
 from .._validation import check_whole
 from ..errors import DataError
@@ -151,18 +154,12 @@ class Structure:
         """True for a sandwich (nr > 0)."""
         return self.nr > 0
 
-    @property
+    @functools.cached_property
     def names(self) -> list[str]:
-        """The parameter names, in the order of the physical vector."""
-        n = self.degree
-        first = 0 if self.feedthrough else 1
-        names = [f"a{i}" for i in range(first, self.na + 1)] + [f"b{j}" for j in range(1, self.nb + 1)]
-        names += ["c_L"] + [f"m_L{i}" for i in range(2, n + 1)]
-        names += ["m_R1", "c_R"] + [f"m_R{i}" for i in range(2, n + 1)]
-        if self.is_sandwich:
-            first = 1 if self.output_feedthrough else 2  # r_0 = 1 or r_1 = 1 is fixed
-            names += [f"r{i}" for i in range(first, self.nr + 1)] + [f"s{j}" for j in range(1, self.ns + 1)]
-        return names
+        """The parameter names, in the order of the physical vector (the core's layout)."""
+        return _core.Problem.layout(
+            self.na, self.nb, self.degree, self.nr, self.ns, self.feedthrough, self.output_feedthrough
+        )
 
     @property
     def ls_names(self) -> list[str]:
@@ -175,17 +172,18 @@ class Structure:
         return len(self.names)
 
     def _slices(self) -> dict[str, Any]:
-        na, nb, n = self.n_a, self.nb, self.degree
-        k = na + nb
-        out: dict[str, Any] = {"a": slice(0, na), "b": slice(na, k), "c_L": k}
-        out["m_L"] = slice(k + 1, k + n)  # m_L2..m_Ln
-        out["m_R1"] = k + n
-        out["c_R"] = k + n + 1
-        out["m_R"] = slice(k + n + 2, k + 2 * n + 1)  # m_R2..m_Rn
-        j = k + 2 * n + 1
-        out["r"] = slice(j, j + self.n_r - 1 if self.is_sandwich else j)
-        out["s"] = slice(out["r"].stop, out["r"].stop + self.ns)
-        return out
+        """Where each block sits in the physical vector, read off the core's names."""
+        names = self.names
+
+        def block(pattern: str) -> slice:
+            at = [i for i, k in enumerate(names) if re.fullmatch(pattern, k)]
+            return slice(at[0], at[-1] + 1) if at else slice(len(names), len(names))
+
+        return {
+            "a": block(r"a\d+"), "b": block(r"b\d+"), "c_L": names.index("c_L"), "m_L": block(r"m_L\d+"),
+            "m_R1": names.index("m_R1"), "c_R": names.index("c_R"), "m_R": block(r"m_R([2-9]|\d\d+)"),
+            "r": block(r"r\d+"), "s": block(r"s\d+"),
+        }
 
     @fill(theta=_THETA_DOC)
     def unpack(self, theta: NDArray[np.float64]) -> Estimate:

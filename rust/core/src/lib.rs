@@ -33,7 +33,8 @@ pub use effects::{AnyEffect, Effect};
 pub use error::{Error, Result};
 pub use identify::{
     cascade_oe_factor, cascade_oe_gradient, sandwich_oe_factor, sandwich_oe_gradient, solve_factor,
-    ArxRegression, CascadeRegression, OeGradient, SandwichRegression,
+    ArxRegression, CascadeRegression, Iteration, OeGradient, Problem, SandwichRegression,
+    Structure,
 };
 pub use linalg::{fold_parallel, LeastSquares, TriangularFactor};
 pub use model::{

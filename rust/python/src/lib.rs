@@ -8,6 +8,7 @@ mod convert;
 mod errors;
 mod identify;
 mod models;
+mod problem;
 
 // The helpers the effect binding (`augmented`) shares.
 use convert::{signal, vec_f64, SignalOut};
@@ -21,6 +22,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<models::PyGeneralBacklash>()?;
     m.add_class::<models::PyCascadeModel>()?;
     m.add_class::<models::PySandwichModel>()?;
+    m.add_class::<problem::PyProblem>()?;
     identify::register(m)?;
     m.add_function(wrap_pyfunction!(augmented::simulate_augmented, m)?)?;
     Ok(())

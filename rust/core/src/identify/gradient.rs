@@ -57,6 +57,17 @@ pub fn cascade_oe_gradient(
     warmup: usize,
 ) -> Result<OeGradient> {
     check_pair(u, y, "y")?;
+    cascade_oe_gradient_unchecked(linear, backlash, u, y, warmup)
+}
+
+/// `cascade_oe_gradient` of a record checked before (`Problem`).
+pub(crate) fn cascade_oe_gradient_unchecked(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+) -> Result<OeGradient> {
     branch_degree(backlash)?;
     // forward: the model's own simulation; backward: its case flags f1 (on L), f2 (on R)
     // recomputed sample by sample as `CascadeModel::simulate_internals` has them
@@ -168,6 +179,18 @@ pub fn sandwich_oe_gradient(
     warmup: usize,
 ) -> Result<OeGradient> {
     check_pair(u, w, "w")?;
+    sandwich_oe_gradient_unchecked(input_linear, backlash, output_linear, u, w, warmup)
+}
+
+/// `sandwich_oe_gradient` of a record checked before (`Problem`).
+pub(crate) fn sandwich_oe_gradient_unchecked(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+) -> Result<OeGradient> {
     let mut out = OeGradient::new(sandwich_cols(input_linear, backlash, output_linear));
     walk_sandwich(input_linear, backlash, output_linear, u, |t, wt, row| {
         if t >= warmup {

@@ -2,9 +2,8 @@
 //! phi(t) of eq (18) with target eq (21), the sandwich's Phi(t) of eq (33) with target eq (34),
 //! and a plain ARX regression for the first linear estimate.
 //!
-//! Column order (eq 19 / 31): a_1..a_na, b_1..b_nb, c_1, m_L2..m_Ln, m_R1, c_2, m_R2..m_Rn,
-//! then for the sandwich r_2..r_nr, s_1..s_ns; with m_L1 = 1, r_1 = 1, c_L = c_1,
-//! c_R = c_2 / m_R1 (eq 20, 32).
+//! Column order (eq 19 / 31): theta's layout (`problem::Layout`) with c_1 = c_L and
+//! c_2 = m_R1 c_R at the positions of c_L and c_R (eq 20, 32; `Structure::ls_names`).
 
 use super::rows::{dense, simulation_rmse, CascadeRows, RowSource, SandwichRows};
 use crate::error::{Error, Result};

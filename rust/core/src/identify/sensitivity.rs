@@ -5,10 +5,12 @@
 //!   on R: dy = R'(xi2) dx + [dR/dc_R = -R'(xi2), dR/dm_Ri = xi2^i],
 //!   holding: dy(t) = dy(t-1);
 //!   sandwich: dw(t) = sum_i r_i dy(t-i) - sum_j s_j dw(t-j) + [dw/dr_i = y(t-i), dw/ds_j = -w(t-j)].
-//! Column order: a_1..a_na, b_1..b_nb, c_L, m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn, then for the
-//! sandwich r_2..r_nr, s_1..s_ns (m_L1 = 1 and r_1 = 1 are fixed).
+//! Column order: theta's layout (`problem::Layout`, its one home): a_1..a_na, b_1..b_nb, c_L,
+//! m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn, then for the sandwich r_2..r_nr, s_1..s_ns (m_L1 = 1
+//! and r_1 = 1 are fixed).
 
 use crate::error::{Error, Result};
+use crate::identify::problem::Layout;
 use crate::linalg::streaming::{default_threads, fold_stream, fold_stream_parts, TriangularFactor};
 use crate::model::backlash::GeneralBacklash;
 use crate::model::linear::LinearBlock;
@@ -37,34 +39,6 @@ pub struct Sensitivity {
     pub output: Vec<f64>,
     pub jacobian: Vec<f64>,
     pub cols: usize,
-}
-
-/// Column layout of the backlash and linear parameters.
-struct Layout {
-    na: usize,
-    nb: usize,
-    n: usize,
-}
-
-impl Layout {
-    fn linear(&self) -> usize {
-        self.na + self.nb
-    }
-    fn c_l(&self) -> usize {
-        self.linear()
-    }
-    fn m_l(&self, i: usize) -> usize {
-        self.c_l() + i - 1 // i = 2..n
-    }
-    fn m_r1(&self) -> usize {
-        self.linear() + self.n
-    }
-    fn c_r(&self) -> usize {
-        self.m_r1() + 1
-    }
-    fn m_r(&self, i: usize) -> usize {
-        self.c_r() + i - 1 // i = 2..n
-    }
 }
 
 /// Jacobian columns of the cascade: a, b, c_L, m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn.
@@ -343,6 +317,28 @@ pub fn cascade_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, y, "y")?;
+    cascade_oe_factor_on(linear, backlash, u, y, warmup, threads)
+}
+
+/// `cascade_oe_factor` of a record checked before (`Problem`).
+pub(crate) fn cascade_oe_factor_unchecked(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+) -> Result<(TriangularFactor, f64)> {
+    cascade_oe_factor_on(linear, backlash, u, y, warmup, oe_threads(u.len()))
+}
+
+fn cascade_oe_factor_on(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
     let cols = cascade_cols(linear, backlash);
     let nl = linear.na() + linear.nb();
     // L's rows: a, b, c_L, m_L2..m_Ln; R's rows: a, b, m_R1, c_R, m_R2..m_Rn
@@ -433,6 +429,31 @@ pub fn sandwich_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, w, "w")?;
+    sandwich_oe_factor_on(input_linear, backlash, output_linear, u, w, warmup, threads)
+}
+
+/// `sandwich_oe_factor` of a record checked before (`Problem`).
+pub(crate) fn sandwich_oe_factor_unchecked(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+) -> Result<(TriangularFactor, f64)> {
+    let threads = oe_threads(u.len());
+    sandwich_oe_factor_on(input_linear, backlash, output_linear, u, w, warmup, threads)
+}
+
+fn sandwich_oe_factor_on(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
     let cols = sandwich_cols(input_linear, backlash, output_linear);
     finish(fold_stream(cols, threads, |sink| {
         walk_sandwich(

@@ -1,0 +1,392 @@
+//! An identification problem compiled once: the structure (orders, degree, feedthroughs) and
+//! the record (u, y, warm-up), checked on construction. It owns the layout of the physical
+//! parameter vector theta and its names in the paper's order (eq 19 / eq 31):
+//!   a_1..a_na (a_0..a_na with an input feedthrough), b_1..b_nb, c_L, m_L2..m_Ln, m_R1, c_R,
+//!   m_R2..m_Rn, then for the sandwich r_2..r_nr (r_1..r_nr with an output feedthrough),
+//!   s_1..s_ns; m_L1 = 1 and the first output coefficient = 1 are fixed.
+//! A block with a feedthrough is the same block one sample later: the core sees coefficients
+//! at lags 1.. and the caller hands in the measured output delayed accordingly.
+//!
+//! Every method unpacks theta once into the blocks and calls the existing numerics
+//! (`CascadeRegression`, `SandwichRegression`, the output-error factors and gradients); the
+//! record is not checked again.
+
+use crate::error::{Error, Result};
+use crate::identify::gradient::OeGradient;
+use crate::identify::gradient::{cascade_oe_gradient_unchecked, sandwich_oe_gradient_unchecked};
+use crate::identify::regressor::solve_factor;
+use crate::identify::sensitivity::{cascade_oe_factor_unchecked, sandwich_oe_factor_unchecked};
+use crate::identify::{CascadeRegression, SandwichRegression};
+use crate::linalg::{LeastSquares, TriangularFactor};
+use crate::model::backlash::GeneralBacklash;
+use crate::model::cascade::CascadeModel;
+use crate::model::linear::LinearBlock;
+use crate::model::sandwich::SandwichModel;
+use crate::model::signal::{check_same_length, check_signal};
+
+/// The structure of an identification: the (input) linear block's orders, the branches'
+/// degree, the sandwich's output block's orders (nr = 0 for a cascade) and the feedthroughs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Structure {
+    pub na: usize,
+    pub nb: usize,
+    pub degree: usize,
+    pub nr: usize,
+    pub ns: usize,
+    pub feedthrough: bool,
+    pub output_feedthrough: bool,
+}
+
+/// The positions in theta of the input block's and the backlash's parameters (the
+/// sensitivities' columns too): a (na of them, a_0.. with feedthrough), b, c_L, m_L2..m_Ln,
+/// m_R1, c_R, m_R2..m_Rn; the sandwich's r and s follow.
+pub(crate) struct Layout {
+    pub(crate) na: usize,
+    pub(crate) nb: usize,
+    pub(crate) n: usize,
+}
+
+impl Layout {
+    pub(crate) fn linear(&self) -> usize {
+        self.na + self.nb
+    }
+    pub(crate) fn c_l(&self) -> usize {
+        self.linear()
+    }
+    pub(crate) fn m_l(&self, i: usize) -> usize {
+        self.c_l() + i - 1 // i = 2..n
+    }
+    pub(crate) fn m_r1(&self) -> usize {
+        self.linear() + self.n
+    }
+    pub(crate) fn c_r(&self) -> usize {
+        self.m_r1() + 1
+    }
+    pub(crate) fn m_r(&self, i: usize) -> usize {
+        self.c_r() + i - 1 // i = 2..n
+    }
+    /// The first output-block coefficient, after m_Rn.
+    pub(crate) fn r(&self) -> usize {
+        self.m_r(self.n) + 1
+    }
+}
+
+/// The blocks of a parameter vector: input block, backlash (as an estimate: no branch-shape
+/// checks), and the sandwich's output block.
+pub struct Blocks {
+    pub linear: LinearBlock,
+    pub backlash: GeneralBacklash,
+    pub output: Option<LinearBlock>,
+}
+
+fn whole(name: &str, value: usize, least: usize) -> Result<()> {
+    if value < least {
+        return Err(Error::Data(format!(
+            "{name} = {value}: give a whole number >= {least}"
+        )));
+    }
+    Ok(())
+}
+
+impl Structure {
+    /// A cascade (nr = ns = 0) or sandwich structure; orders and degree checked.
+    pub fn new(
+        na: usize,
+        nb: usize,
+        degree: usize,
+        nr: usize,
+        ns: usize,
+        feedthrough: bool,
+        output_feedthrough: bool,
+    ) -> Result<Self> {
+        whole("na", na, 1)?;
+        whole("degree", degree, 1)?;
+        if output_feedthrough && nr == 0 {
+            return Err(Error::Data(
+                "output_feedthrough is for the sandwich's output block: a cascade has none".into(),
+            ));
+        }
+        Ok(Self {
+            na,
+            nb,
+            degree,
+            nr,
+            ns,
+            feedthrough,
+            output_feedthrough,
+        })
+    }
+
+    /// True for a sandwich (nr > 0).
+    pub fn is_sandwich(&self) -> bool {
+        self.nr > 0
+    }
+
+    /// Input coefficients as the core sees them (a_0..a_na with feedthrough).
+    pub fn n_a(&self) -> usize {
+        self.na + usize::from(self.feedthrough)
+    }
+
+    /// Output-block coefficients as the core sees them, the fixed first one included.
+    pub fn n_r(&self) -> usize {
+        if self.is_sandwich() {
+            self.nr + usize::from(self.output_feedthrough)
+        } else {
+            0
+        }
+    }
+
+    /// The positions of the input block's and the backlash's parameters in theta.
+    pub(crate) fn layout(&self) -> Layout {
+        Layout {
+            na: self.n_a(),
+            nb: self.nb,
+            n: self.degree,
+        }
+    }
+
+    /// The number of parameters p.
+    pub fn size(&self) -> usize {
+        self.layout().r()
+            + if self.is_sandwich() {
+                self.n_r() - 1 + self.ns
+            } else {
+                0
+            }
+    }
+
+    /// The parameter names in the order of theta.
+    pub fn names(&self) -> Vec<String> {
+        let first = usize::from(!self.feedthrough);
+        let n = self.degree;
+        let mut names: Vec<String> = (first..=self.na).map(|i| format!("a{i}")).collect();
+        names.extend((1..=self.nb).map(|j| format!("b{j}")));
+        names.push("c_L".into());
+        names.extend((2..=n).map(|i| format!("m_L{i}")));
+        names.push("m_R1".into());
+        names.push("c_R".into());
+        names.extend((2..=n).map(|i| format!("m_R{i}")));
+        if self.is_sandwich() {
+            let first = if self.output_feedthrough { 1 } else { 2 };
+            names.extend((first..=self.nr).map(|i| format!("r{i}")));
+            names.extend((1..=self.ns).map(|j| format!("s{j}")));
+        }
+        names
+    }
+
+    /// The names of the least-squares vector of eq (19) / (31): c_1 = c_L, c_2 = m_R1 c_R.
+    pub fn ls_names(&self) -> Vec<String> {
+        self.names()
+            .into_iter()
+            .map(|k| match k.as_str() {
+                "c_L" => "c_1".into(),
+                "c_R" => "c_2".into(),
+                _ => k,
+            })
+            .collect()
+    }
+
+    /// The blocks of a physical vector, with m_L1 = 1 (and r_1 = 1) put back.
+    pub fn unpack(&self, theta: &[f64]) -> Result<Blocks> {
+        if theta.len() != self.size() {
+            return Err(Error::Data(format!(
+                "theta has {} parameters but the structure has {}: give one value per name",
+                theta.len(),
+                self.size()
+            )));
+        }
+        let n = self.degree;
+        let lay = self.layout();
+        let (c_l, m_r1, c_r, r) = (lay.c_l(), lay.m_r1(), lay.c_r(), lay.r());
+        let linear = LinearBlock::new(
+            theta[..self.n_a()].to_vec(),
+            theta[self.n_a()..c_l].to_vec(),
+        )?;
+        let m_left: Vec<f64> = std::iter::once(1.0)
+            .chain(theta[c_l + 1..c_l + n].iter().copied())
+            .collect();
+        let m_right: Vec<f64> = std::iter::once(theta[m_r1])
+            .chain(theta[c_r + 1..r].iter().copied())
+            .collect();
+        let backlash = GeneralBacklash::from_estimate(theta[c_l], theta[c_r], m_left, m_right)?;
+        let output = if self.is_sandwich() {
+            let s0 = r + self.n_r() - 1;
+            let rs: Vec<f64> = std::iter::once(1.0)
+                .chain(theta[r..s0].iter().copied())
+                .collect();
+            Some(LinearBlock::new(rs, theta[s0..].to_vec())?)
+        } else {
+            None
+        };
+        Ok(Blocks {
+            linear,
+            backlash,
+            output,
+        })
+    }
+}
+
+/// One iteration of the paper's algorithm at an estimate: the least-squares solution, the
+/// fraction of samples that move the backlash, and (cascade) the estimate's own free-run
+/// simulation RMSE.
+pub struct Iteration {
+    pub ls: LeastSquares,
+    pub moving_fraction: f64,
+    pub rmse: Option<f64>,
+}
+
+/// The structure and the record of an identification, checked once.
+#[derive(Debug, Clone)]
+pub struct Problem {
+    structure: Structure,
+    u: Vec<f64>,
+    y: Vec<f64>,
+    warmup: usize,
+}
+
+impl Problem {
+    /// Checks u and y (non-empty, finite, one length) and 0 <= warmup < len(u).
+    pub fn new(structure: Structure, u: Vec<f64>, y: Vec<f64>, warmup: usize) -> Result<Self> {
+        check_signal("u", &u)?;
+        check_signal("y", &y)?;
+        check_same_length(&u, &y, "y")?;
+        if warmup >= u.len() {
+            return Err(Error::Data(format!(
+                "warmup = {warmup}: give a whole number of samples, 0 <= warmup < {} (the record \
+                 length)",
+                u.len()
+            )));
+        }
+        Ok(Self {
+            structure,
+            u,
+            y,
+            warmup,
+        })
+    }
+
+    pub fn structure(&self) -> &Structure {
+        &self.structure
+    }
+
+    pub fn u(&self) -> &[f64] {
+        &self.u
+    }
+
+    pub fn y(&self) -> &[f64] {
+        &self.y
+    }
+
+    pub fn warmup(&self) -> usize {
+        self.warmup
+    }
+
+    /// The parameter names in the order of theta.
+    pub fn names(&self) -> Vec<String> {
+        self.structure.names()
+    }
+
+    /// Free-run output of the estimate theta from rest.
+    pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
+        let blocks = self.structure.unpack(theta)?;
+        Self::simulate_blocks(blocks, &self.u)
+    }
+
+    fn simulate_blocks(blocks: Blocks, u: &[f64]) -> Result<Vec<f64>> {
+        match blocks.output {
+            None => {
+                let m = CascadeModel::new(blocks.linear, blocks.backlash);
+                m.simulate(u, &m.rest_state())
+            }
+            Some(out) => {
+                let m = SandwichModel::new(blocks.linear, blocks.backlash, out);
+                m.simulate(u, &m.rest_state())
+            }
+        }
+    }
+
+    /// One iteration of the paper's algorithm at theta (cascade eq 18-28, sandwich eq 33-36),
+    /// streamed into a triangular factor. The cascade's switching signal is the measured y,
+    /// or with `simulated_switching` the estimate's own simulated output.
+    pub fn iteration(&self, theta: &[f64], simulated_switching: bool) -> Result<Iteration> {
+        let names = self.structure.ls_names();
+        let blocks = self.structure.unpack(theta)?;
+        match &blocks.output {
+            Some(out) => {
+                let regression = SandwichRegression::new(
+                    &blocks.linear,
+                    &blocks.backlash,
+                    out,
+                    &self.u,
+                    &self.y,
+                )?;
+                let (factor, moving) = regression.factor(self.warmup);
+                Ok(Iteration {
+                    ls: solve_factor(&factor, &names, moving)?,
+                    moving_fraction: moving,
+                    rmse: None,
+                })
+            }
+            None => {
+                let simulated;
+                let y_switch: &[f64] = if simulated_switching {
+                    let m = CascadeModel::new(blocks.linear.clone(), blocks.backlash.clone());
+                    simulated = m.simulate(&self.u, &m.rest_state())?;
+                    &simulated
+                } else {
+                    &self.y
+                };
+                let regression = CascadeRegression::new(
+                    &blocks.linear,
+                    &blocks.backlash,
+                    &self.u,
+                    &self.y,
+                    y_switch,
+                )?;
+                let (factor, moving, rmse) = regression.iteration(self.warmup);
+                Ok(Iteration {
+                    ls: solve_factor(&factor, &names, moving)?,
+                    moving_fraction: moving,
+                    rmse: Some(rmse),
+                })
+            }
+        }
+    }
+
+    /// The output-error problem at theta in factored form: R_aug of [J | y - y_sim] over
+    /// t >= warmup and the cost sum (y - y_sim)^2, streamed (no N x p Jacobian).
+    pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
+        let b = self.structure.unpack(theta)?;
+        match &b.output {
+            None => {
+                cascade_oe_factor_unchecked(&b.linear, &b.backlash, &self.u, &self.y, self.warmup)
+            }
+            Some(out) => sandwich_oe_factor_unchecked(
+                &b.linear,
+                &b.backlash,
+                out,
+                &self.u,
+                &self.y,
+                self.warmup,
+            ),
+        }
+    }
+
+    /// g = J^T (y - y_sim) over t >= warmup and the cost, one pass without the factor.
+    pub fn gradient(&self, theta: &[f64]) -> Result<OeGradient> {
+        let b = self.structure.unpack(theta)?;
+        match &b.output {
+            None => {
+                cascade_oe_gradient_unchecked(&b.linear, &b.backlash, &self.u, &self.y, self.warmup)
+            }
+            Some(out) => sandwich_oe_gradient_unchecked(
+                &b.linear,
+                &b.backlash,
+                out,
+                &self.u,
+                &self.y,
+                self.warmup,
+            ),
+        }
+    }
+}

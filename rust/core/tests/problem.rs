@@ -1,0 +1,201 @@
+//! The compiled `Problem` against the functions it unpacks theta for: its factor, gradient,
+//! iteration and simulation equal those of the blocks built by hand, on Example 1 (cascade),
+//! Example 2 (sandwich) and a sandwich with both feedthroughs; its names are the paper's
+//! order; the record is checked once, on construction.
+
+mod common;
+
+use backlashid_core::identify::{
+    cascade_oe_factor, cascade_oe_gradient, sandwich_oe_factor, sandwich_oe_gradient, solve_factor,
+    CascadeRegression, Problem, SandwichRegression, Structure,
+};
+use backlashid_core::{
+    CascadeModel, Error, GeneralBacklash, LinearBlock, SandwichModel, TriangularFactor,
+};
+use common::{
+    example1_model, example2_model, input, noisy, perturbed, sandwich_from, EXAMPLE2_THETA,
+};
+
+/// Example 1 in the physical order a1 a2 b1 b2 c_L m_L2 m_L3 m_R1 c_R m_R2 m_R3.
+const EXAMPLE1_THETA: [f64; 11] = [0.7, 0.5, -0.2, 0.35, 0.6, -0.3, 0.3, 1.5, 0.5, 0.4, 0.2];
+
+fn close(a: &[f64], b: &[f64]) {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
+    for (x, y) in a.iter().zip(b) {
+        assert!((x - y).abs() <= 1e-12 * scale, "{x} vs {y}");
+    }
+}
+
+fn same_factor(a: &(TriangularFactor, f64), b: &(TriangularFactor, f64)) {
+    close(a.0.r_aug(), b.0.r_aug());
+    close(&[a.1], &[b.1]);
+}
+
+fn cascade_blocks(t: &[f64]) -> (LinearBlock, GeneralBacklash) {
+    let lin = LinearBlock::new(t[0..2].to_vec(), t[2..4].to_vec()).unwrap();
+    let bl =
+        GeneralBacklash::from_estimate(t[4], t[8], vec![1.0, t[5], t[6]], vec![t[7], t[9], t[10]])
+            .unwrap();
+    (lin, bl)
+}
+
+fn names(s: &[&str]) -> Vec<String> {
+    s.iter().map(|k| k.to_string()).collect()
+}
+
+#[test]
+fn the_cascade_problem_equals_the_functions_on_example1() {
+    let s = Structure::new(2, 2, 3, 0, 0, false, false).unwrap();
+    assert_eq!(
+        s.names(),
+        names(&["a1", "a2", "b1", "b2", "c_L", "m_L2", "m_L3", "m_R1", "c_R", "m_R2", "m_R3"])
+    );
+    let u = input(3000);
+    let y = noisy(
+        &example1_model()
+            .simulate(&u, &example1_model().rest_state())
+            .unwrap(),
+        7,
+    );
+    let theta = perturbed(EXAMPLE1_THETA);
+    let (lin, bl) = cascade_blocks(&theta);
+    for warmup in [0, 100] {
+        let p = Problem::new(s, u.clone(), y.clone(), warmup).unwrap();
+        same_factor(
+            &p.oe_factor(&theta).unwrap(),
+            &cascade_oe_factor(&lin, &bl, &u, &y, warmup).unwrap(),
+        );
+        let (g, want) = (
+            p.gradient(&theta).unwrap(),
+            cascade_oe_gradient(&lin, &bl, &u, &y, warmup).unwrap(),
+        );
+        close(&g.gradient, &want.gradient);
+        close(&[g.cost], &[want.cost]);
+        let model = CascadeModel::new(lin.clone(), bl.clone());
+        let y_sim = model.simulate(&u, &model.rest_state()).unwrap();
+        close(&p.simulate(&theta).unwrap(), &y_sim);
+        for (simulated, y_switch) in [(false, &y), (true, &y_sim)] {
+            let it = p.iteration(&theta, simulated).unwrap();
+            let reg = CascadeRegression::new(&lin, &bl, &u, &y, y_switch).unwrap();
+            let (factor, moving, rmse) = reg.iteration(warmup);
+            let ls = solve_factor(&factor, &s.ls_names(), moving).unwrap();
+            close(&it.ls.theta, &ls.theta);
+            close(&it.ls.unscaled_covariance, &ls.unscaled_covariance);
+            close(&[it.ls.rss, it.moving_fraction], &[ls.rss, moving]);
+            close(&[it.rmse.unwrap()], &[rmse]);
+        }
+    }
+}
+
+#[test]
+fn the_sandwich_problem_equals_the_functions_on_example2() {
+    let s = Structure::new(2, 2, 3, 2, 2, false, false).unwrap();
+    assert_eq!(s.size(), 14);
+    assert_eq!(&s.names()[11..], &names(&["r2", "s1", "s2"])[..]);
+    assert_eq!(s.ls_names()[4], "c_1");
+    let u = input(3000);
+    let m = example2_model();
+    let w = noisy(&m.simulate(&u, &m.rest_state()).unwrap(), 8);
+    let theta = perturbed(EXAMPLE2_THETA);
+    let (lin, bl, out) = sandwich_from(&theta);
+    for warmup in [0, 100] {
+        let p = Problem::new(s, u.clone(), w.clone(), warmup).unwrap();
+        same_factor(
+            &p.oe_factor(&theta).unwrap(),
+            &sandwich_oe_factor(&lin, &bl, &out, &u, &w, warmup).unwrap(),
+        );
+        let (g, want) = (
+            p.gradient(&theta).unwrap(),
+            sandwich_oe_gradient(&lin, &bl, &out, &u, &w, warmup).unwrap(),
+        );
+        close(&g.gradient, &want.gradient);
+        close(&[g.cost], &[want.cost]);
+        let model = SandwichModel::new(lin.clone(), bl.clone(), out.clone());
+        close(
+            &p.simulate(&theta).unwrap(),
+            &model.simulate(&u, &model.rest_state()).unwrap(),
+        );
+        let it = p.iteration(&theta, false).unwrap();
+        let (factor, moving) = SandwichRegression::new(&lin, &bl, &out, &u, &w)
+            .unwrap()
+            .factor(warmup);
+        let ls = solve_factor(&factor, &s.ls_names(), moving).unwrap();
+        close(&it.ls.theta, &ls.theta);
+        close(&[it.ls.rss, it.moving_fraction], &[ls.rss, moving]);
+        assert!(it.rmse.is_none());
+    }
+}
+
+#[test]
+fn a_feedthrough_structure_unpacks_a0_and_r1_into_the_shifted_blocks() {
+    let s = Structure::new(2, 1, 2, 2, 1, true, true).unwrap();
+    let want = [
+        "a0", "a1", "a2", "b1", "c_L", "m_L2", "m_R1", "c_R", "m_R2", "r1", "r2", "s1",
+    ];
+    assert_eq!(s.names(), names(&want));
+    let theta = [
+        0.3, 0.6, 0.2, -0.3, 0.4, 0.1, 0.9, 0.5, 0.05, 0.4, 0.1, -0.2,
+    ];
+    let lin = LinearBlock::new(theta[0..3].to_vec(), vec![theta[3]]).unwrap();
+    let bl = GeneralBacklash::from_estimate(
+        theta[4],
+        theta[7],
+        vec![1.0, theta[5]],
+        vec![theta[6], theta[8]],
+    )
+    .unwrap();
+    let out = LinearBlock::new(vec![1.0, theta[9], theta[10]], vec![theta[11]]).unwrap();
+    let u = input(2000);
+    let model = SandwichModel::new(lin.clone(), bl.clone(), out.clone());
+    let w = noisy(&model.simulate(&u, &model.rest_state()).unwrap(), 9);
+    let p = Problem::new(s, u.clone(), w.clone(), 10).unwrap();
+    close(
+        &p.simulate(&theta).unwrap(),
+        &model.simulate(&u, &model.rest_state()).unwrap(),
+    );
+    same_factor(
+        &p.oe_factor(&theta).unwrap(),
+        &sandwich_oe_factor(&lin, &bl, &out, &u, &w, 10).unwrap(),
+    );
+    let g = p.gradient(&theta).unwrap();
+    close(
+        &g.gradient,
+        &sandwich_oe_gradient(&lin, &bl, &out, &u, &w, 10)
+            .unwrap()
+            .gradient,
+    );
+    // an input feedthrough alone: a cascade with a0..a2
+    let c = Structure::new(2, 2, 1, 0, 0, true, false).unwrap();
+    assert_eq!(
+        c.names(),
+        names(&["a0", "a1", "a2", "b1", "b2", "c_L", "m_R1", "c_R"])
+    );
+}
+
+#[test]
+fn the_record_is_checked_once_on_construction() {
+    let s = Structure::new(2, 2, 3, 0, 0, false, false).unwrap();
+    let data = |e: Result<Problem, Error>| match e {
+        Err(Error::Data(msg)) => msg,
+        other => panic!("expected a data error, got {other:?}"),
+    };
+    let u = input(100);
+    let msg = data(Problem::new(s, u.clone(), u[..99].to_vec(), 0));
+    assert!(msg.contains("u has 100 samples but y has 99"), "{msg}");
+    let mut bad = u.clone();
+    bad[3] = f64::NAN;
+    assert!(data(Problem::new(s, u.clone(), bad, 0)).starts_with("y[3]"));
+    let msg = data(Problem::new(s, u.clone(), u.clone(), 100));
+    assert!(
+        msg.contains("warmup = 100") && msg.contains("0 <= warmup < 100"),
+        "{msg}"
+    );
+    assert!(data(Problem::new(s, vec![], vec![], 0)).starts_with("u is empty"));
+    let p = Problem::new(s, u.clone(), u.clone(), 0).unwrap();
+    assert!(matches!(p.simulate(&[0.0; 3]), Err(Error::Data(_))));
+    assert!(matches!(
+        Structure::new(2, 2, 3, 0, 0, false, true),
+        Err(Error::Data(_))
+    ));
+}

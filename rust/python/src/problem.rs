@@ -1,0 +1,180 @@
+//! `_core.Problem`: an identification problem compiled once (the structure and the record,
+//! checked on construction), whose methods take only a parameter vector theta. The
+//! identification's iterations and output-error refinement call it once per step or trial
+//! instead of passing the record again (pydantic-core's compile-once `SchemaValidator` is
+//! the pattern).
+
+use backlashid_core as core;
+use pyo3::prelude::*;
+use pyo3::types::PyBool;
+
+use crate::convert::{factor_out, ls_out, signal, vec_f64, FactorOut, LsOut, SignalIn, SignalOut};
+use crate::errors::{run, DataError};
+
+/// A whole number >= `least` (an order, a degree, a warm-up), else a DataError with the
+/// message of `_validation.check_whole`.
+fn whole(value: &Bound<'_, PyAny>, name: &str, least: usize) -> PyResult<usize> {
+    let bad = || {
+        let text = value
+            .repr()
+            .map(|r| r.to_string())
+            .unwrap_or_else(|_| "?".into());
+        DataError::new_err(format!("{name} = {text}: give a whole number >= {least}"))
+    };
+    if value.is_instance_of::<PyBool>() {
+        return Err(bad());
+    }
+    match value.extract::<i64>() {
+        Ok(v) if v >= least as i64 => Ok(v as usize),
+        _ => Err(bad()),
+    }
+}
+
+/// The warm-up: a whole number >= 0, with `_validation.check_warmup`'s message (the core
+/// checks warmup < n after the signals).
+fn warmup_of(value: &Bound<'_, PyAny>, n: usize) -> PyResult<usize> {
+    let ok = !value.is_instance_of::<PyBool>();
+    match value.extract::<i64>() {
+        Ok(v) if ok && v >= 0 => Ok(v as usize),
+        _ => {
+            let text = value
+                .repr()
+                .map(|r| r.to_string())
+                .unwrap_or_else(|_| "?".into());
+            Err(DataError::new_err(format!(
+                "warmup = {text}: give a whole number of samples, 0 <= warmup < {n} (the record \
+                 length)"
+            )))
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn structure(
+    na: &Bound<'_, PyAny>,
+    nb: &Bound<'_, PyAny>,
+    degree: &Bound<'_, PyAny>,
+    nr: &Bound<'_, PyAny>,
+    ns: &Bound<'_, PyAny>,
+    feedthrough: bool,
+    output_feedthrough: bool,
+) -> PyResult<core::Structure> {
+    let s = core::Structure::new(
+        whole(na, "na", 1)?,
+        whole(nb, "nb", 0)?,
+        whole(degree, "degree", 1)?,
+        whole(nr, "nr", 0)?,
+        whole(ns, "ns", 0)?,
+        feedthrough,
+        output_feedthrough,
+    );
+    s.map_err(|e| crate::errors::CoreError(e).into())
+}
+
+/// An identification problem: the structure (orders, degree, feedthroughs) and the record
+/// (u, y, warm-up), checked once. Rust owns the layout of theta and its names.
+#[pyclass(frozen, name = "Problem", module = "backlashid._core")]
+pub(crate) struct PyProblem {
+    inner: core::Problem,
+}
+
+#[pymethods]
+impl PyProblem {
+    #[new]
+    #[pyo3(signature = (u, y, na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false, warmup=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        u: SignalIn<'_>,
+        y: SignalIn<'_>,
+        na: &Bound<'_, PyAny>,
+        nb: &Bound<'_, PyAny>,
+        degree: &Bound<'_, PyAny>,
+        nr: &Bound<'_, PyAny>,
+        ns: &Bound<'_, PyAny>,
+        feedthrough: bool,
+        output_feedthrough: bool,
+        warmup: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?;
+        let (u, y) = (signal("u", &u)?.into_owned(), signal("y", &y)?.into_owned());
+        let warmup = match warmup {
+            Some(w) => warmup_of(w, u.len())?,
+            None => 0,
+        };
+        let inner = run(py, || core::Problem::new(s, u, y, warmup))?;
+        Ok(Self { inner })
+    }
+
+    /// The parameter names of a structure, in the order of theta (no record needed).
+    #[staticmethod]
+    #[pyo3(signature = (na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false))]
+    fn layout(
+        na: &Bound<'_, PyAny>,
+        nb: &Bound<'_, PyAny>,
+        degree: &Bound<'_, PyAny>,
+        nr: &Bound<'_, PyAny>,
+        ns: &Bound<'_, PyAny>,
+        feedthrough: bool,
+        output_feedthrough: bool,
+    ) -> PyResult<Vec<String>> {
+        Ok(structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?.names())
+    }
+
+    /// The parameter names, in the order of theta.
+    #[getter]
+    fn names(&self) -> Vec<String> {
+        self.inner.names()
+    }
+
+    /// The names of the least-squares vector of eq (19) / (31) (c_1, c_2 for c_L, c_R).
+    #[getter]
+    fn ls_names(&self) -> Vec<String> {
+        self.inner.structure().ls_names()
+    }
+
+    /// The number of samples of the record.
+    #[getter]
+    fn samples(&self) -> usize {
+        self.inner.u().len()
+    }
+
+    /// The samples at the start left out of every criterion.
+    #[getter]
+    fn warmup(&self) -> usize {
+        self.inner.warmup()
+    }
+
+    /// Free-run output of the estimate theta from rest.
+    fn simulate<'py>(&self, py: Python<'py>, theta: Vec<f64>) -> PyResult<SignalOut<'py>> {
+        let out = run(py, || self.inner.simulate(&theta))?;
+        Ok(vec_f64(py, out))
+    }
+
+    /// One iteration of the paper's algorithm at theta (cascade eq 18-28, sandwich eq
+    /// 33-36): ((theta_ls, rss, cov, rcond), moving_fraction, rmse), rmse the estimate's own
+    /// simulation RMSE (cascade) or None (sandwich).
+    #[pyo3(signature = (theta, simulated_switching=false))]
+    fn iteration<'py>(
+        &self,
+        py: Python<'py>,
+        theta: Vec<f64>,
+        simulated_switching: bool,
+    ) -> PyResult<(LsOut<'py>, f64, Option<f64>)> {
+        let it = run(py, || self.inner.iteration(&theta, simulated_switching))?;
+        Ok((ls_out(py, it.ls)?, it.moving_fraction, it.rmse))
+    }
+
+    /// The output-error problem at theta, streamed: (R_aug, cost) with R_aug^T R_aug =
+    /// [J | r]^T [J | r] over t >= warmup, r = y - y_sim.
+    fn oe_factor<'py>(&self, py: Python<'py>, theta: Vec<f64>) -> PyResult<FactorOut<'py>> {
+        let out = run(py, || self.inner.oe_factor(&theta))?;
+        factor_out(py, out)
+    }
+
+    /// The output-error gradient at theta: (J^T r, cost = sum r^2) over t >= warmup.
+    fn gradient<'py>(&self, py: Python<'py>, theta: Vec<f64>) -> PyResult<(SignalOut<'py>, f64)> {
+        let g = run(py, || self.inner.gradient(&theta))?;
+        Ok((vec_f64(py, g.gradient), g.cost))
+    }
+}
