@@ -15,7 +15,7 @@ use crate::error::{Error, Result};
 use crate::identify::gradient::OeGradient;
 use crate::identify::gradient::{cascade_oe_gradient_unchecked, sandwich_oe_gradient_unchecked};
 use crate::identify::regressor::solve_factor;
-use crate::identify::sensitivity::{cascade_oe_factor_unchecked, sandwich_oe_factor_unchecked};
+use crate::identify::sensitivity::{cascade_oe_factor_on, oe_threads, sandwich_oe_factor_on};
 use crate::identify::{CascadeRegression, SandwichRegression};
 use crate::linalg::{LeastSquares, TriangularFactor};
 use crate::model::backlash::GeneralBacklash;
@@ -357,18 +357,12 @@ impl Problem {
     /// t >= warmup and the cost sum (y - y_sim)^2, streamed (no N x p Jacobian).
     pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
         let b = self.structure.unpack(theta)?;
+        let (u, y, threads) = (&self.u[..], &self.y[..], oe_threads(self.u.len()));
         match &b.output {
-            None => {
-                cascade_oe_factor_unchecked(&b.linear, &b.backlash, &self.u, &self.y, self.warmup)
+            None => cascade_oe_factor_on(&b.linear, &b.backlash, u, y, self.warmup, threads),
+            Some(out) => {
+                sandwich_oe_factor_on(&b.linear, &b.backlash, out, u, y, self.warmup, threads)
             }
-            Some(out) => sandwich_oe_factor_unchecked(
-                &b.linear,
-                &b.backlash,
-                out,
-                &self.u,
-                &self.y,
-                self.warmup,
-            ),
         }
     }
 

@@ -25,7 +25,7 @@ const OE_SECOND_THREAD_FROM: usize = 50_000;
 /// Threads of the default output-error factors for `rows` samples: the recursion, plus one
 /// folding thread on long records when the machine has a second core (the same bits
 /// either way).
-fn oe_threads(rows: usize) -> usize {
+pub(crate) fn oe_threads(rows: usize) -> usize {
     if rows < OE_SECOND_THREAD_FROM {
         1
     } else {
@@ -320,18 +320,8 @@ pub fn cascade_oe_factor_threads(
     cascade_oe_factor_on(linear, backlash, u, y, warmup, threads)
 }
 
-/// `cascade_oe_factor` of a record checked before (`Problem`).
-pub(crate) fn cascade_oe_factor_unchecked(
-    linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    u: &[f64],
-    y: &[f64],
-    warmup: usize,
-) -> Result<(TriangularFactor, f64)> {
-    cascade_oe_factor_on(linear, backlash, u, y, warmup, oe_threads(u.len()))
-}
-
-fn cascade_oe_factor_on(
+/// `cascade_oe_factor_threads` of a record checked before (`Problem`, which checks it once).
+pub(crate) fn cascade_oe_factor_on(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
     u: &[f64],
@@ -432,20 +422,8 @@ pub fn sandwich_oe_factor_threads(
     sandwich_oe_factor_on(input_linear, backlash, output_linear, u, w, warmup, threads)
 }
 
-/// `sandwich_oe_factor` of a record checked before (`Problem`).
-pub(crate) fn sandwich_oe_factor_unchecked(
-    input_linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    output_linear: &LinearBlock,
-    u: &[f64],
-    w: &[f64],
-    warmup: usize,
-) -> Result<(TriangularFactor, f64)> {
-    let threads = oe_threads(u.len());
-    sandwich_oe_factor_on(input_linear, backlash, output_linear, u, w, warmup, threads)
-}
-
-fn sandwich_oe_factor_on(
+/// `sandwich_oe_factor_threads` of a record checked before (`Problem`, which checks it once).
+pub(crate) fn sandwich_oe_factor_on(
     input_linear: &LinearBlock,
     backlash: &GeneralBacklash,
     output_linear: &LinearBlock,
