@@ -87,10 +87,21 @@ def check_warmup(warmup: Any, n: int) -> int:
 
 
 def check_finite(values: NDArray[np.float64], name: str) -> None:
-    """Name the first NaN or inf sample of a signal."""
+    """Name the first NaN or inf sample of a signal (the core's message, model/signal.rs)."""
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
-        raise DataError(f"{name}[{bad[0]}] is {values[bad[0]]}: remove or interpolate non-finite samples")
+        raise DataError(
+            f"{name}[{bad[0]}] is {values[bad[0]]}: remove or interpolate non-finite samples "
+            f"({bad.size} NaN or infinite in all), or cut the record before them"
+        )
+
+
+def check_same_length(*signals: tuple[str, NDArray[np.float64]]) -> None:
+    """DataError unless every (name, signal) has as many samples as the first."""
+    first, reference = signals[0]
+    for name, values in signals[1:]:
+        if values.size != reference.size:
+            raise DataError(f"{first} has {reference.size} samples but {name} has {values.size}: give one record (same length)")
 
 
 def one_record(
@@ -102,8 +113,7 @@ def one_record(
         a_arr, b_arr = a_arr.ravel(), b_arr.ravel()
     elif a_arr.ndim != 1 or b_arr.ndim != 1:
         raise DataError(f"{names[0]} and {names[1]} must be 1-D signals (got shapes {a_arr.shape} and {b_arr.shape})")
-    if a_arr.size != b_arr.size:
-        raise DataError(f"{names[0]} has {a_arr.size} samples but {names[1]} has {b_arr.size}: give one record")
+    check_same_length((names[0], a_arr), (names[1], b_arr))
     return a_arr, b_arr
 
 
@@ -141,19 +151,10 @@ def check_signals(*signals: tuple[str, Any], min_length: int = 0, what: str = "t
                 arr = arr.ravel()
             else:
                 raise DataError(f"{name} has shape {arr.shape}: pass a 1-D signal (one record)")
-        bad = np.flatnonzero(~np.isfinite(arr))
-        if bad.size:
-            raise DataError(
-                f"{name} has {bad.size} NaN or infinite (non-finite) values (first at sample {bad[0]}): "
-                "cut the record before them or interpolate them first"
-            )
+        check_finite(arr, name)
         if arr.size < min_length:
             raise DataError(f"{name} has {arr.size} samples; {what} needs at least {min_length}: give a longer record")
-        if out and arr.size != out[0].size:
-            first = signals[0][0]
-            raise DataError(
-                f"{name} has {arr.size} samples and {first} {out[0].size}: pass the signals of one record "
-                "(same length), aligned"
-            )
+        if out:
+            check_same_length((signals[0][0], out[0]), (name, arr))
         out.append(arr.copy())
     return out

@@ -9,8 +9,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._docstrings import PLOT, fill
 from .._optional import pyplot
-from .._validation import as_signal
-from ..errors import DataError
+from .._validation import as_signal, one_record
 from ..models import GeneralBacklash
 
 __all__ = [
@@ -315,9 +314,7 @@ def plot_residuals(
     4
     """
     plt = pyplot()
-    e, us = as_signal(residual, "residual").ravel(), as_signal(u, "u").ravel()
-    if e.shape != us.shape:
-        raise DataError(f"residual has {e.size} samples and u {us.size}: give one record")
+    e, us = one_record(residual, u, ("residual", "u"), flatten=True)
     if fig is None:
         fig = plt.figure(figsize=(11, 6.5))
     axes = fig.subplots(2, 2)

@@ -5,9 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import DataError
-
-__all__ = ["holm", "same_length", "snap_constant"]
+__all__ = ["holm", "snap_constant"]
 
 
 def snap_constant(e: NDArray[np.float64], *, centre: bool = False) -> NDArray[np.float64]:
@@ -18,13 +16,6 @@ def snap_constant(e: NDArray[np.float64], *, centre: bool = False) -> NDArray[np
     if float(np.ptp(e)) <= 1e-12 * scale:
         return np.zeros_like(e) if centre else np.full_like(e, e[0])
     return e - e.mean() if centre else e
-
-
-def same_length(n: int, **signals: NDArray[np.float64]) -> None:
-    """DataError unless every signal has the residual's ``n`` samples."""
-    for name, s in signals.items():
-        if s.size != n:
-            raise DataError(f"{name} has {s.size} samples and the residual {n}: pass signals of one record, aligned")
 
 
 def holm(p_values: ArrayLike) -> NDArray[np.float64]:

@@ -33,10 +33,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..._docstrings import TO_DICT, fill
 from ..._json import json_float
-from ..._validation import check_signals
+from ..._validation import check_same_length, check_signals
 from ...errors import DataError
 from ...models import CascadeModel, CascadeState, SandwichModel, SandwichState
-from .._statistics import holm, same_length, snap_constant
+from .._statistics import holm, snap_constant
 
 __all__ = ["REGIMES", "RegimeShare", "RegimeShares", "regime_masks", "regime_shares"]
 
@@ -423,7 +423,7 @@ def regime_shares(
     warmup = int(warmup)
     e = check_signals(("residual", residual), min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")[0]
     u_arr = check_signals(("u", u), min_length=warmup + MIN_SAMPLES, what=f"a warm-up of {warmup} plus the regime test")[0]
-    same_length(e.size, u=u_arr)
+    check_same_length(("residual", e), ("u", u_arr))
     sim, x_before = _simulate(model, u_arr, initial_state)
     evaluated = np.arange(e.size) >= warmup
     masks, k = regime_masks(np.asarray(sim.x), np.asarray(sim.f1), np.asarray(sim.f2), x_before, evaluated)

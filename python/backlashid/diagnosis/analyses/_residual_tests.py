@@ -43,9 +43,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import linalg, stats
 
 from ..._docstrings import TO_DICT, fill
-from ..._validation import check_signals
+from ..._validation import check_same_length, check_signals
 from ...errors import DataError
-from .._statistics import holm, same_length, snap_constant
+from .._statistics import holm, snap_constant
 
 __all__ = ["CorrelationTest", "ResidualTests", "TEST_NAMES", "residual_tests"]
 
@@ -365,11 +365,11 @@ def residual_tests(
     e = snap_constant(check_signals(("residual", residual), min_length=need, what=what)[0], centre=True)
     n = e.size
     u_arr = check_signals(("u", u), min_length=need, what=what)[0]
-    same_length(n, u=u_arr)
+    check_same_length(("residual", e), ("u", u_arr))
     x_arr = None
     if x is not None:
         x_arr = check_signals(("x", x), min_length=need, what=what)[0]
-        same_length(n, x=x_arr)
+        check_same_length(("residual", e), ("x", x_arr))
     if np.ptp(u_arr) == 0.0:
         raise DataError("u is constant: the input carries no excitation to correlate the residual with")
 

@@ -29,9 +29,9 @@ from scipy import signal, stats
 
 from ..._docstrings import TO_DICT, fill
 from ..._json import json_float
-from ..._validation import check_signals
+from ..._validation import check_same_length, check_signals
 from ...errors import DataError
-from .._statistics import holm, same_length, snap_constant
+from .._statistics import holm, snap_constant
 
 __all__ = ["Band", "FrequencyAnalysis", "frequency_analysis"]
 
@@ -312,7 +312,7 @@ def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | 
     """
     e = snap_constant(check_signals(("residual", residual), min_length=MIN_SAMPLES, what="a spectrum by band")[0], centre=True)
     u_arr = check_signals(("u", u), min_length=MIN_SAMPLES, what="a spectrum by band")[0]
-    same_length(e.size, u=u_arr)
+    check_same_length(("residual", e), ("u", u_arr))
     n = e.size
     if noise_std is not None:
         try:

@@ -23,8 +23,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from ... import _core
 from ..._json import json_float
-from ..._validation import as_signal
-from ...errors import BacklashIdError, DataError, ModelError
+from ..._validation import as_signal, check_same_length
+from ...errors import BacklashIdError, ModelError
 from ...identify import Structure
 from ...models import CascadeModel, LinearBlock
 
@@ -212,8 +212,7 @@ class AugmentedModel:
             If ``simulated`` and ``y`` differ in length.
         """
         y_arr = as_signal(y, "y").ravel()
-        if y_arr.shape != simulated.shape:
-            raise DataError(f"u has {simulated.size} samples and y {y_arr.size}: give one record")
+        check_same_length(("u", simulated), ("y", y_arr))
         return simulated + ar_predict(y_arr - simulated, self.ar) if self.ar.size else simulated
 
     @property
