@@ -79,8 +79,9 @@ class Problem:
     ) -> Self: ...
     @staticmethod
     def layout(
-        na: int, nb: int, degree: int, nr: int, ns: int, feedthrough: bool = False, output_feedthrough: bool = False
-    ) -> list[str]: ...  # the names of theta of a structure, no record needed
+        na: int, nb: int, degree: int, nr: int, ns: int, feedthrough: bool = False, output_feedthrough: bool = False,
+        least_squares: bool = False,
+    ) -> list[str]: ...  # the names of theta (or of the least-squares vector) of a structure, no record needed
     @property
     def names(self) -> list[str]: ...
     @property

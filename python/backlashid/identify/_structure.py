@@ -154,25 +154,30 @@ class Structure:
         """True for a sandwich (nr > 0)."""
         return self.nr > 0
 
+    def _layout(self, least_squares: bool) -> list[str]:
+        return _core.Problem.layout(
+            self.na, self.nb, self.degree, self.nr, self.ns, self.feedthrough, self.output_feedthrough, least_squares
+        )
+
     @functools.cached_property
     def names(self) -> list[str]:
         """The parameter names, in the order of the physical vector (the core's layout)."""
-        return _core.Problem.layout(
-            self.na, self.nb, self.degree, self.nr, self.ns, self.feedthrough, self.output_feedthrough
-        )
+        return self._layout(False)
 
-    @property
+    @functools.cached_property
     def ls_names(self) -> list[str]:
-        """Names of the least-squares vector of eq (19)/(31)."""
-        return [{"c_L": "c_1", "c_R": "c_2"}.get(k, k) for k in self.names]
+        """Names of the least-squares vector of eq (19)/(31) (the core's: c_1, c_2 for c_L, c_R)."""
+        return self._layout(True)
 
     @property
     def size(self) -> int:
         """The number of parameters p."""
         return len(self.names)
 
+    @functools.cached_property
     def _slices(self) -> dict[str, Any]:
-        """Where each block sits in the physical vector, read off the core's names."""
+        """Where each block sits in the physical vector, read off the core's names (once: every
+        unpack on the fits' and the diagnosis's refit paths reads it)."""
         names = self.names
 
         def block(pattern: str) -> slice:
@@ -196,7 +201,7 @@ class Structure:
         Estimate
             Its blocks' coefficients.
         """
-        sl = self._slices()
+        sl = self._slices
         t = np.asarray(theta, dtype=np.float64)
         return Estimate(
             a=t[sl["a"]].tolist(),
@@ -271,7 +276,7 @@ class Structure:
         numpy.ndarray
             The physical vector.
         """
-        sl = self._slices()
+        sl = self._slices
         t = np.array(theta_ls, dtype=np.float64)
         t[sl["c_R"]] = t[sl["c_R"]] / t[sl["m_R1"]]
         return t

@@ -106,9 +106,11 @@ impl PyProblem {
         Ok(Self { inner })
     }
 
-    /// The parameter names of a structure, in the order of theta (no record needed).
+    /// The parameter names of a structure, in the order of theta (no record needed); with
+    /// `least_squares`, those of the least-squares vector of eq (19) / (31).
     #[staticmethod]
-    #[pyo3(signature = (na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false))]
+    #[pyo3(signature = (na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false, least_squares=false))]
+    #[allow(clippy::too_many_arguments)]
     fn layout(
         na: &Bound<'_, PyAny>,
         nb: &Bound<'_, PyAny>,
@@ -117,8 +119,14 @@ impl PyProblem {
         ns: &Bound<'_, PyAny>,
         feedthrough: bool,
         output_feedthrough: bool,
+        least_squares: bool,
     ) -> PyResult<Vec<String>> {
-        Ok(structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?.names())
+        let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?;
+        Ok(if least_squares {
+            s.ls_names()
+        } else {
+            s.names()
+        })
     }
 
     /// The parameter names, in the order of theta.
