@@ -32,9 +32,9 @@ from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import brentq
 
 from .._json import json_number
+from .._numerics import find_root
 from ..diagnosis import EFFECTS
 from ..errors import DataError, ModelError
 from ..models import CascadeModel, GeneralBacklash, LinearBlock
@@ -625,7 +625,7 @@ def _draw_scaled(g: _Generator, ctx: _Context, effect: str, level: float, sigma:
         lo, hi = hi, min(2.0 * hi, s_max)
     if not np.isfinite(rms_change(hi)):
         raise _Redraw(f"{effect} of size {hi:.3g} makes the system unstable")
-    size = float(brentq(lambda s: rms_change(s) - target, lo, hi, xtol=1e-15 * hi, rtol=1e-14, maxiter=200))
+    size = find_root(lambda s: rms_change(s) - target, lo, hi, xtol=1e-15 * hi, rtol=1e-14, max_iter=200)
     params = params_of(shape, size)
     x_true, y_true = simulate_true(nom, effect, params, u, t, horizon)
     change = y_true - y_nom

@@ -46,8 +46,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import optimize, stats
+from scipy import stats
 
+from .._numerics import lstsq, minimize_bounded
 from .._validation import check_signals
 from ..errors import DataError, ModelError
 from ..models import CascadeModel, CascadeState, LinearBlock
@@ -217,9 +218,9 @@ def estimated_start(simulate: Any, u: Array, y: Array, memory_range: tuple[float
         if costs[k] < best_cost:
             best, best_cost = float(grid[k]), costs[k]
         lo, hi = float(grid[max(k - 1, 0)]), float(grid[min(k + 1, grid.size - 1)])
-    res = optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-9 * max(hi - lo, 1e-12)})
-    if res.success and res.fun < best_cost:
-        best = float(res.x)
+    x, fx, converged = minimize_bounded(cost, lo, hi, xatol=1e-9 * max(hi - lo, 1e-12))
+    if converged and fx < best_cost:
+        best = float(x)
     return simulate(u, best, True), best
 
 
@@ -262,7 +263,7 @@ def _black_box(model, u_e, y_e, ynom_e, u_v, y_v, ynom_v, warmup, n_est, with_pa
     a_e = _features(model, u_e, ynom_e, r_e if with_past else None, 0.0, total)[warmup:]
     a_v = _features(model, u_v, ynom_v, r_v if with_past else None, n_est, total)[warmup:]
     scale = np.maximum(np.std(a_e, axis=0), 1e-12)
-    coef, *_ = np.linalg.lstsq(a_e / scale, r_e[warmup:], rcond=None)
+    coef = lstsq(a_e / scale, r_e[warmup:])
     return r_v[warmup:] - (a_v / scale) @ coef
 
 
@@ -284,7 +285,7 @@ def _modulation_p(residual: Array, y_nom: Array, phi: Array, order: int = 4) -> 
 
     e, zw = whiten(residual), whiten(z)
     zw = np.column_stack([zw, np.ones(e.size)])
-    coef, *_ = np.linalg.lstsq(zw, e, rcond=None)
+    coef = lstsq(zw, e)
     rss1 = float(np.sum((e - zw @ coef) ** 2))
     rss0 = float(np.sum((e - e.mean()) ** 2))
     m, dof = order, e.size - order - 1

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..._numerics import lstsq
 from ._base import Array, Augmentation, AugmentedModel, Effect, Problem, ScreenContext, ar_predict
 
 MAX_AR = 4  # highest order of the AR model
@@ -16,7 +17,7 @@ def fit_ar(prob: Problem, theta0: Array) -> tuple[Array, float]:
     best: tuple[float, Array] = (n * np.log(np.mean(r * r) + 1e-300), np.zeros(0))
     for p in range(1, MAX_AR + 1):
         a = np.column_stack([r[p - k : n - k] for k in range(1, p + 1)])
-        phi, *_ = np.linalg.lstsq(a, r[p:], rcond=None)
+        phi = lstsq(a, r[p:])
         e = r[p:] - a @ phi
         bic = (n - p) * np.log(np.mean(e * e) + 1e-300) + p * np.log(n)
         if bic < best[0]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ... import _core
+from ..._numerics import lstsq
 from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
 
 N_PLAYS = 2  # extra plays
@@ -48,7 +49,7 @@ class HysteresisMemory(Effect, rank=9, augmentation=AUGMENTATION):
         for i in range(len(radii)):
             for j in range(i + 1, len(radii)):
                 a = np.column_stack([plays[i], plays[j]])
-                w, *_ = np.linalg.lstsq(a, target, rcond=None)
+                w = lstsq(a, target)
                 rss = float(np.sum((target - a @ w) ** 2))
                 pairs.append((rss, (float(radii[i]), float(w[0]), float(radii[j]), float(w[1]))))
         pairs.sort()

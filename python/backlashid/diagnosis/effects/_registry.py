@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import stats
 
+from ..._numerics import lstsq
 from ..._validation import check_signals
 from ...errors import DataError, ModelError
 from ...identify import Structure
@@ -192,7 +193,7 @@ def screen(
         if a.shape[1] == 0:
             out.append(Screening(name, 0.0, 1.0, 0))
             continue
-        coef, *_ = np.linalg.lstsq(a, r, rcond=None)
+        coef = lstsq(a, r)
         fitted = a @ coef
         r2 = float(1.0 - np.sum((r - fitted) ** 2) / max(float(r @ r), 1e-300))
         dof = a.shape[1]
