@@ -10,6 +10,14 @@ median gap closed of correct attributions, and the time per case, against the is
     python benches/withheld_effects.py --jobs 2 --json withheld.json
     python benches/withheld_effects.py --fit-only          # nominal fits only (no diagnoser needed)
     python benches/withheld_effects.py --effects friction none --levels 3 --per-effect 10
+
+Side by side with another version of the package (e.g. ``git archive <commit> python | tar -x -C
+/tmp/old`` plus the compiled ``_core`` copied into /tmp/old/python/backlashid): ``--baseline
+/tmp/old/python`` runs the same cases with that tree in a child process at the same time (each
+side with half the jobs), so both see the same machine and the same load, and prints the ratio
+of the diagnosis times and both sides' accuracies.
+
+    python benches/withheld_effects.py --jobs 2 --seed 4 --baseline /tmp/old/python
 """
 
 from __future__ import annotations
@@ -17,7 +25,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import sys
+import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
@@ -179,6 +189,7 @@ def main() -> int:
     ap.add_argument("--fit-only", action="store_true", help="only the nominal fits (no diagnosis)")
     ap.add_argument("--known-noise", action="store_true", help="give diagnose the true white-noise std")
     ap.add_argument("--json", metavar="PATH", help="write per-case results and the summary as JSON")
+    ap.add_argument("--baseline", metavar="DIR", help="also run the cases with the package in DIR (a python/ source tree), side by side")
     args = ap.parse_args()
     if not args.fit_only and not hasattr(bid, "diagnose"):
         print("backlashid.diagnose is not available in this tree (merge main first), or run with --fit-only", file=sys.stderr)
@@ -186,6 +197,10 @@ def main() -> int:
     specs = case_specs(args.levels, args.per_effect, args.seed, args.effects)
     print(f"withheld-effect benchmark: {len(specs)} cases, levels {args.levels}, {args.per_effect} per effect and level, "
           f"seed {args.seed}, warm-up {args.warmup}, {args.jobs} job(s)")  # fmt: skip
+    baseline = None
+    if args.baseline:
+        args.jobs = max(args.jobs // 2, 1)
+        baseline = _start_baseline(args)
     t0 = time.perf_counter()
     call = (run_case, [args.warmup] * len(specs), [args.fit_only] * len(specs), [args.known_noise] * len(specs))
     if args.jobs > 1:
@@ -197,11 +212,57 @@ def main() -> int:
     summary = summarise(results, args.fit_only)
     summary["wall_seconds"] = wall
     print(f"\nwall time {wall:.1f} s ({wall / max(len(specs), 1):.2f} s per case with {args.jobs} job(s))")
+    out: dict[str, Any] = {"args": vars(args), "summary": summary, "cases": results}
+    if baseline is not None:
+        out["baseline"] = _compare(baseline, results, summary)
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"args": vars(args), "summary": summary, "cases": results}, fh, indent=1, default=float)
+            json.dump(out, fh, indent=1, default=float)
         print(f"wrote {os.path.abspath(args.json)}")
     return 0
+
+
+def _start_baseline(args: argparse.Namespace) -> tuple[subprocess.Popen[bytes], str, str]:
+    """This script, same cases and options, with the package in args.baseline first on the path."""
+    fd, path = tempfile.mkstemp(suffix=".json")
+    os.close(fd)
+    argv = [sys.executable, os.path.abspath(__file__), "--jobs", str(args.jobs), "--seed", str(args.seed), "--warmup", str(args.warmup)]
+    argv += ["--per-effect", str(args.per_effect), "--levels", *map(str, args.levels), "--json", path]
+    argv += ["--effects", *args.effects] if args.effects else []
+    argv += ["--known-noise"] if args.known_noise else []
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.path.abspath(args.baseline), os.environ.get("PYTHONPATH", "")])}
+    log = path + ".log"
+    with open(log, "wb") as fh:
+        proc = subprocess.Popen(argv, env=env, stdout=fh, stderr=subprocess.STDOUT)
+    return proc, path, log
+
+
+def _compare(baseline: tuple[subprocess.Popen[bytes], str, str], results: list[dict[str, Any]], summary: dict[str, Any]) -> dict[str, Any]:
+    """Wait for the baseline run and print the two side by side."""
+    proc, path, log = baseline
+    if proc.wait() != 0:
+        with open(log) as fh:
+            print(f"\nthe baseline run failed:\n{fh.read()[-3000:]}")
+        return {"error": f"exit code {proc.returncode}"}
+    with open(path) as fh:
+        base = json.load(fh)
+    b_sum = base["summary"]
+    times = {(x["effect"], x["level"], x["seed"]): x.get("diagnose_seconds") for x in base["cases"]}
+    ratios = [times[k] / x["diagnose_seconds"] for x in results
+              if (k := (x["effect"], x["level"], x["seed"])) in times and times[k] and x.get("diagnose_seconds")]  # fmt: skip
+    new_t, old_t = summary.get("diagnose_seconds_median", float("nan")), b_sum.get("diagnose_seconds_median", float("nan"))
+    print(f"\n== side by side with the baseline tree {base['args'].get('baseline') or ''}(same cases, run at the same time)")
+    print(f"diagnose median: baseline {old_t:.3f} s, this tree {new_t:.3f} s: {old_t / new_t:.2f} times faster; "
+          f"median of the per-case ratios {np.median(ratios):.2f}")  # fmt: skip
+    for level, lv in summary["levels"].items():
+        old = b_sum["levels"].get(level, {})
+        print(f"ENR {float(level):g}: rank-1 baseline {_pct(old.get('rank1', float('nan')))}, this tree {_pct(lv['rank1'])}; "
+              f"top-3 {_pct(old.get('top3', float('nan')))} / {_pct(lv['top3'])}")  # fmt: skip
+    if "none_correct" in summary:
+        print(f"'none' correct: baseline {_pct(b_sum.get('none_correct', float('nan')))}, this tree {_pct(summary['none_correct'])}")
+    os.remove(path)
+    os.remove(log)
+    return {"summary": b_sum, "speedup_of_medians": old_t / new_t, "median_case_speedup": float(np.median(ratios)), "cases": base["cases"]}
 
 
 if __name__ == "__main__":

@@ -124,6 +124,7 @@ def _without_feedthrough(model: CascadeModel, u_e: Array, u_v: Array) -> tuple[C
 
 INITIAL_STATES = ("estimate", "rest")
 MEMORY_GRID = 33  # backlash memories tried before the 1-D refinement
+MEMORY_PREFIX = 256  # first prefix of the record tried for the memory search (doubled until settled)
 
 
 def held_state(model: CascadeModel, u0: float, y_prev: float) -> CascadeState:
@@ -172,6 +173,12 @@ def estimated_start(simulate: Any, u: Array, y: Array, memory_range: tuple[float
     fitted on the warm-up alone, its error persists over a long hold and the paired test would
     read the differences between models' memories as significant.
 
+    Once the backlash has moved, the simulation no longer depends on the memory: the search runs
+    on the shortest prefix (``MEMORY_PREFIX`` samples, doubled) over whose second half the
+    simulations from both ends of the range agree exactly. The backlash orders its outputs by
+    their memories, so every memory in between agrees there too, and the record's cost differs
+    between memories only within the prefix.
+
     Parameters
     ----------
     simulate : callable
@@ -203,13 +210,16 @@ def estimated_start(simulate: Any, u: Array, y: Array, memory_range: tuple[float
     0.3
     """
 
+    lo, hi = memory_range
+    m = _settled(simulate, u, lo, hi)
+    u_m, y_m = u[:m], y[:m]
+
     def cost(y0: float) -> float:
-        r = y - simulate(u, y0, True)
+        r = y_m - simulate(u_m, y0, True)
         return float(r @ r)
 
     # the cost is flat where the memory lies outside the dead band (it is clamped onto a branch
     # at once) and quadratic inside: a coarse grid, a fine grid around its best point, then Brent
-    lo, hi = memory_range
     best, best_cost = lo, math.inf
     for _ in range(2):
         grid = np.linspace(lo, hi, MEMORY_GRID)
@@ -222,6 +232,17 @@ def estimated_start(simulate: Any, u: Array, y: Array, memory_range: tuple[float
     if converged and fx < best_cost:
         best = float(x)
     return simulate(u, best, True), best
+
+
+def _settled(simulate: Any, u: Array, lo: float, hi: float) -> int:
+    """Length of the shortest prefix (MEMORY_PREFIX doubled) over whose second half the
+    simulations from the memories lo and hi agree exactly; the record's length if none."""
+    m = MEMORY_PREFIX
+    while m < u.size:
+        if np.array_equal(simulate(u[:m], lo, True)[m // 2 :], simulate(u[:m], hi, True)[m // 2 :]):
+            return m
+        m *= 2
+    return int(u.size)
 
 
 # -- statistics ----------------------------------------------------------------------------------

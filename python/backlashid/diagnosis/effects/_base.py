@@ -301,19 +301,30 @@ class Problem:
         """The augmented cascade on this record."""
         return simulate(self.structure, theta, effects, self.u, self.t0)
 
+    def __post_init__(self) -> None:
+        self.big = 1e3 * (float(np.std(self.y)) + 1.0)  # the residual of a diverging model
+
     def residual(self, theta: Array, effects: CoreEffects) -> Array:
         """Output error after the warm-up (a large constant where the model diverges)."""
         try:
             y_hat = self.simulate(theta, effects)
         except BacklashIdError:
-            return np.full(self.y.size - self.warmup, 1e3 * (np.std(self.y) + 1.0))
+            return np.full(self.y.size - self.warmup, self.big)
+        return self.output_residual(y_hat)
+
+    def output_residual(self, y_hat: Array) -> Array:
+        """Output error of the output y_hat after the warm-up (a large constant where it diverges)."""
         r = (self.y - y_hat)[self.warmup :]
-        big = 1e3 * (np.std(self.y) + 1.0)
-        return r if np.all(np.abs(r) < 1e3 * big) else np.full(r.size, big)
+        return r if np.all(np.abs(r) < 1e3 * self.big) else np.full(r.size, self.big)
 
     def cost(self, theta: Array, effects: CoreEffects) -> float:
         """Sum of squared output errors after the warm-up."""
         r = self.residual(theta, effects)
+        return float(r @ r)
+
+    def output_cost(self, y_hat: Array) -> float:
+        """Sum of squared output errors of the output y_hat after the warm-up."""
+        r = self.output_residual(y_hat)
         return float(r @ r)
 
 

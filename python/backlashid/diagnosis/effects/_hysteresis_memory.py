@@ -33,17 +33,11 @@ class HysteresisMemory(Effect, rank=9, augmentation=AUGMENTATION):
         plays explain most of the nominal residual, then refit everything from the best three."""
         x = self._x(prob, theta0)
         sx = float(np.std(x)) + 1e-12
-        r0 = prob.y - prob.simulate(theta0)
-
-        def play(r: float) -> Array:
-            p, out = 0.0, np.empty_like(x)
-            for t, xt in enumerate(x):
-                p = max(xt - r, min(xt + r, p))
-                out[t] = p
-            return out
-
+        y_nom = prob.simulate(theta0)
+        r0 = prob.y - y_nom
         radii = sx * np.geomspace(0.01, 2.0, 10)
-        plays = [play(r)[prob.warmup :] for r in radii]
+        # play_r(x) of weight 1 on top of the nominal output, by the augmented simulator
+        plays = [(prob.simulate(theta0, self.core({"r_1": r, "w_1": 1.0, "r_2": 0.0, "w_2": 0.0})) - y_nom)[prob.warmup :] for r in radii]
         target = r0[prob.warmup :]
         pairs = []
         for i in range(len(radii)):
