@@ -467,7 +467,7 @@ def diagnose(
     scored: dict[str, _Scored] = {}
     for effect in order:
         aug = fit_effect(effect, model, u_e, y_e, warmup=warmup, t0=0.0, seed=seed)
-        sim_v, _ = on_validation(lambda u, y0, held, aug=aug: aug.simulate(u, t0=n_est, y_prev=y0, held=held))
+        sim_v, _ = on_validation(aug.simulator(t0=n_est))
         if effect == "colored_noise":
             y_hat_v = aug.predict_from(sim_v, y_v)
             y_hat_e = aug.predict(u_e, y_e, t0=0.0)

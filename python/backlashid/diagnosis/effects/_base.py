@@ -83,14 +83,32 @@ def simulate(
     """The augmented cascade's output (``_core.simulate_augmented``). ``held``: the linear block
     starts at its equilibrium with u[0] (the input held before the record) instead of at rest;
     ``y_prev`` is the backlash memory y(0)."""
-    a, b, *rest = structure.unpack(theta).chain()
-    state: dict[str, Any] = {}
-    if held:
-        x_eq = held_x(LinearBlock(a, b), float(u[0]))
-        state = {"u_past": [float(u[0])] * len(a), "x_past": [x_eq] * len(b)}
-    return _core.simulate_augmented(
-        a, b, *rest, u, effects=list(effects), t0=float(t0), time_scale=TIME_SCALE, y_prev=float(y_prev), **state
-    )
+    return Simulator(structure, theta, effects, t0)(u, y_prev, held)
+
+
+class Simulator:
+    """One augmented cascade's simulation, unpacked once: ``(u, y_prev, held) -> output``, for
+    the many runs of one model that differ in the start only (the validation start's search)."""
+
+    def __init__(self, structure: Structure, theta: Array, effects: CoreEffects, t0: float) -> None:
+        self.chain = structure.unpack(theta).chain()
+        self.effects = list(effects)
+        self.t0 = float(t0)
+        self._held: dict[float, dict[str, Any]] = {}
+
+    def held_state(self, u0: float) -> dict[str, Any]:
+        """The linear block's past at its equilibrium with the input held at u0."""
+        if u0 not in self._held:
+            a, b = self.chain[0], self.chain[1]
+            x_eq = held_x(LinearBlock(a, b), u0)
+            self._held[u0] = {"u_past": [u0] * len(a), "x_past": [x_eq] * len(b)}
+        return self._held[u0]
+
+    def __call__(self, u: Array, y_prev: float = 0.0, held: bool = False) -> Array:
+        state = self.held_state(float(u[0])) if held else {}
+        return _core.simulate_augmented(
+            *self.chain, u, effects=self.effects, t0=self.t0, time_scale=TIME_SCALE, y_prev=float(y_prev), **state
+        )
 
 
 def ar_predict(residual: Array, phi: Array) -> Array:
@@ -169,7 +187,23 @@ class AugmentedModel:
             If the augmented model diverges or the linear block has a pole at 1 with ``held``.
         """
         u_arr = as_signal(u, "u").ravel()
-        return simulate(self.structure, self.theta, self.core, u_arr, t0, y_prev, held)
+        return self.simulator(t0)(u_arr, y_prev, held)
+
+    def simulator(self, t0: float = 0.0) -> Simulator:
+        """This model's simulation unpacked once, ``(u, y_prev, held) -> output`` (u checked by
+        the caller), for many runs that differ in the start.
+
+        Parameters
+        ----------
+        t0 : float, default 0.0
+            Time of u[0] in samples (drifts only).
+
+        Returns
+        -------
+        Simulator
+            Callable ``(u, y_prev=0.0, held=False) -> ndarray``, as :meth:`simulate`.
+        """
+        return Simulator(self.structure, self.theta, self.core, t0)
 
     def predict(self, u: ArrayLike, y: ArrayLike, t0: float = 0.0) -> Array:
         """One-step prediction: the simulation plus the noise model's prediction of the output
