@@ -328,7 +328,7 @@ impl Problem {
     /// poles strictly inside the unit circle (eq 16, and eq 29 for the sandwich).
     pub fn feasible(&self, theta: &[f64]) -> Result<bool> {
         let b = self.structure.unpack(theta)?;
-        Ok(b.linear.is_stable() && b.output.as_ref().is_none_or(LinearBlock::is_stable))
+        Ok(b.linear.is_stable() && b.output.as_ref().map_or(true, LinearBlock::is_stable))
     }
 
     /// The box of theta: the dead-band widths c_L and c_R at least 0 (eq 4-5: L meets zero at
