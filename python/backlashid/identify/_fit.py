@@ -3,7 +3,7 @@
 The paper's iterative algorithm with internal-variable estimation runs first: each iteration
 is one core call (internal variables by eq 22-26 / 35, regressor eq 18 / 33, faer QR solve);
 this module only drives the iterations. By default the iterate with the lowest free-run
-simulation error is then refined by output-error Levenberg-Marquardt (``refine.py``), which
+simulation error is then refined by the package's one output-error Levenberg-Marquardt (``_refine.py``), which
 removes the bias of the equation-error iterations under noise.
 """
 
