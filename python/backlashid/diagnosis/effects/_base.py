@@ -25,12 +25,13 @@ from ... import _core
 from ..._json import json_float
 from ..._validation import as_signal, check_same_length
 from ...errors import BacklashIdError, ModelError
-from ...identify import Structure
+from ...identify import Structure, levenberg_marquardt
 from ...models import CascadeModel, LinearBlock
 
 __all__ = ["Augmentation", "AugmentedModel", "Effect", "Screening", "TIME_SCALE"]
 
 TIME_SCALE = 1000.0  # samples per time unit of the drift rates
+MAX_ITER = 40  # most iterations of a refit to convergence
 
 Array = NDArray[np.float64]
 CoreEffects = tuple[tuple[str, tuple[float, ...]], ...]  # (name, parameters) for _core.simulate_augmented
@@ -362,7 +363,7 @@ class Problem:
         return float(r @ r)
 
 
-def levenberg_marquardt(fun: Callable[[Array], Array], x0: Array, lower: Array, upper: Array, max_iter: int) -> Array:
+def finite_difference_lm(fun: Callable[[Array], Array], x0: Array, lower: Array, upper: Array, max_iter: int) -> Array:
     """Levenberg-Marquardt with a forward-difference Jacobian, Marquardt's scaling and steps
     projected onto the bounds. Small p (<= ~20), long residual vectors: the normal equations
     J^T J (p x p) are cheap where a dense SVD of J is not."""
@@ -609,7 +610,7 @@ class Effect:
         lower = np.concatenate([np.full(n, -np.inf), lb])
         upper = np.concatenate([np.full(n, np.inf), ub])
         fun = lambda p: prob.residual(p[:n], self.core(params(p)))  # noqa: E731
-        p = levenberg_marquardt(fun, x0, lower, upper, max_iter)
+        p = finite_difference_lm(fun, x0, lower, upper, max_iter)
         return p[:n], params(p), prob.cost(p[:n], self.core(params(p)))
 
     def _multi_start(self, prob: Problem, theta0: Array, starts: list[tuple[Array, dict[str, float]]], lb: Array, ub: Array) -> Fitted:
@@ -656,12 +657,15 @@ class StructureEffect(Effect):
         raise NotImplementedError
 
     def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
-        """Refit in the bigger structure, the new terms from 0."""
+        """Refit in the bigger structure, the new terms from 0: the cascade's compiled problem
+        searched by the package's Levenberg-Marquardt (exact sensitivities)."""
         s, bigger = prob.structure, self.bigger(prob.structure)
         old = dict(zip(s.names, theta0))
         start = np.array([old.get(name, 0.0) for name in bigger.names])
-        big = Problem(bigger, prob.u, prob.y, prob.warmup, prob.t0)
-        theta, _, _ = self._refit(big, start, np.zeros(0), np.zeros(0), np.zeros(0), max_iter=40, names=())
+        try:
+            theta = levenberg_marquardt(bigger.problem(prob.u, prob.y, prob.warmup), start, max_iter=MAX_ITER).theta
+        except BacklashIdError:  # the start diverges: the nominal model with the new terms at 0
+            theta = start
         return AugmentedModel(self.name, bigger, theta, dict(self.extra), n_extra=self.n_extra)
 
     def directions(self, screen: ScreenContext) -> list[Array]:
