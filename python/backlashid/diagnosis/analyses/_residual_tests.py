@@ -303,7 +303,8 @@ def _portmanteau(a: NDArray[np.float64], b: NDArray[np.float64], lags: NDArray[n
     a_t = ac[k_max:]
     lagged = np.column_stack([bc[k_max - k : n - k] for k in lags])  # rows t = k_max..n-1
     g = lagged.T @ a_t
-    s = (lagged * (a_t**2)[:, None]).T @ lagged
+    z_t = lagged * np.abs(a_t)[:, None]
+    s = z_t.T @ z_t  # = sum_t a(t)^2 l(t) l(t)^T; one operand (BLAS syrk), where two take a threaded gemm ~30x longer here
     w, v = linalg.eigh(s)
     if w[-1] <= 0.0:
         return 0.0, 0
