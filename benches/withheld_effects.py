@@ -13,11 +13,12 @@ median gap closed of correct attributions, and the time per case, against the is
 
 Side by side with another version of the package (e.g. ``git archive <commit> python | tar -x -C
 /tmp/old`` plus the compiled ``_core`` copied into /tmp/old/python/backlashid): ``--baseline
-/tmp/old/python`` runs the same cases with that tree in a child process at the same time (each
-side with half the jobs), so both see the same machine and the same load, and prints the ratio
-of the diagnosis times and both sides' accuracies.
+/tmp/old/python`` runs every case with that tree in a child process at the same time as this
+tree runs it (one case at a time on each side, the pair started together, so both see the same
+machine and the same load: two busy processes, as ``--jobs 2``), and prints the ratio of the
+diagnosis times and both sides' accuracies.
 
-    python benches/withheld_effects.py --jobs 2 --seed 4 --baseline /tmp/old/python
+    python benches/withheld_effects.py --seed 4 --baseline /tmp/old/python
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
@@ -189,21 +189,24 @@ def main() -> int:
     ap.add_argument("--fit-only", action="store_true", help="only the nominal fits (no diagnosis)")
     ap.add_argument("--known-noise", action="store_true", help="give diagnose the true white-noise std")
     ap.add_argument("--json", metavar="PATH", help="write per-case results and the summary as JSON")
-    ap.add_argument("--baseline", metavar="DIR", help="also run the cases with the package in DIR (a python/ source tree), side by side")
+    ap.add_argument("--baseline", metavar="DIR", help="also run every case with the package in DIR (a python/ source tree), side by side")
+    ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.serve:
+        return _serve(args)
     if not args.fit_only and not hasattr(bid, "diagnose"):
         print("backlashid.diagnose is not available in this tree (merge main first), or run with --fit-only", file=sys.stderr)
         return 2
     specs = case_specs(args.levels, args.per_effect, args.seed, args.effects)
+    jobs = f"side by side with {args.baseline}" if args.baseline else f"{args.jobs} job(s)"
     print(f"withheld-effect benchmark: {len(specs)} cases, levels {args.levels}, {args.per_effect} per effect and level, "
-          f"seed {args.seed}, warm-up {args.warmup}, {args.jobs} job(s)")  # fmt: skip
-    baseline = None
-    if args.baseline:
-        args.jobs = max(args.jobs // 2, 1)
-        baseline = _start_baseline(args)
+          f"seed {args.seed}, warm-up {args.warmup}, {jobs}")  # fmt: skip
     t0 = time.perf_counter()
     call = (run_case, [args.warmup] * len(specs), [args.fit_only] * len(specs), [args.known_noise] * len(specs))
-    if args.jobs > 1:
+    base: list[dict[str, Any]] | None = None
+    if args.baseline:
+        results, base = _side_by_side(specs, args)
+    elif args.jobs > 1:
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
             results = list(pool.map(call[0], specs, *call[1:]))
     else:
@@ -211,10 +214,10 @@ def main() -> int:
     wall = time.perf_counter() - t0
     summary = summarise(results, args.fit_only)
     summary["wall_seconds"] = wall
-    print(f"\nwall time {wall:.1f} s ({wall / max(len(specs), 1):.2f} s per case with {args.jobs} job(s))")
+    print(f"\nwall time {wall:.1f} s ({wall / max(len(specs), 1):.2f} s per case, {jobs})")
     out: dict[str, Any] = {"args": vars(args), "summary": summary, "cases": results}
-    if baseline is not None:
-        out["baseline"] = _compare(baseline, results, summary)
+    if base is not None:
+        out["baseline"] = _compare(base, results, summary)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=1, default=float)
@@ -222,36 +225,52 @@ def main() -> int:
     return 0
 
 
-def _start_baseline(args: argparse.Namespace) -> tuple[subprocess.Popen[bytes], str, str]:
-    """This script, same cases and options, with the package in args.baseline first on the path."""
-    fd, path = tempfile.mkstemp(suffix=".json")
-    os.close(fd)
-    argv = [sys.executable, os.path.abspath(__file__), "--jobs", str(args.jobs), "--seed", str(args.seed), "--warmup", str(args.warmup)]
-    argv += ["--per-effect", str(args.per_effect), "--levels", *map(str, args.levels), "--json", path]
-    argv += ["--effects", *args.effects] if args.effects else []
+def _serve(args: argparse.Namespace) -> int:
+    """Worker of --baseline: one case "effect level seed" per line on stdin, its result as one
+    JSON line on stdout (with whatever package is first on the path)."""
+    for line in sys.stdin:
+        effect, level, seed = line.split()
+        result = run_case(CaseSpec(effect, float(level), int(seed)), args.warmup, args.fit_only, args.known_noise)
+        print(json.dumps(result, default=float), flush=True)
+    return 0
+
+
+def _side_by_side(specs: list[CaseSpec], args: argparse.Namespace) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Every case run by this tree and, at the same time, by the tree in args.baseline (a child
+    process): the pair of runs of a case start together, so both see the same load."""
+    argv = [sys.executable, os.path.abspath(__file__), "--serve", "--warmup", str(args.warmup)]
     argv += ["--known-noise"] if args.known_noise else []
+    argv += ["--fit-only"] if args.fit_only else []
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.path.abspath(args.baseline), os.environ.get("PYTHONPATH", "")])}
-    log = path + ".log"
-    with open(log, "wb") as fh:
-        proc = subprocess.Popen(argv, env=env, stdout=fh, stderr=subprocess.STDOUT)
-    return proc, path, log
+    proc = subprocess.Popen(argv, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert proc.stdin is not None and proc.stdout is not None
+    mine, theirs = [], []
+    try:
+        for spec in specs:
+            proc.stdin.write(f"{spec.effect} {spec.level!r} {spec.seed}\n")
+            proc.stdin.flush()
+            mine.append(run_case(spec, args.warmup, args.fit_only, args.known_noise))
+            line = proc.stdout.readline()
+            if not line:
+                raise RuntimeError(f"the baseline run stopped (exit code {proc.wait()})")
+            theirs.append(json.loads(line))
+    finally:
+        proc.stdin.close()
+        proc.wait()
+    return mine, theirs
 
 
-def _compare(baseline: tuple[subprocess.Popen[bytes], str, str], results: list[dict[str, Any]], summary: dict[str, Any]) -> dict[str, Any]:
-    """Wait for the baseline run and print the two side by side."""
-    proc, path, log = baseline
-    if proc.wait() != 0:
-        with open(log) as fh:
-            print(f"\nthe baseline run failed:\n{fh.read()[-3000:]}")
-        return {"error": f"exit code {proc.returncode}"}
-    with open(path) as fh:
-        base = json.load(fh)
-    b_sum = base["summary"]
-    times = {(x["effect"], x["level"], x["seed"]): x.get("diagnose_seconds") for x in base["cases"]}
-    ratios = [times[k] / x["diagnose_seconds"] for x in results
-              if (k := (x["effect"], x["level"], x["seed"])) in times and times[k] and x.get("diagnose_seconds")]  # fmt: skip
+def _compare(base: list[dict[str, Any]], results: list[dict[str, Any]], summary: dict[str, Any]) -> dict[str, Any]:
+    """The baseline's summary, and the two side by side."""
+    print("\n== the baseline tree")
+    b_sum = summarise(base, False)
+    ratios = [
+        b["diagnose_seconds"] / x["diagnose_seconds"]
+        for b, x in zip(base, results)
+        if b.get("diagnose_seconds") and x.get("diagnose_seconds")
+    ]
     new_t, old_t = summary.get("diagnose_seconds_median", float("nan")), b_sum.get("diagnose_seconds_median", float("nan"))
-    print(f"\n== side by side with the baseline tree {base['args'].get('baseline') or ''}(same cases, run at the same time)")
+    print("\n== side by side (the same cases, each run by both trees at the same time)")
     print(f"diagnose median: baseline {old_t:.3f} s, this tree {new_t:.3f} s: {old_t / new_t:.2f} times faster; "
           f"median of the per-case ratios {np.median(ratios):.2f}")  # fmt: skip
     for level, lv in summary["levels"].items():
@@ -260,9 +279,9 @@ def _compare(baseline: tuple[subprocess.Popen[bytes], str, str], results: list[d
               f"top-3 {_pct(old.get('top3', float('nan')))} / {_pct(lv['top3'])}")  # fmt: skip
     if "none_correct" in summary:
         print(f"'none' correct: baseline {_pct(b_sum.get('none_correct', float('nan')))}, this tree {_pct(summary['none_correct'])}")
-    os.remove(path)
-    os.remove(log)
-    return {"summary": b_sum, "speedup_of_medians": old_t / new_t, "median_case_speedup": float(np.median(ratios)), "cases": base["cases"]}
+    same = sum(b.get("reported") == x.get("reported") for b, x in zip(base, results))
+    print(f"same best_effect in {same} of {len(results)} cases")
+    return {"summary": b_sum, "speedup_of_medians": old_t / new_t, "median_case_speedup": float(np.median(ratios)), "cases": base}
 
 
 if __name__ == "__main__":

@@ -38,7 +38,8 @@ def test_minimize_bounded_counts_and_refuses():
 
 
 @pytest.mark.parametrize(
-    "f, lo, hi", [(lambda x: x**3 - 2.0, 0.0, 5.0), (lambda x: math.tanh(x - 0.7) * 3.0, -1.0, 40.0), (lambda x: math.exp(x) - 5.0, 0.0, 2.0)]
+    "f, lo, hi",
+    [(lambda x: x**3 - 2.0, 0.0, 5.0), (lambda x: math.tanh(x - 0.7) * 3.0, -1.0, 40.0), (lambda x: math.exp(x) - 5.0, 0.0, 2.0)],
 )
 def test_find_root_is_brentq(f, lo, hi):
     ref = optimize.brentq(f, lo, hi, xtol=1e-15 * hi, rtol=1e-14, maxiter=200)
