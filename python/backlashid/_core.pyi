@@ -1,4 +1,5 @@
-# Type stubs of the Rust extension (rust/python/src: models.rs, problem.rs, identify.rs, augmented.rs),
+# Type stubs of the Rust extension (rust/python/src: models.rs, problem.rs, identify.rs, augmented.rs,
+# augmented_problem.rs),
 # checked against the built module by `python -m mypy.stubtest backlashid._core`.
 # Errors raised are those of backlashid.errors: DataError for bad signals, ModelError for bad
 # parameters or divergence, NotIdentifiableError for a rank-deficient regression.
@@ -15,6 +16,7 @@ __all__ = [
     "CascadeModel",
     "SandwichModel",
     "Problem",
+    "AugmentedProblem",
     "lstsq",
     "arx",
     "spectral_radius",
@@ -100,6 +102,33 @@ class Problem:
     def cost(self, theta: _F) -> float: ...  # sum (y - y_sim)^2 over t >= warmup, one simulation
     def feasible(self, theta: _F) -> bool: ...  # every linear block stable
     def bounds(self) -> tuple[list[float], list[float]]: ...  # (lower, upper): c_L, c_R >= 0
+
+# The diagnosis's refit compiled once (rust/core/src/identify/augmented_problem.rs): the nominal
+# cascade (na, nb, degree; no feedthrough) with effects (name, parameters) of the catalogue, theta
+# = the cascade's parameters then the effect parameters named in free (each differentiable: not
+# dead_time's d nor quantization's q), on (u, y) from rest or held at u[0] (held=True) with the
+# backlash memory y_prev; the protocol of the one Levenberg-Marquardt. The defaults shown as ...
+# are effects = free = [] and time_scale = 1000.0.
+@final
+class AugmentedProblem:
+    def __new__(
+        cls, u: _F, y: _F, na: int, nb: int, degree: int, effects: list[tuple[str, list[float]]] = ...,
+        free: list[str] = ..., *, warmup: int | None = None, t0: float = 0.0, time_scale: float = ...,
+        held: bool = False, y_prev: float = 0.0,
+    ) -> Self: ...
+    @property
+    def names(self) -> list[str]: ...
+    @property
+    def samples(self) -> int: ...
+    @property
+    def warmup(self) -> int: ...
+    def simulate(self, theta: _F) -> _F: ...
+    def cost(self, theta: _F) -> float: ...  # sum of squared output errors over t >= warmup
+    def oe_factor(self, theta: _F) -> tuple[_F, float]: ...  # (R_aug, cost), exact sensitivities
+    def gradient(self, theta: _F) -> tuple[_F, float]: ...  # (J^T r, cost)
+    def sensitivity(self, theta: _F) -> tuple[_F, _F]: ...  # (y_sim, dense J, N x p)
+    def feasible(self, theta: _F) -> bool: ...  # linear block stable, free effects in their domain
+    def bounds(self) -> tuple[list[float], list[float]]: ...
 
 def lstsq(a: _F, b: _F, names: list[str]) -> _LS: ...
 def arx(u: _F, y: _F, na: int, nb: int, delay: int, warmup: int) -> _LS: ...

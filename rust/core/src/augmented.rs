@@ -22,7 +22,7 @@ pub const TIME_SCALE: f64 = 1000.0;
 
 /// Horner's rule for sum_{i>=1} m_i xi^i (eq 4-5).
 #[inline(always)]
-fn branch(m: &[f64], xi: f64) -> f64 {
+pub(crate) fn branch(m: &[f64], xi: f64) -> f64 {
     let mut acc = 0.0;
     for c in m.iter().rev() {
         acc = acc * xi + c;
@@ -129,14 +129,19 @@ pub fn simulate_augmented(
             out = e.output(out, &s);
         }
         if !(out.is_finite() && xt.is_finite()) {
-            return Err(Error::Model(format!(
-                "the augmented model diverged at sample {t} (x = {xt}, y = {out}): the linear \
-                 block or the friction feedback is unstable; reduce F_v or check the poles"
-            )));
+            return Err(diverged(t, xt, out));
         }
         y[t] = out;
     }
     Ok(y)
+}
+
+/// The simulation's refusal where x(t) or y(t) is not finite.
+pub(crate) fn diverged(t: usize, xt: f64, out: f64) -> Error {
+    Error::Model(format!(
+        "the augmented model diverged at sample {t} (x = {xt}, y = {out}): the linear block \
+         or the friction feedback is unstable; reduce F_v or check the poles"
+    ))
 }
 
 #[cfg(test)]

@@ -33,8 +33,8 @@ pub use effects::{AnyEffect, Effect};
 pub use error::{Error, Result};
 pub use identify::{
     cascade_oe_factor, cascade_oe_gradient, sandwich_oe_factor, sandwich_oe_gradient, solve_factor,
-    ArxRegression, CascadeRegression, Iteration, OeGradient, Problem, SandwichRegression,
-    Structure,
+    ArxRegression, AugmentedProblem, CascadeRegression, Iteration, OeGradient, Problem,
+    RecordStart, SandwichRegression, Structure,
 };
 pub use linalg::{fold_parallel, LeastSquares, TriangularFactor};
 pub use model::{

@@ -4,6 +4,7 @@
 //! numerics live here.
 
 mod augmented;
+mod augmented_problem;
 mod convert;
 mod errors;
 mod identify;
@@ -23,6 +24,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<models::PyCascadeModel>()?;
     m.add_class::<models::PySandwichModel>()?;
     m.add_class::<problem::PyProblem>()?;
+    m.add_class::<augmented_problem::PyAugmentedProblem>()?;
     identify::register(m)?;
     m.add_function(wrap_pyfunction!(augmented::simulate_augmented, m)?)?;
     Ok(())

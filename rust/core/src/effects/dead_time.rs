@@ -1,6 +1,6 @@
 //! Dead time: the linear block sees u(t - d), d extra samples (rest before the record).
 
-use super::{arity, Effect, Sample, Stage};
+use super::{arity, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
 
 /// Name in the catalogue.
@@ -38,5 +38,31 @@ impl Effect for DeadTime {
         } else {
             0.0
         }
+    }
+    fn parameters(&self) -> Vec<f64> {
+        vec![self.delay as f64]
+    }
+    fn parameter_names(&self) -> Vec<String> {
+        vec!["d".into()]
+    }
+    /// d is a whole number of samples: searched outside the refit.
+    fn differentiable(&self, _k: usize) -> bool {
+        false
+    }
+    fn bounds(&self, _k: usize) -> (f64, f64) {
+        (0.0, f64::INFINITY)
+    }
+    #[inline]
+    fn drive_tangent(
+        &mut self,
+        v: f64,
+        dv: &mut [f64],
+        s: &Sample,
+        _d: &Tangent,
+        _cols: &Columns,
+    ) -> f64 {
+        // the source of the drive: the measured input, no parameter in it
+        dv.fill(0.0);
+        self.drive(v, s)
     }
 }

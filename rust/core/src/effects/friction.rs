@@ -1,7 +1,7 @@
 //! Friction: u_eff(t) = u(t) - F_c sign(v(t)) - F_v v(t), v(t) = x(t) - x(t-1), sign(0) = 0
 //! (x(t) depends on u_eff up to t-1 only, so this is causal).
 
-use super::{arity, finite, Effect, Sample, Stage};
+use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::Result;
 
 /// Name in the catalogue.
@@ -51,5 +51,37 @@ impl Effect for Friction {
         } else {
             v
         }
+    }
+    fn parameters(&self) -> Vec<f64> {
+        vec![self.coulomb, self.viscous]
+    }
+    fn parameter_names(&self) -> Vec<String> {
+        vec!["F_c".into(), "F_v".into()]
+    }
+    /// Friction dissipates: F_c, F_v >= 0.
+    fn bounds(&self, _k: usize) -> (f64, f64) {
+        (0.0, f64::INFINITY)
+    }
+    /// d u_eff = dv - sign(v) dF_c - v dF_v - F_v (dx(t) - dx(t-1)); sign is flat (its
+    /// derivative 0, also at v = 0 where it is 0). At F_c = F_v = 0 the derivatives in F_c
+    /// and F_v are those of the limit.
+    #[inline]
+    fn drive_tangent(
+        &mut self,
+        v: f64,
+        dv: &mut [f64],
+        s: &Sample,
+        d: &Tangent,
+        cols: &Columns,
+    ) -> f64 {
+        let vel = s.x - s.x_prev;
+        if self.viscous != 0.0 {
+            for ((o, a), b) in dv.iter_mut().zip(d.dx).zip(d.dx_prev) {
+                *o -= self.viscous * (a - b);
+            }
+        }
+        add_at(dv, cols[0], -sign(vel));
+        add_at(dv, cols[1], -vel);
+        self.drive(v, s)
     }
 }

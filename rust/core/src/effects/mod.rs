@@ -6,6 +6,13 @@
 //! The registry below is the one place that lists them: adding an effect is a new module here
 //! and its name in the `registry!` list (and its Python module in
 //! `backlashid.diagnosis.effects`).
+//!
+//! For the output-error refit (`crate::identify::augmented_problem`) every effect also has
+//! its parameters' names, domain bounds and tangent hooks: each hook returns the value of
+//! its value hook and carries d/dtheta of that value (a vector over theta, `p` wide) along,
+//! with the one-sided derivative that the value takes at a non-smooth point (sign at 0, a
+//! clip's edge, a play's corner). A parameter may be marked not differentiable (an integer
+//! dead time, the quantiser's step): it is held in the refit and searched outside it.
 
 use std::fmt::Debug;
 
@@ -39,6 +46,30 @@ pub struct Sample<'a> {
     pub tau: f64,
 }
 
+/// What a tangent hook sees of the derivatives at sample t, each d/dtheta over the refit's
+/// parameter vector theta (`p` values).
+#[derive(Debug, Clone, Copy)]
+pub struct Tangent<'a> {
+    /// d x(t) / d theta.
+    pub dx: &'a [f64],
+    /// d x(t-1) / d theta.
+    pub dx_prev: &'a [f64],
+    /// d f(t) / d theta (Output stage only; empty before).
+    pub df: &'a [f64],
+}
+
+/// The columns in theta of an effect's parameters (in the catalogue's order); None for a
+/// parameter held in the refit.
+pub type Columns = [Option<usize>];
+
+/// `d[col] += v` for a parameter in theta (nothing for a held one).
+#[inline(always)]
+pub(crate) fn add_at(d: &mut [f64], col: Option<usize>, v: f64) {
+    if let Some(c) = col {
+        d[c] += v;
+    }
+}
+
 /// One effect of the catalogue.
 pub trait Effect: Clone + Debug + Send + Sync {
     /// The effect's name, as in the Python catalogue.
@@ -64,6 +95,65 @@ pub trait Effect: Clone + Debug + Send + Sync {
     /// Output stage: the output at t, given the value `out` so far.
     fn output(&mut self, out: f64, _s: &Sample) -> f64 {
         out
+    }
+
+    /// Its parameters, in the catalogue's order (what `from_parameters` takes).
+    fn parameters(&self) -> Vec<f64>;
+    /// Their names, as in the Python catalogue.
+    fn parameter_names(&self) -> Vec<String>;
+    /// Whether parameter `k` has a derivative (false: held in the refit, searched outside).
+    fn differentiable(&self, _k: usize) -> bool {
+        true
+    }
+    /// The box of parameter `k`'s domain, (lower, upper), +-inf where free.
+    fn bounds(&self, _k: usize) -> (f64, f64) {
+        (f64::NEG_INFINITY, f64::INFINITY)
+    }
+    /// Every parameter where the refit may take it: `check` and any stricter domain of the
+    /// derivatives (an open interval where the box of `bounds` is closed).
+    fn feasible(&self) -> bool {
+        self.check().is_ok()
+    }
+    /// `start` for a simulation with tangents over `p = dx0.len()` parameters: the memory
+    /// at rest on x(0) = `x0` (d x(0) / d theta = `dx0`) and y(0) = `y0` (a constant);
+    /// `cols` are the columns of its own parameters.
+    fn start_tangent(&self, x0: f64, y0: f64, _dx0: &[f64], _cols: &Columns) -> Self {
+        self.start(x0, y0)
+    }
+    /// `drive` with the tangent `dv` of the value carried along (the default leaves it: an
+    /// effect of another stage).
+    fn drive_tangent(
+        &mut self,
+        v: f64,
+        _dv: &mut [f64],
+        s: &Sample,
+        _d: &Tangent,
+        _cols: &Columns,
+    ) -> f64 {
+        self.drive(v, s)
+    }
+    /// `widths` with the tangents (d c_L(t), d c_R(t)) carried along; returns the widths
+    /// (the nominal ones where the effect leaves them).
+    fn widths_tangent(
+        &self,
+        c: (f64, f64),
+        _dc: (&mut [f64], &mut [f64]),
+        s: &Sample,
+        _cols: &Columns,
+    ) -> (f64, f64) {
+        self.widths(c.0, c.1, s).unwrap_or(c)
+    }
+    /// `output` with the tangent `dout` of the value carried along (the default leaves it:
+    /// an effect of another stage).
+    fn output_tangent(
+        &mut self,
+        out: f64,
+        _dout: &mut [f64],
+        s: &Sample,
+        _d: &Tangent,
+        _cols: &Columns,
+    ) -> f64 {
+        self.output(out, s)
     }
 }
 
@@ -155,6 +245,53 @@ macro_rules! registry {
             #[inline(always)]
             pub fn output(&mut self, out: f64, s: &Sample) -> f64 {
                 match self { $(AnyEffect::$t(e) => e.output(out, s)),* }
+            }
+            /// [`Effect::parameters`].
+            pub fn parameters(&self) -> Vec<f64> {
+                match self { $(AnyEffect::$t(e) => e.parameters()),* }
+            }
+            /// [`Effect::parameter_names`].
+            pub fn parameter_names(&self) -> Vec<String> {
+                match self { $(AnyEffect::$t(e) => e.parameter_names()),* }
+            }
+            /// [`Effect::differentiable`].
+            pub fn differentiable(&self, k: usize) -> bool {
+                match self { $(AnyEffect::$t(e) => e.differentiable(k)),* }
+            }
+            /// [`Effect::bounds`].
+            pub fn bounds(&self, k: usize) -> (f64, f64) {
+                match self { $(AnyEffect::$t(e) => e.bounds(k)),* }
+            }
+            /// [`Effect::feasible`].
+            pub fn feasible(&self) -> bool {
+                match self { $(AnyEffect::$t(e) => e.feasible()),* }
+            }
+            /// [`Effect::start_tangent`].
+            pub fn start_tangent(&self, x0: f64, y0: f64, dx0: &[f64], cols: &Columns) -> AnyEffect {
+                match self {
+                    $(AnyEffect::$t(e) => AnyEffect::$t(e.start_tangent(x0, y0, dx0, cols))),*
+                }
+            }
+            /// [`Effect::drive_tangent`].
+            #[inline(always)]
+            pub fn drive_tangent(
+                &mut self, v: f64, dv: &mut [f64], s: &Sample, d: &Tangent, cols: &Columns,
+            ) -> f64 {
+                match self { $(AnyEffect::$t(e) => e.drive_tangent(v, dv, s, d, cols)),* }
+            }
+            /// [`Effect::widths_tangent`].
+            #[inline(always)]
+            pub fn widths_tangent(
+                &self, c: (f64, f64), dc: (&mut [f64], &mut [f64]), s: &Sample, cols: &Columns,
+            ) -> (f64, f64) {
+                match self { $(AnyEffect::$t(e) => e.widths_tangent(c, dc, s, cols)),* }
+            }
+            /// [`Effect::output_tangent`].
+            #[inline(always)]
+            pub fn output_tangent(
+                &mut self, out: f64, dout: &mut [f64], s: &Sample, d: &Tangent, cols: &Columns,
+            ) -> f64 {
+                match self { $(AnyEffect::$t(e) => e.output_tangent(out, dout, s, d, cols)),* }
             }
         }
 

@@ -1,6 +1,6 @@
 //! Output offset and drift: y += o_0 + o_1 tau.
 
-use super::{arity, finite, Effect, Sample, Stage};
+use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::Result;
 
 /// Name in the catalogue.
@@ -33,5 +33,24 @@ impl Effect for OutputOffset {
     #[inline]
     fn output(&mut self, out: f64, s: &Sample) -> f64 {
         out + (self.offset + self.rate * s.tau)
+    }
+    fn parameters(&self) -> Vec<f64> {
+        vec![self.offset, self.rate]
+    }
+    fn parameter_names(&self) -> Vec<String> {
+        vec!["o_0".into(), "o_1".into()]
+    }
+    #[inline]
+    fn output_tangent(
+        &mut self,
+        out: f64,
+        dout: &mut [f64],
+        s: &Sample,
+        _d: &Tangent,
+        cols: &Columns,
+    ) -> f64 {
+        add_at(dout, cols[0], 1.0);
+        add_at(dout, cols[1], s.tau);
+        self.output(out, s)
     }
 }

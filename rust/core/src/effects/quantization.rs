@@ -1,6 +1,6 @@
 //! Quantiser: y := q round(y / q) (q = 0: none), after everything else.
 
-use super::{arity, Effect, Sample, Stage};
+use super::{arity, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
 
 /// Name in the catalogue.
@@ -38,5 +38,34 @@ impl Effect for Quantization {
         } else {
             out
         }
+    }
+    fn parameters(&self) -> Vec<f64> {
+        vec![self.quantum]
+    }
+    fn parameter_names(&self) -> Vec<String> {
+        vec!["q".into()]
+    }
+    /// The output is piecewise constant in q: searched outside the refit.
+    fn differentiable(&self, _k: usize) -> bool {
+        false
+    }
+    fn bounds(&self, _k: usize) -> (f64, f64) {
+        (0.0, f64::INFINITY)
+    }
+    /// q > 0: round is piecewise constant, so the output's derivative in every parameter
+    /// is 0 (almost everywhere; at a step the value takes one side, so does the derivative).
+    #[inline]
+    fn output_tangent(
+        &mut self,
+        out: f64,
+        dout: &mut [f64],
+        s: &Sample,
+        _d: &Tangent,
+        _cols: &Columns,
+    ) -> f64 {
+        if self.quantum > 0.0 {
+            dout.fill(0.0);
+        }
+        self.output(out, s)
     }
 }

@@ -1,6 +1,6 @@
 //! Saturation: the drive input clipped to [lo, hi] before the linear block.
 
-use super::{arity, Effect, Sample, Stage};
+use super::{add_at, arity, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
 
 /// Name in the catalogue.
@@ -37,6 +37,35 @@ impl Effect for Saturation {
         if v < self.lo {
             self.lo
         } else if v > self.hi {
+            self.hi
+        } else {
+            v
+        }
+    }
+    fn parameters(&self) -> Vec<f64> {
+        vec![self.lo, self.hi]
+    }
+    fn parameter_names(&self) -> Vec<String> {
+        vec!["lo".into(), "hi".into()]
+    }
+    /// Clipped: the bound's column; at an edge (v = lo or hi) the value is v's, so is the
+    /// derivative.
+    #[inline]
+    fn drive_tangent(
+        &mut self,
+        v: f64,
+        dv: &mut [f64],
+        _s: &Sample,
+        _d: &Tangent,
+        cols: &Columns,
+    ) -> f64 {
+        if v < self.lo {
+            dv.fill(0.0);
+            add_at(dv, cols[0], 1.0);
+            self.lo
+        } else if v > self.hi {
+            dv.fill(0.0);
+            add_at(dv, cols[1], 1.0);
             self.hi
         } else {
             v

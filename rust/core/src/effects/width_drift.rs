@@ -1,6 +1,6 @@
 //! Width drift: c_L(t) = c_L + dc_L tau, c_R(t) = c_R + dc_R tau, tau = (t0 + t) / time_scale.
 
-use super::{arity, finite, Effect, Sample, Stage};
+use super::{add_at, arity, finite, Columns, Effect, Sample, Stage};
 use crate::error::Result;
 
 /// Name in the catalogue.
@@ -37,5 +37,24 @@ impl Effect for WidthDrift {
         } else {
             None
         }
+    }
+    fn parameters(&self) -> Vec<f64> {
+        vec![self.left, self.right]
+    }
+    fn parameter_names(&self) -> Vec<String> {
+        vec!["dc_L".into(), "dc_R".into()]
+    }
+    /// d c_L(t) += tau d dc_L, d c_R(t) += tau d dc_R (at zero rates too).
+    #[inline]
+    fn widths_tangent(
+        &self,
+        c: (f64, f64),
+        dc: (&mut [f64], &mut [f64]),
+        s: &Sample,
+        cols: &Columns,
+    ) -> (f64, f64) {
+        add_at(dc.0, cols[0], s.tau);
+        add_at(dc.1, cols[1], s.tau);
+        self.widths(c.0, c.1, s).unwrap_or(c)
     }
 }

@@ -4,12 +4,15 @@
 //! output-error refinement the exact sensitivities, their factored Gauss-Newton problem and
 //! the gradient.
 
+pub mod augmented_problem;
+mod augmented_sensitivity;
 pub mod gradient;
 pub mod problem;
 pub mod regressor;
 mod rows;
 pub mod sensitivity;
 
+pub use augmented_problem::{AugmentedProblem, RecordStart};
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
 pub use problem::{Iteration, Problem, Structure};
 pub use regressor::{

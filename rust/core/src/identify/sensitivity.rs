@@ -102,7 +102,7 @@ pub fn sandwich_sensitivity(
 
 /// Which case of eq (1) a sample took.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Move {
+pub(crate) enum Move {
     Left,
     Right,
     Hold,
@@ -254,7 +254,7 @@ fn push_lag(lags: &mut [f64], newest: f64) {
 }
 
 /// The factor and cost of `fold_stream`, refused when the Jacobian or residual overflowed.
-fn finish(folded: Result<(TriangularFactor, f64)>) -> Result<(TriangularFactor, f64)> {
+pub(crate) fn finish(folded: Result<(TriangularFactor, f64)>) -> Result<(TriangularFactor, f64)> {
     let (factor, cost) = folded?;
     if !cost.is_finite() || factor.r_aug().iter().any(|v| !v.is_finite()) {
         return Err(overflowed());

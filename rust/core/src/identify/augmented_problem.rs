@@ -1,0 +1,848 @@
+//! The diagnosis's refit compiled once: the nominal cascade's structure, effects of the
+//! catalogue ([`crate::effects`]) with the names of their parameters that the refit frees,
+//! and the record (u, y, warm-up, its time t0 and time scale, the start: rest or the input
+//! held at u(0), and the backlash memory y(0)), checked on construction. theta is the
+//! cascade's parameter vector (`Structure`'s layout and names) followed by the free effect
+//! parameters in the order given; the other effect parameters (an integer dead time, a
+//! quantiser's step, any not freed) keep their given values. The output-error factor and
+//! gradient carry the exact sensitivities of `augmented_sensitivity`.
+
+use crate::augmented::simulate_augmented;
+use crate::effects::{from_parameters, AnyEffect};
+use crate::error::{Error, Result};
+use crate::identify::augmented_sensitivity::{
+    augmented_oe_factor, augmented_oe_gradient, augmented_sensitivity, Start,
+};
+use crate::identify::gradient::OeGradient;
+use crate::identify::problem::Structure;
+use crate::identify::sensitivity::{check_pair, oe_threads, Sensitivity};
+use crate::linalg::TriangularFactor;
+use crate::model::backlash::check_memory;
+use crate::model::cascade::{CascadeModel, CascadeState};
+use crate::model::linear::{LinearBlock, LinearState};
+
+/// Where the record starts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RecordStart {
+    /// The linear block at its equilibrium with u(0) (the input held before the record)
+    /// instead of at rest.
+    pub held: bool,
+    /// The backlash memory y(0).
+    pub y_prev: f64,
+    /// The time of u(0) in the continuous record, in samples (drifts only).
+    pub t0: f64,
+    /// Samples per time unit of the drifts.
+    pub time_scale: f64,
+}
+
+/// A refit of the nominal cascade with effects, compiled once.
+#[derive(Debug, Clone)]
+pub struct AugmentedProblem {
+    structure: Structure,
+    /// The effects with their given parameters (the held ones' values).
+    effects: Vec<AnyEffect>,
+    /// (effect, parameter) of each free name, in theta's order after the nominal part.
+    free: Vec<(usize, usize)>,
+    names: Vec<String>,
+    u: Vec<f64>,
+    y: Vec<f64>,
+    warmup: usize,
+    start: RecordStart,
+}
+
+/// The model, effects and their columns of one theta.
+struct At {
+    model: CascadeModel,
+    effects: Vec<(AnyEffect, Vec<Option<usize>>)>,
+}
+
+impl AugmentedProblem {
+    /// `structure` a cascade without feedthrough; `effects` (name, parameters) pairs of the
+    /// catalogue, each name at most once; `free` names of their parameters, each once and
+    /// differentiable; u, y non-empty, finite, one length; 0 <= warmup < len(u).
+    pub fn new(
+        structure: Structure,
+        effects: &[(String, Vec<f64>)],
+        free: &[String],
+        u: Vec<f64>,
+        y: Vec<f64>,
+        warmup: usize,
+        start: RecordStart,
+    ) -> Result<Self> {
+        if structure.is_sandwich() || structure.feedthrough {
+            return Err(Error::Data(
+                "the augmented cascade takes a cascade structure without feedthrough (the \
+                 diagnosis delays the record instead)"
+                    .into(),
+            ));
+        }
+        check_pair(&u, &y, "y")?;
+        if warmup >= u.len() {
+            return Err(Error::Data(format!(
+                "warmup = {warmup}: give a whole number of samples, 0 <= warmup < {} (the record \
+                 length)",
+                u.len()
+            )));
+        }
+        if !(start.time_scale.is_finite() && start.time_scale > 0.0) {
+            return Err(Error::Data(format!(
+                "time_scale = {}: give a positive number of samples per time unit",
+                start.time_scale
+            )));
+        }
+        if !start.t0.is_finite() {
+            return Err(Error::Data(format!(
+                "t0 = {}: give the record's start time in samples",
+                start.t0
+            )));
+        }
+        check_memory(start.y_prev)?;
+        let mut built: Vec<AnyEffect> = Vec::with_capacity(effects.len());
+        for (name, p) in effects {
+            let e = from_parameters(name, p)?;
+            if built.iter().any(|b| b.name() == e.name()) {
+                return Err(Error::Model(format!(
+                    "effect {name:?} given twice: give each effect once"
+                )));
+            }
+            built.push(e);
+        }
+        let mut names = structure.names();
+        let mut cols = Vec::with_capacity(free.len());
+        for want in free {
+            let hits: Vec<(usize, usize)> = built
+                .iter()
+                .enumerate()
+                .flat_map(|(i, e)| {
+                    e.parameter_names()
+                        .into_iter()
+                        .enumerate()
+                        .filter(|(_, n)| n == want)
+                        .map(move |(k, _)| (i, k))
+                })
+                .collect();
+            let Some(&(i, k)) = hits.first() else {
+                let known: Vec<String> = built.iter().flat_map(|e| e.parameter_names()).collect();
+                return Err(Error::Model(format!(
+                    "free parameter {want:?} is not a parameter of the effects given (they have \
+                     {})",
+                    known.join(", ")
+                )));
+            };
+            if cols.contains(&(i, k)) {
+                return Err(Error::Model(format!(
+                    "free parameter {want:?} given twice: name each once"
+                )));
+            }
+            if !built[i].differentiable(k) {
+                return Err(Error::Model(format!(
+                    "{}'s {want} has no derivative (a whole number of samples or a quantiser's \
+                     step): hold it and search it outside the refit, one problem per value",
+                    built[i].name()
+                )));
+            }
+            cols.push((i, k));
+            names.push(want.clone());
+        }
+        Ok(Self {
+            structure,
+            effects: built,
+            free: cols,
+            names,
+            u,
+            y,
+            warmup,
+            start,
+        })
+    }
+
+    pub fn structure(&self) -> &Structure {
+        &self.structure
+    }
+
+    /// The parameter names: the cascade's, then the free effect parameters'.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    pub fn u(&self) -> &[f64] {
+        &self.u
+    }
+
+    pub fn y(&self) -> &[f64] {
+        &self.y
+    }
+
+    pub fn warmup(&self) -> usize {
+        self.warmup
+    }
+
+    pub fn start(&self) -> &RecordStart {
+        &self.start
+    }
+
+    /// The cascade and the effects at theta (each effect checked in its domain).
+    fn at(&self, theta: &[f64]) -> Result<At> {
+        let p0 = self.structure.size();
+        if theta.len() != self.names.len() {
+            return Err(Error::Data(format!(
+                "theta has {} parameters but the problem has {}: give one value per name",
+                theta.len(),
+                self.names.len()
+            )));
+        }
+        let blocks = self.structure.unpack(&theta[..p0])?;
+        let mut params: Vec<Vec<f64>> = self.effects.iter().map(|e| e.parameters()).collect();
+        let mut cols: Vec<Vec<Option<usize>>> =
+            params.iter().map(|p| vec![None; p.len()]).collect();
+        for (m, &(i, k)) in self.free.iter().enumerate() {
+            params[i][k] = theta[p0 + m];
+            cols[i][k] = Some(p0 + m);
+        }
+        let effects = self
+            .effects
+            .iter()
+            .zip(params)
+            .zip(cols)
+            .map(|((e, p), c)| Ok((from_parameters(e.name(), &p)?, c)))
+            .collect::<Result<_>>()?;
+        Ok(At {
+            model: CascadeModel::new(blocks.linear, blocks.backlash),
+            effects,
+        })
+    }
+
+    /// The state before the record and d x_past / d theta (nb rows of p): rest, or the
+    /// input held at u(0) with x at its equilibrium sum a / (1 + sum b) u(0).
+    fn state(&self, linear: &LinearBlock) -> Result<(CascadeState, Vec<f64>)> {
+        let (na, nb, p) = (linear.na(), linear.nb(), self.names.len());
+        let mut dx_past = vec![0.0; nb * p];
+        let linear_state = if self.start.held {
+            let u0 = self.u[0];
+            let den = 1.0 + linear.b().iter().sum::<f64>();
+            if den == 0.0 {
+                return Err(Error::Model(format!(
+                    "the linear block {:?}, {:?} has a pole at z = 1, so no equilibrium holds it \
+                     at a constant input: start from rest (initial_state='rest')",
+                    linear.a(),
+                    linear.b()
+                )));
+            }
+            let x_eq = linear.a().iter().sum::<f64>() / den * u0;
+            for row in dx_past.chunks_exact_mut(p) {
+                for v in &mut row[..na] {
+                    *v = u0 / den;
+                }
+                for v in &mut row[na..na + nb] {
+                    *v = -x_eq / den;
+                }
+            }
+            LinearState {
+                u_past: vec![u0; na],
+                x_past: vec![x_eq; nb],
+            }
+        } else {
+            linear.rest_state()
+        };
+        Ok((
+            CascadeState {
+                linear: linear_state,
+                y_prev: self.start.y_prev,
+            },
+            dx_past,
+        ))
+    }
+
+    /// The free-run output at theta (`simulate_augmented`).
+    pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
+        let at = self.at(theta)?;
+        let (state, _) = self.state(&at.model.linear)?;
+        let effects: Vec<AnyEffect> = at.effects.into_iter().map(|(e, _)| e).collect();
+        let s = &self.start;
+        simulate_augmented(&at.model, &effects, &self.u, s.t0, s.time_scale, &state)
+    }
+
+    /// sum (y - y_sim)^2 over t >= warmup.
+    pub fn cost(&self, theta: &[f64]) -> Result<f64> {
+        let sim = self.simulate(theta)?;
+        let cost: f64 = self.y[self.warmup..]
+            .iter()
+            .zip(&sim[self.warmup..])
+            .map(|(y, s)| (y - s) * (y - s))
+            .sum();
+        if !cost.is_finite() {
+            return Err(Error::Model(
+                "the output error overflowed: the simulated output is far from the measured one \
+                 (an unstable or badly scaled estimate)"
+                    .into(),
+            ));
+        }
+        Ok(cost)
+    }
+
+    /// The output and its dense Jacobian d y_sim / d theta (N x p; tests and small records).
+    pub fn sensitivity(&self, theta: &[f64]) -> Result<Sensitivity> {
+        let at = self.at(theta)?;
+        let (state, dx_past) = self.state(&at.model.linear)?;
+        let start = Start {
+            state: &state,
+            dx_past: &dx_past,
+        };
+        let s = &self.start;
+        augmented_sensitivity(
+            &at.model,
+            &at.effects,
+            &self.u,
+            s.t0,
+            s.time_scale,
+            &start,
+            self.names.len(),
+        )
+    }
+
+    /// R_aug of [J | y - y_sim] over t >= warmup and the cost, streamed.
+    pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
+        self.oe_factor_threads(theta, oe_threads(self.u.len()))
+    }
+
+    /// `oe_factor` with the folding on a second thread when `threads` >= 2 (the same bits).
+    pub fn oe_factor_threads(
+        &self,
+        theta: &[f64],
+        threads: usize,
+    ) -> Result<(TriangularFactor, f64)> {
+        let at = self.at(theta)?;
+        let (state, dx_past) = self.state(&at.model.linear)?;
+        let start = Start {
+            state: &state,
+            dx_past: &dx_past,
+        };
+        let s = &self.start;
+        augmented_oe_factor(
+            &at.model,
+            &at.effects,
+            &self.u,
+            &self.y,
+            self.warmup,
+            s.t0,
+            s.time_scale,
+            &start,
+            self.names.len(),
+            threads,
+        )
+    }
+
+    /// g = J^T (y - y_sim) over t >= warmup and the cost, one pass without the factor.
+    pub fn gradient(&self, theta: &[f64]) -> Result<OeGradient> {
+        let at = self.at(theta)?;
+        let (state, dx_past) = self.state(&at.model.linear)?;
+        let start = Start {
+            state: &state,
+            dx_past: &dx_past,
+        };
+        let s = &self.start;
+        augmented_oe_gradient(
+            &at.model,
+            &at.effects,
+            &self.u,
+            &self.y,
+            self.warmup,
+            s.t0,
+            s.time_scale,
+            &start,
+            self.names.len(),
+        )
+    }
+
+    /// The refit's guard: theta of the right length, the linear block stable and every
+    /// effect with a free parameter inside its domain (`Effect::feasible`).
+    pub fn feasible(&self, theta: &[f64]) -> bool {
+        match self.at(theta) {
+            Ok(at) => {
+                at.model.linear.is_stable()
+                    && at
+                        .effects
+                        .iter()
+                        .all(|(e, c)| c.iter().all(Option::is_none) || e.feasible())
+            }
+            Err(_) => false,
+        }
+    }
+
+    /// (lower, upper) per parameter: +-inf for the cascade's, the effects' domain boxes
+    /// (`Effect::bounds`) for the free ones.
+    pub fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
+        let p0 = self.structure.size();
+        let mut lower = vec![f64::NEG_INFINITY; p0];
+        let mut upper = vec![f64::INFINITY; p0];
+        for &(i, k) in &self.free {
+            let (lo, hi) = self.effects[i].bounds(k);
+            lower.push(lo);
+            upper.push(hi);
+        }
+        (lower, upper)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identify::sensitivity::cascade_sensitivity;
+    use crate::test_params::{input, lcg_unit, noisy, smooth_input};
+
+    /// Example 1's orders (na = nb = 2, cubic branches) at an estimate off the true values.
+    const THETA: [f64; 11] = [
+        0.65, 0.55, -0.15, 0.3, 0.55, -0.25, 0.28, 1.45, 0.45, 0.35, 0.25,
+    ];
+
+    fn structure() -> Structure {
+        Structure::new(2, 2, 3, 0, 0, false, false).unwrap()
+    }
+
+    /// A slow triangle of `period` samples between -a and a.
+    fn triangle(n: usize, period: usize, a: f64) -> Vec<f64> {
+        (0..n)
+            .map(|k| {
+                let ph = (k % period) as f64 / period as f64;
+                a * (if ph < 0.5 {
+                    4.0 * ph - 1.0
+                } else {
+                    3.0 - 4.0 * ph
+                })
+            })
+            .collect()
+    }
+
+    /// The test records: a rich random input, a smooth two-tone one, slow triangles.
+    fn inputs(n: usize) -> Vec<(&'static str, Vec<f64>)> {
+        vec![
+            ("random", input(n).iter().map(|v| 1.5 * v).collect()),
+            ("smooth", smooth_input(n).iter().map(|v| 1.4 * v).collect()),
+            ("triangle", triangle(n, 173, 1.6)),
+            ("slow triangle + noise", noisy(&triangle(n, 401, 1.3), 9)),
+        ]
+    }
+
+    fn start(held: bool) -> RecordStart {
+        RecordStart {
+            held,
+            y_prev: if held { 0.3 } else { 0.0 },
+            t0: if held { 700.0 } else { 0.0 },
+            time_scale: 250.0,
+        }
+    }
+
+    /// The problem of `effects` with `free` parameters on `u` (y: noise). A held start
+    /// keeps x(0) = x(1) = x_eq (x sees u_eff up to t-1 only), so a backlash that moves at
+    /// t = 0 meets L(x(1)) = y(0) at t = 1, a tie of eq (1) where the one-sided derivatives
+    /// differ and differences straddle it: held, y(0) is taken inside the dead band at
+    /// x_eq. Held with friction, u(0) = 0: x(0) = sum a u(0) - sum b x_eq equals x_eq only
+    /// to rounding, and sign(x(0) - x_eq) of that residue jumps between +-1 with the last
+    /// bit of theta (a discontinuity of the simulation itself); at u(0) = 0 both are 0.
+    fn problem(
+        effects: &[(&str, &[f64])],
+        free: &[&str],
+        u: &[f64],
+        mut s: RecordStart,
+    ) -> AugmentedProblem {
+        let mut u = u.to_vec();
+        if s.held && effects.iter().any(|(n, _)| *n == "friction") {
+            u[0] = 0.0;
+        }
+        if s.held {
+            let b = structure().unpack(&THETA).unwrap();
+            let (a_sum, b_sum): (f64, f64) = (b.linear.a().iter().sum(), b.linear.b().iter().sum());
+            let x_eq = a_sum / (1.0 + b_sum) * u[0];
+            s.y_prev = 0.5 * (b.backlash.left().value(x_eq) + b.backlash.right().value(x_eq));
+        }
+        let effects: Vec<(String, Vec<f64>)> = effects
+            .iter()
+            .map(|(n, p)| (n.to_string(), p.to_vec()))
+            .collect();
+        let free: Vec<String> = free.iter().map(|n| n.to_string()).collect();
+        let y = noisy(&vec![0.0; u.len()], 4);
+        AugmentedProblem::new(structure(), &effects, &free, u, y, 5, s).unwrap()
+    }
+
+    /// theta of a problem: THETA then the free parameters' given values.
+    fn theta(p: &AugmentedProblem) -> Vec<f64> {
+        let mut th = THETA.to_vec();
+        for &(i, k) in &p.free {
+            th.push(p.effects[i].parameters()[k]);
+        }
+        th
+    }
+
+    /// Central differences of `simulate` against the exact Jacobian, column by column:
+    /// the error's norm below `tol` times the column's (or the differences' scale). A
+    /// switch of the backlash (or a clip, a play) that falls within +-h of a sample bends
+    /// the differences there, so a column passes at the first of three step sizes that
+    /// agrees (an error in the Jacobian fails at all three). Returns the worst relative
+    /// error.
+    fn check_jacobian(p: &AugmentedProblem, th: &[f64], tol: f64, what: &str) -> f64 {
+        let sens = p.sensitivity(th).unwrap();
+        let sim = p.simulate(th).unwrap();
+        assert_eq!(
+            sens.output, sim,
+            "{what}: the tangent pass's values are the simulation's"
+        );
+        let cols = sens.cols;
+        let n = sim.len();
+        let mut worst: f64 = 0.0;
+        for j in 0..cols {
+            let exact: Vec<f64> = (0..n).map(|t| sens.jacobian[t * cols + j]).collect();
+            let norm = exact.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let mut tries = Vec::new();
+            for scale in [1.0, 1.0 / 7.0, 3.1] {
+                let h = scale * 1e-6 * th[j].abs().max(0.1);
+                let (mut plus, mut minus) = (th.to_vec(), th.to_vec());
+                plus[j] += h;
+                minus[j] -= h;
+                let (sp, sm) = (p.simulate(&plus).unwrap(), p.simulate(&minus).unwrap());
+                let fd: Vec<f64> = (0..n).map(|t| (sp[t] - sm[t]) / (2.0 * h)).collect();
+                let fd_norm = fd.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let err = exact
+                    .iter()
+                    .zip(&fd)
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum::<f64>()
+                    .sqrt();
+                let rel = err / norm.max(fd_norm).max(1e-3);
+                tries.push((rel, err, fd_norm));
+                if rel < tol {
+                    break;
+                }
+            }
+            let (rel, err, fd_norm) = *tries.last().unwrap();
+            assert!(
+                rel < tol,
+                "{what}: column {} ({}): |J - FD| = {err:e}, |J| = {norm:e}, |FD| = {fd_norm:e} \
+                 ({tries:?})",
+                j,
+                p.names()[j]
+            );
+            worst = worst.max(rel);
+        }
+        worst
+    }
+
+    /// Every effect at non-zero sizes and at its zero size, alone and all together, on
+    /// every input, from rest and held: the exact Jacobian is the differences'.
+    #[test]
+    fn sensitivities_are_central_differences_for_every_effect() {
+        type Case<'a> = (&'a [(&'a str, &'a [f64])], &'a [&'a str]);
+        let cases: &[Case] = &[
+            (&[], &[]),
+            (&[("saturation", &[-0.9, 1.0])], &["lo", "hi"]),
+            (&[("friction", &[0.05, 0.1])], &["F_c", "F_v"]),
+            (&[("friction", &[0.0, 0.0])], &["F_c", "F_v"]),
+            (&[("width_drift", &[0.3, -0.2])], &["dc_L", "dc_R"]),
+            (&[("width_drift", &[0.0, 0.0])], &["dc_L", "dc_R"]),
+            (
+                &[("compliance", &[0.4, 0.6, 0.15])],
+                &["k", "omega", "zeta"],
+            ),
+            (&[("compliance", &[0.0, 0.5, 0.1])], &["k", "omega", "zeta"]),
+            (
+                &[("hysteresis_memory", &[0.2, 0.3, 0.5, -0.2])],
+                &["r_1", "w_1", "r_2", "w_2"],
+            ),
+            (&[("hysteresis_memory", &[0.1, 0.0])], &["r_1", "w_1"]),
+            (&[("output_offset", &[0.1, 0.3])], &["o_0", "o_1"]),
+            (&[("dead_time", &[2.0])], &[]),
+            (
+                &[
+                    ("dead_time", &[1.0]),
+                    ("saturation", &[-1.1, 0.95]),
+                    ("friction", &[0.04, 0.15]),
+                    ("width_drift", &[0.2, 0.1]),
+                    ("compliance", &[0.3, 0.9, 0.2]),
+                    ("hysteresis_memory", &[0.25, 0.2]),
+                    ("output_offset", &[-0.1, 0.2]),
+                ],
+                &[
+                    "lo", "hi", "F_c", "F_v", "dc_L", "dc_R", "k", "omega", "zeta", "r_1", "w_1",
+                    "o_0", "o_1",
+                ],
+            ),
+        ];
+        let mut worst: f64 = 0.0;
+        for (effects, free) in cases {
+            for (name, u) in inputs(600) {
+                for held in [false, true] {
+                    let p = problem(effects, free, &u, start(held));
+                    let what = format!("{effects:?} on {name}, held {held}");
+                    worst = worst.max(check_jacobian(&p, &theta(&p), 1e-6, &what));
+                }
+            }
+        }
+        eprintln!("worst relative error {worst:e}");
+    }
+
+    /// Random non-zero sizes of every effect: the exact Jacobian is the differences'.
+    #[test]
+    fn sensitivities_at_random_sizes() {
+        let mut g = 77u64;
+        let mut r = |lo: f64, hi: f64| lo + (hi - lo) * lcg_unit(&mut g);
+        for round in 0..4 {
+            let sat = [r(-1.2, -0.6), r(0.6, 1.2)];
+            let fr = [r(0.01, 0.1), r(0.0, 0.3)];
+            let wd = [r(-0.4, 0.4), r(-0.4, 0.4)];
+            let co = [r(0.1, 1.0), r(0.1, 2.5), r(0.05, 0.8)];
+            let hy = [r(0.0, 0.5), r(-0.5, 0.5), r(0.0, 0.8), r(-0.5, 0.5)];
+            let oo = [r(-1.0, 1.0), r(-1.0, 1.0)];
+            let each: [(&str, &[f64], &[&str]); 6] = [
+                ("saturation", &sat, &["lo", "hi"]),
+                ("friction", &fr, &["F_c", "F_v"]),
+                ("width_drift", &wd, &["dc_L", "dc_R"]),
+                ("compliance", &co, &["k", "omega", "zeta"]),
+                ("hysteresis_memory", &hy, &["r_1", "w_1", "r_2", "w_2"]),
+                ("output_offset", &oo, &["o_0", "o_1"]),
+            ];
+            for (name, params, free) in each {
+                for (input_name, u) in inputs(500) {
+                    let p = problem(&[(name, params)], free, &u, start(round % 2 == 1));
+                    let what = format!("{name} {params:?} on {input_name}");
+                    check_jacobian(&p, &theta(&p), 1e-6, &what);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn without_effects_the_jacobian_is_the_cascades() {
+        let u = smooth_input(800);
+        let p = problem(&[], &[], &u, start(false));
+        let got = p.sensitivity(&THETA).unwrap();
+        let b = structure().unpack(&THETA).unwrap();
+        let want = cascade_sensitivity(&b.linear, &b.backlash, &u).unwrap();
+        assert_eq!(got.cols, want.cols);
+        assert_eq!(got.output, want.output);
+        for (a, b) in got.jacobian.iter().zip(&want.jacobian) {
+            assert!((a - b).abs() <= 1e-12 * (1.0 + b.abs()), "{a} {b}");
+        }
+    }
+
+    /// Quantised output: flat in every parameter (J = 0); the differences are 0 but where
+    /// a level changes within the step.
+    #[test]
+    fn a_quantiser_flattens_the_jacobian() {
+        let u = smooth_input(600);
+        let p = problem(
+            &[("quantization", &[0.05]), ("output_offset", &[0.01, 0.0])],
+            &["o_0"],
+            &u,
+            start(false),
+        );
+        let th = theta(&p);
+        let sens = p.sensitivity(&th).unwrap();
+        assert!(sens.jacobian.iter().all(|v| *v == 0.0));
+        let mut plus = th.clone();
+        plus[0] += 1e-9;
+        let (a, b) = (p.simulate(&th).unwrap(), p.simulate(&plus).unwrap());
+        let moved = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+        assert!(moved < 6, "{moved}");
+        // and the step itself is refused as a free parameter
+        let e = vec![("quantization".to_string(), vec![0.05])];
+        let err = AugmentedProblem::new(
+            structure(),
+            &e,
+            &["q".into()],
+            u.clone(),
+            u.clone(),
+            0,
+            start(false),
+        );
+        assert!(matches!(err, Err(Error::Model(m)) if m.contains("outside the refit")));
+    }
+
+    /// R_aug^T R_aug = [J r]^T [J r] of the dense Jacobian, the gradient J^T r, the cost;
+    /// one and two folding threads give the same bits.
+    #[test]
+    fn factor_and_gradient_are_those_of_the_dense_jacobian() {
+        let u = noisy(&triangle(3000, 331, 1.4), 2);
+        for (effects, free) in [
+            (vec![("friction", vec![0.03, 0.1])], vec!["F_c", "F_v"]),
+            (vec![("width_drift", vec![0.0, 0.0])], vec!["dc_L", "dc_R"]),
+            (
+                vec![("compliance", vec![0.3, 0.7, 0.2])],
+                vec!["k", "omega", "zeta"],
+            ),
+            (vec![], vec![]),
+        ] {
+            let effects: Vec<(String, Vec<f64>)> = effects
+                .into_iter()
+                .map(|(n, p)| (n.to_string(), p))
+                .collect();
+            let free: Vec<String> = free.into_iter().map(String::from).collect();
+            let clean = {
+                let p = AugmentedProblem::new(
+                    structure(),
+                    &effects,
+                    &free,
+                    u.clone(),
+                    u.clone(),
+                    0,
+                    start(true),
+                )
+                .unwrap();
+                let mut th = THETA.to_vec();
+                th.extend(p.bounds().0[11..].iter().map(|_| 0.0));
+                for (m, &(i, k)) in p.free.iter().enumerate() {
+                    th[11 + m] = p.effects[i].parameters()[k];
+                }
+                (p.simulate(&th).unwrap(), th)
+            };
+            let (y_true, th) = clean;
+            let y = noisy(&y_true, 11);
+            let warmup = 40;
+            let p = AugmentedProblem::new(
+                structure(),
+                &effects,
+                &free,
+                u.clone(),
+                y.clone(),
+                warmup,
+                start(true),
+            )
+            .unwrap();
+            let mut est = th.clone();
+            for (k, v) in est.iter_mut().enumerate() {
+                *v *= 1.0 + 0.02 * ((k % 3) as f64 - 1.0);
+            }
+            let sens = p.sensitivity(&est).unwrap();
+            let cols = sens.cols;
+            let aug = |t: usize, j: usize| {
+                if j < cols {
+                    sens.jacobian[t * cols + j]
+                } else {
+                    y[t] - sens.output[t]
+                }
+            };
+            let (f, cost) = p.oe_factor(&est).unwrap();
+            assert_eq!(p.oe_factor_threads(&est, 2).unwrap(), (f.clone(), cost));
+            let n = cols + 1;
+            let r = f.r_aug();
+            let size = (0..n)
+                .map(|k| (warmup..y.len()).map(|t| aug(t, k).powi(2)).sum::<f64>())
+                .fold(0.0f64, f64::max);
+            for i in 0..n {
+                for j in 0..n {
+                    let rtr: f64 = (0..n).map(|k| r[k * n + i] * r[k * n + j]).sum();
+                    let gram: f64 = (warmup..y.len()).map(|t| aug(t, i) * aug(t, j)).sum();
+                    assert!(
+                        (rtr - gram).abs() < 1e-11 * size,
+                        "{effects:?} {i} {j}: {rtr} {gram}"
+                    );
+                }
+            }
+            let want_cost: f64 = (warmup..y.len()).map(|t| aug(t, cols).powi(2)).sum();
+            assert!((cost - want_cost).abs() <= 1e-12 * want_cost);
+            assert!((p.cost(&est).unwrap() - want_cost).abs() <= 1e-12 * want_cost);
+            let g = p.gradient(&est).unwrap();
+            assert!((g.cost - want_cost).abs() <= 1e-12 * want_cost);
+            for j in 0..cols {
+                let want: f64 = (warmup..y.len()).map(|t| aug(t, j) * aug(t, cols)).sum();
+                assert!(
+                    (g.gradient[j] - want).abs() <= 1e-10 * (1.0 + want.abs()),
+                    "{j}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn names_bounds_feasibility_and_refusals() {
+        let u = smooth_input(100);
+        let p = problem(
+            &[
+                ("compliance", &[0.2, 0.5, 0.1]),
+                ("friction", &[0.0, 0.0]),
+                ("dead_time", &[3.0]),
+            ],
+            &["zeta", "F_c", "k"],
+            &u,
+            start(false),
+        );
+        let mut names = structure().names();
+        names.extend(["zeta", "F_c", "k"].map(String::from));
+        assert_eq!(p.names(), &names[..]);
+        let (lo, hi) = p.bounds();
+        assert_eq!(&lo[11..], &[0.0, 0.0, 0.0]);
+        assert_eq!(&hi[11..], &[1.0, f64::INFINITY, f64::INFINITY]);
+        assert!(lo[..11].iter().all(|v| *v == f64::NEG_INFINITY));
+        let mut th = THETA.to_vec();
+        th.extend([0.1, 0.0, 0.2]);
+        assert!(p.feasible(&th));
+        th[11] = 1.0; // zeta = 1: outside the open interval
+        assert!(!p.feasible(&th));
+        th[11] = 0.1;
+        th[2] = -2.5; // an unstable linear block
+        assert!(!p.feasible(&th));
+        assert!(!p.feasible(&THETA));
+        // the dead time stays as given: u delayed by 3
+        let mut th = THETA.to_vec();
+        th.extend([0.1, 0.0, 0.0]);
+        let y = p.simulate(&th).unwrap();
+        let plain = problem(&[], &[], &u, start(false))
+            .simulate(&THETA)
+            .unwrap();
+        let mut shifted = vec![0.0; 3];
+        shifted.extend_from_slice(&u[..97]);
+        let delayed = problem(&[], &[], &shifted, start(false))
+            .simulate(&THETA)
+            .unwrap();
+        assert_eq!(y, delayed);
+        assert_ne!(y, plain);
+        let e = |list: &[(&str, &[f64])]| -> Vec<(String, Vec<f64>)> {
+            list.iter()
+                .map(|(n, p)| (n.to_string(), p.to_vec()))
+                .collect()
+        };
+        let make = |effects: Vec<(String, Vec<f64>)>, free: &[&str], warmup: usize| {
+            let free: Vec<String> = free.iter().map(|s| s.to_string()).collect();
+            AugmentedProblem::new(
+                structure(),
+                &effects,
+                &free,
+                u.clone(),
+                u.clone(),
+                warmup,
+                start(false),
+            )
+        };
+        assert!(
+            matches!(make(e(&[("friction", &[0.0, 0.0])]), &["F_x"], 0), Err(Error::Model(m)) if m.contains("F_c, F_v"))
+        );
+        assert!(matches!(
+            make(e(&[("friction", &[0.0, 0.0])]), &["F_c", "F_c"], 0),
+            Err(Error::Model(_))
+        ));
+        assert!(matches!(
+            make(e(&[("dead_time", &[1.0])]), &["d"], 0),
+            Err(Error::Model(_))
+        ));
+        assert!(matches!(
+            make(
+                e(&[("friction", &[0.0, 0.0]), ("friction", &[0.1, 0.0])]),
+                &[],
+                0
+            ),
+            Err(Error::Model(_))
+        ));
+        assert!(matches!(make(e(&[]), &[], 100), Err(Error::Data(_))));
+        assert!(matches!(p.simulate(&THETA), Err(Error::Data(_))));
+        // a wild friction feedback diverges: a ModelError, not a panic
+        let wild = problem(
+            &[("friction", &[0.0, -50.0])],
+            &["F_v"],
+            &input(2000),
+            start(false),
+        );
+        let mut th = THETA.to_vec();
+        th.push(-50.0);
+        assert!(matches!(wild.cost(&th), Err(Error::Model(_))));
+        assert!(matches!(wild.oe_factor(&th), Err(Error::Model(_))));
+        assert!(matches!(wild.gradient(&th), Err(Error::Model(_))));
+    }
+}

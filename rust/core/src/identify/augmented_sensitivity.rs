@@ -1,0 +1,429 @@
+//! Exact forward sensitivities of the augmented cascade ([`crate::augmented`]): the one-pass
+//! simulation run again with d/dtheta carried beside every value, theta = the nominal
+//! cascade's parameters (`problem::Layout`'s columns) followed by the refitted effects'
+//! continuous parameters. Per sample t:
+//!
+//! - linear block (eq 16) with its input u_eff depending on theta (saturation's levels,
+//!   friction's feedback): dx(t) = sum_i a_i du_eff(t-i) - sum_j b_j dx(t-j) +
+//!   [dx/da_i = u_eff(t-i), dx/db_j = -x(t-j)], the past before the record carried as
+//!   given (zero at rest; the held start's equilibrium x = sum a / (1 + sum b) u(0) has its
+//!   own);
+//! - drive stage: each effect's `drive_tangent` (d u_eff);
+//! - widths stage: each effect's `widths_tangent` (d c_L(t), d c_R(t); e_{c_L}, e_{c_R}
+//!   without one);
+//! - the backlash's switching derivatives, those of `sensitivity`'s recursions with the
+//!   widths' tangents in place of e_{c_L}, e_{c_R}: on L dy = L'(xi1) (dx + dc_L) +
+//!   [dL/dm_Li = xi1^i], on R dy = R'(xi2) (dx - dc_R) + [dR/dm_Ri = xi2^i], holding dy(t) =
+//!   dy(t-1);
+//! - output stage: each effect's `output_tangent`.
+//!
+//! `sensitivity`'s cascade recursion filters lags of u and x by 1/B once for all columns; that
+//! needs an input free of theta, which a drive effect breaks, so the linear block's tangent
+//! here is the plain recursion on dx (p (na + nb) multiply-adds a sample).
+
+use crate::augmented::{branch, diverged};
+use crate::effects::{AnyEffect, Sample, Stage, Tangent};
+use crate::error::{Error, Result};
+use crate::identify::gradient::OeGradient;
+use crate::identify::problem::Layout;
+use crate::identify::sensitivity::{branch_degree, finish, overflowed, Move, Sensitivity};
+use crate::linalg::streaming::{fold_stream_parts, TriangularFactor};
+use crate::model::backlash::check_memory;
+use crate::model::cascade::{CascadeModel, CascadeState};
+
+/// d branch / d xi by Horner's rule (as `Branch::slope`).
+#[inline(always)]
+fn slope(m: &[f64], xi: f64) -> f64 {
+    let mut acc = 0.0;
+    for (k, c) in m.iter().enumerate().rev() {
+        acc = acc * xi + (k + 1) as f64 * c;
+    }
+    acc
+}
+
+/// The last `rows` tangents (p each), most recent first: `lag(k)` is the one k samples back.
+struct Ring {
+    rows: usize,
+    p: usize,
+    head: usize,
+    data: Vec<f64>,
+}
+
+impl Ring {
+    /// Holding `past` (row k-1 is lag k), zero rows beyond it.
+    fn new(rows: usize, p: usize, past: &[f64]) -> Self {
+        let mut data = vec![0.0; rows * p];
+        let m = past.len().min(data.len());
+        data[..m].copy_from_slice(&past[..m]);
+        Self {
+            rows,
+            p,
+            head: 0,
+            data,
+        }
+    }
+
+    #[inline(always)]
+    fn lag(&self, k: usize) -> &[f64] {
+        let at = (self.head + k - 1) % self.rows * self.p;
+        &self.data[at..at + self.p]
+    }
+
+    #[inline(always)]
+    fn push(&mut self, row: &[f64]) {
+        self.head = (self.head + self.rows - 1) % self.rows;
+        let at = self.head * self.p;
+        self.data[at..at + self.p].copy_from_slice(row);
+    }
+}
+
+/// The start of a tangent pass: the state before the record and d x_past / d theta (nb rows
+/// of p, most recent first; the past inputs u_past are constants).
+pub(crate) struct Start<'a> {
+    pub(crate) state: &'a CascadeState,
+    pub(crate) dx_past: &'a [f64],
+}
+
+/// The augmented cascade's output y(t) and its row dy(t) / d theta (`p` wide), handed to
+/// `visit(t, y(t), dy(t), same)` for t = 0, 1, ...; `same` says dy(t) equals dy(t-1) bit for
+/// bit (a held backlash whose output effects left the row alone). `effects` pairs each effect
+/// with the columns of its parameters (None: held). The values are those of
+/// `simulate_augmented` to the bit.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn walk_augmented(
+    model: &CascadeModel,
+    effects: &[(AnyEffect, Vec<Option<usize>>)],
+    u: &[f64],
+    t0: f64,
+    time_scale: f64,
+    start: &Start,
+    p: usize,
+    mut visit: impl FnMut(usize, f64, &[f64], bool) -> Result<()>,
+) -> Result<()> {
+    let lin = &model.linear;
+    let bl = &model.backlash;
+    let state = start.state;
+    lin.check_state(&state.linear, "state.linear")?;
+    check_memory(state.y_prev)?;
+    let n = branch_degree(bl)?;
+    let (a, b) = (lin.a(), lin.b());
+    let (na, nb) = (a.len(), b.len());
+    let lay = Layout { na, nb, n };
+    if p < lay.r() || start.dx_past.len() != nb * p || lin.feedthrough().is_some() {
+        return Err(Error::Data(format!(
+            "augmented sensitivities: {p} columns for a cascade of {} parameters, {} values of \
+             d x_past for {nb} x {p} (internal shape mismatch)",
+            lay.r(),
+            start.dx_past.len()
+        )));
+    }
+    let (m_l, m_r) = (bl.left().coefficients(), bl.right().coefficients());
+    let (c_l, c_r) = (bl.c_left(), bl.c_right());
+    let x0 = state.linear.x_past.first().copied().unwrap_or(0.0);
+    let dx0 = if nb > 0 {
+        start.dx_past[..p].to_vec()
+    } else {
+        vec![0.0; p]
+    };
+    // fresh copies with their memories at rest on x(0), y(0), in the order of the pass
+    let mut running: Vec<(AnyEffect, &[Option<usize>])> = effects
+        .iter()
+        .map(|(e, cols)| {
+            e.check()?;
+            if cols.len() != e.parameters().len() || cols.iter().flatten().any(|&c| c >= p) {
+                return Err(Error::Data(format!(
+                    "augmented sensitivities: columns {cols:?} for {} (internal shape mismatch)",
+                    e.name()
+                )));
+            }
+            Ok((
+                e.start_tangent(x0, state.y_prev, &dx0, cols),
+                cols.as_slice(),
+            ))
+        })
+        .collect::<Result<_>>()?;
+    running.sort_by_key(|(e, _)| e.order());
+    let mut drive = Vec::new();
+    let mut widths = Vec::new();
+    let mut output = Vec::new();
+    for e in running {
+        match e.0.stage() {
+            Stage::Drive => drive.push(e),
+            Stage::Widths => widths.push(e),
+            Stage::Output => output.push(e),
+        }
+    }
+    let driven = !drive.is_empty();
+    let len = u.len();
+    let (mut u_eff, mut x) = (vec![0.0; len], vec![0.0; len]);
+    // tangents: of u_eff over na lags, of x over max(nb, 1) lags (x(t-1) for friction)
+    let mut du = Ring::new(na, p, &[]);
+    let mut dxr = Ring::new(nb.max(1), p, if nb > 0 { start.dx_past } else { &dx0 });
+    let (mut dxt, mut dv, mut dy, mut dout) =
+        (vec![0.0; p], vec![0.0; p], vec![0.0; p], vec![0.0; p]);
+    let (mut dcl, mut dcr) = (vec![0.0; p], vec![0.0; p]);
+    let mut prev_out = vec![0.0; p];
+    let mut y_prev = state.y_prev;
+    let mut x_prev = x0;
+    for t in 0..len {
+        let xt = lin.output_at(&u_eff, &x, t, &state.linear);
+        x[t] = xt;
+        // dx(t)
+        dxt.fill(0.0);
+        if driven {
+            for (i, ai) in a.iter().enumerate() {
+                for (d, v) in dxt.iter_mut().zip(du.lag(i + 1)) {
+                    *d += ai * v;
+                }
+            }
+        }
+        for (j, bj) in b.iter().enumerate() {
+            for (d, v) in dxt.iter_mut().zip(dxr.lag(j + 1)) {
+                *d -= bj * v;
+            }
+        }
+        for i in 1..=na {
+            dxt[i - 1] += if i <= t {
+                u_eff[t - i]
+            } else {
+                state.linear.u_past[i - t - 1]
+            };
+        }
+        for j in 1..=nb {
+            dxt[na + j - 1] -= if j <= t {
+                x[t - j]
+            } else {
+                state.linear.x_past[j - t - 1]
+            };
+        }
+        let mut s = Sample {
+            t,
+            u,
+            x: xt,
+            x_prev,
+            f: 0.0,
+            tau: (t0 + t as f64) / time_scale,
+        };
+        // the drive input of the linear block at t
+        let mut v = u[t];
+        if driven {
+            dv.fill(0.0);
+            let d = Tangent {
+                dx: &dxt,
+                dx_prev: dxr.lag(1),
+                df: &[],
+            };
+            for (e, cols) in drive.iter_mut() {
+                v = e.drive_tangent(v, &mut dv, &s, &d, cols);
+            }
+            du.push(&dv);
+        }
+        u_eff[t] = v;
+        x_prev = xt;
+        // the widths of that time
+        let (cl, cr) = if widths.is_empty() {
+            (c_l, c_r)
+        } else {
+            dcl.fill(0.0);
+            dcr.fill(0.0);
+            dcl[lay.c_l()] = 1.0;
+            dcr[lay.c_r()] = 1.0;
+            let mut c = (c_l, c_r);
+            for (e, cols) in &widths {
+                c = e.widths_tangent(c, (&mut dcl, &mut dcr), &s, cols);
+            }
+            c
+        };
+        // eq (1) in its case order, and the switching derivatives
+        let xi_l = xt + cl;
+        let lv = branch(m_l, xi_l);
+        let (f, mv, xi) = if lv <= y_prev {
+            (lv, Move::Left, xi_l)
+        } else {
+            let xi_r = xt - cr;
+            let rv = branch(m_r, xi_r);
+            if rv >= y_prev {
+                (rv, Move::Right, xi_r)
+            } else {
+                (y_prev, Move::Hold, 0.0)
+            }
+        };
+        if mv != Move::Hold {
+            let left = mv == Move::Left;
+            let sl = slope(if left { m_l } else { m_r }, xi);
+            for (d, v) in dy.iter_mut().zip(&dxt) {
+                *d = sl * v;
+            }
+            // d c_L(t) on L, -d c_R(t) on R
+            let sign = if left { 1.0 } else { -1.0 };
+            if widths.is_empty() {
+                dy[if left { lay.c_l() } else { lay.c_r() }] += sign * sl;
+            } else {
+                let dc = if left { &dcl } else { &dcr };
+                for (d, v) in dy.iter_mut().zip(dc) {
+                    *d += sign * sl * v;
+                }
+            }
+            let mut pw = xi;
+            if !left {
+                dy[lay.m_r1()] += xi;
+            }
+            for i in 2..=n {
+                pw *= xi;
+                dy[if left { lay.m_l(i) } else { lay.m_r(i) }] += pw;
+            }
+        }
+        // else holding: dy(t) = dy(t-1), already in place
+        y_prev = f;
+        s.f = f;
+        let mut out = f;
+        if output.is_empty() {
+            // the row is dy itself
+            if !(out.is_finite() && xt.is_finite()) {
+                return Err(diverged(t, xt, out));
+            }
+            visit(t, out, &dy, mv == Move::Hold && t > 0)?;
+        } else {
+            dout.copy_from_slice(&dy);
+            let d = Tangent {
+                dx: &dxt,
+                dx_prev: dxr.lag(1),
+                df: &dy,
+            };
+            for (e, cols) in output.iter_mut() {
+                out = e.output_tangent(out, &mut dout, &s, &d, cols);
+            }
+            if !(out.is_finite() && xt.is_finite()) {
+                return Err(diverged(t, xt, out));
+            }
+            let same = mv == Move::Hold && t > 0 && dout == prev_out;
+            visit(t, out, &dout, same)?;
+            std::mem::swap(&mut dout, &mut prev_out);
+        }
+        dxr.push(&dxt);
+    }
+    Ok(())
+}
+
+/// The augmented cascade's output and its dense Jacobian (N x p, row-major; the refits use
+/// `augmented_oe_factor`).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn augmented_sensitivity(
+    model: &CascadeModel,
+    effects: &[(AnyEffect, Vec<Option<usize>>)],
+    u: &[f64],
+    t0: f64,
+    time_scale: f64,
+    start: &Start,
+    p: usize,
+) -> Result<Sensitivity> {
+    let mut out = Sensitivity {
+        output: Vec::with_capacity(u.len()),
+        jacobian: Vec::with_capacity(u.len() * p),
+        cols: p,
+    };
+    walk_augmented(
+        model,
+        effects,
+        u,
+        t0,
+        time_scale,
+        start,
+        p,
+        |_, yt, row, _| {
+            out.output.push(yt);
+            out.jacobian.extend_from_slice(row);
+            Ok(())
+        },
+    )?;
+    Ok(out)
+}
+
+/// R_aug of [J | r] over t >= `warmup` (J = d y_sim / d theta, r = y - y_sim) and the cost
+/// sum r^2, streamed: a run of equal rows (a held backlash) folds as one (`RowSink::repeat`),
+/// the folding on a second thread when `threads` >= 2.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn augmented_oe_factor(
+    model: &CascadeModel,
+    effects: &[(AnyEffect, Vec<Option<usize>>)],
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+    t0: f64,
+    time_scale: f64,
+    start: &Start,
+    p: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
+    let streamed = fold_stream_parts(&[p], threads, |sink| {
+        walk_augmented(
+            model,
+            effects,
+            u,
+            t0,
+            time_scale,
+            start,
+            p,
+            |t, yt, row, same| {
+                if t < warmup {
+                    return Ok(());
+                }
+                let r = y[t] - yt;
+                if same && sink.repeat(r) {
+                    return Ok(());
+                }
+                sink.push(row, r)
+            },
+        )
+    })?;
+    let all: Vec<usize> = (0..p).collect();
+    let factor = TriangularFactor::embed_sum(
+        p,
+        &[(&streamed.factors[0], &all)],
+        streamed.rows,
+        streamed.dispersion,
+    );
+    finish(factor.map(|f| (f, streamed.sum_squares)))
+}
+
+/// g = J^T r over t >= `warmup` and the cost, in the forward pass (no factor).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn augmented_oe_gradient(
+    model: &CascadeModel,
+    effects: &[(AnyEffect, Vec<Option<usize>>)],
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+    t0: f64,
+    time_scale: f64,
+    start: &Start,
+    p: usize,
+) -> Result<OeGradient> {
+    let mut g = OeGradient {
+        gradient: vec![0.0; p],
+        cost: 0.0,
+    };
+    walk_augmented(
+        model,
+        effects,
+        u,
+        t0,
+        time_scale,
+        start,
+        p,
+        |t, yt, row, _| {
+            if t >= warmup {
+                let r = y[t] - yt;
+                g.cost += r * r;
+                for (gk, v) in g.gradient.iter_mut().zip(row) {
+                    *gk += r * v;
+                }
+            }
+            Ok(())
+        },
+    )?;
+    if !g.cost.is_finite() || g.gradient.iter().any(|v| !v.is_finite()) {
+        return Err(overflowed());
+    }
+    Ok(g)
+}
