@@ -14,7 +14,7 @@ record follows the estimation record, so it starts at t0 = len(u_est)).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -332,77 +332,40 @@ class Problem:
     warmup: int
     t0: float
 
-    def simulate(self, theta: Array, effects: CoreEffects = ()) -> Array:
-        """The augmented cascade on this record."""
-        return simulate(self.structure, theta, effects, self.u, self.t0)
-
     def __post_init__(self) -> None:
         self.big = 1e3 * (float(np.std(self.y)) + 1.0)  # the residual of a diverging model
 
-    def residual(self, theta: Array, effects: CoreEffects) -> Array:
-        """Output error after the warm-up (a large constant where the model diverges)."""
-        try:
-            y_hat = self.simulate(theta, effects)
-        except BacklashIdError:
-            return np.full(self.y.size - self.warmup, self.big)
-        return self.output_residual(y_hat)
+    def simulate(self, theta: Array, effects: CoreEffects = ()) -> Array:
+        """The augmented cascade on this record."""
+        return simulate(self.structure, theta, effects, self.u, self.t0)
 
     def output_residual(self, y_hat: Array) -> Array:
         """Output error of the output y_hat after the warm-up (a large constant where it diverges)."""
         r = (self.y - y_hat)[self.warmup :]
         return r if np.all(np.abs(r) < 1e3 * self.big) else np.full(r.size, self.big)
 
-    def cost(self, theta: Array, effects: CoreEffects) -> float:
-        """Sum of squared output errors after the warm-up."""
-        r = self.residual(theta, effects)
-        return float(r @ r)
-
     def output_cost(self, y_hat: Array) -> float:
         """Sum of squared output errors of the output y_hat after the warm-up."""
         r = self.output_residual(y_hat)
         return float(r @ r)
 
+    def cost(self, theta: Array, effects: CoreEffects) -> float:
+        """Sum of squared output errors after the warm-up (large where the model diverges)."""
+        try:
+            y_hat = self.simulate(theta, effects)
+        except BacklashIdError:
+            return float(self.big**2 * (self.y.size - self.warmup))
+        return self.output_cost(y_hat)
 
-def finite_difference_lm(fun: Callable[[Array], Array], x0: Array, lower: Array, upper: Array, max_iter: int) -> Array:
-    """Levenberg-Marquardt with a forward-difference Jacobian, Marquardt's scaling and steps
-    projected onto the bounds. Small p (<= ~20), long residual vectors: the normal equations
-    J^T J (p x p) are cheap where a dense SVD of J is not."""
-    x = np.clip(x0, lower, upper)
-    r = fun(x)
-    cost = float(r @ r)
-    lam = 1e-3
-    for _ in range(max_iter):
-        h = 1e-6 * np.maximum(np.abs(x), 1e-2)
-        h = np.where(x + h > upper, -h, h)
-        jac = np.empty((r.size, x.size))
-        for i in range(x.size):
-            xi = x.copy()
-            xi[i] += h[i]
-            jac[:, i] = (fun(xi) - r) / h[i]
-        a = jac.T @ jac
-        g = jac.T @ r
-        d = np.diag(a).copy()
-        d[d <= 0] = 1.0
-        accepted = False
-        for _ in range(8):
-            try:
-                step = -np.linalg.solve(a + lam * np.diag(d), g)
-            except np.linalg.LinAlgError:
-                lam *= 10
-                continue
-            x_new = np.clip(x + step, lower, upper)
-            r_new = fun(x_new)
-            c_new = float(r_new @ r_new)
-            if c_new < cost:
-                accepted = True
-                done = cost - c_new < 1e-8 * cost
-                x, r, cost = x_new, r_new, c_new
-                lam = max(lam / 3, 1e-9)
-                break
-            lam *= 4
-        if not accepted or done:
-            break
-    return x
+    def compiled(self, effects: CoreEffects, free: Sequence[str]) -> _core.AugmentedProblem:
+        """The core's compiled refit of the nominal parameters and the effects' parameters
+        ``free`` (the others held at their values in ``effects``): theta is the structure's
+        vector followed by the free parameters; exact sensitivities."""
+        s = self.structure
+        return _core.AugmentedProblem(
+            self.u, self.y, s.na, s.nb, s.degree, [(n, list(p)) for n, p in effects], list(free),
+            warmup=self.warmup, t0=self.t0, time_scale=TIME_SCALE,
+        )  # fmt: skip
 
 
 class Effect:
@@ -607,11 +570,16 @@ class Effect:
             return {**fixed, **dict(zip(names, map(float, p[n:])))}
 
         x0 = np.concatenate([theta0, np.clip(e0, lb, ub)])
-        lower = np.concatenate([np.full(n, -np.inf), lb])
-        upper = np.concatenate([np.full(n, np.inf), ub])
-        fun = lambda p: prob.residual(p[:n], self.core(params(p)))  # noqa: E731
-        p = finite_difference_lm(fun, x0, lower, upper, max_iter)
-        return p[:n], params(p), prob.cost(p[:n], self.core(params(p)))
+        problem = prob.compiled(self.core(params(x0)), names)
+        low, high = problem.bounds()
+        lower = np.maximum(np.asarray(low, dtype=np.float64), np.concatenate([np.full(n, -np.inf), lb]))
+        upper = np.minimum(np.asarray(high, dtype=np.float64), np.concatenate([np.full(n, np.inf), ub]))
+        try:
+            fit = levenberg_marquardt(problem, x0, lower=lower, upper=upper, max_iter=max_iter)
+        except BacklashIdError:  # the start diverges: no refit from it
+            return theta0, params(x0), prob.cost(theta0, self.core(params(x0)))
+        p = fit.theta
+        return p[:n], params(p), float(fit.cost)
 
     def _multi_start(self, prob: Problem, theta0: Array, starts: list[tuple[Array, dict[str, float]]], lb: Array, ub: Array) -> Fitted:
         """A short refit from each start (effect values, fixed parameters), then the best one
