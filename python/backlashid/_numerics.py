@@ -25,7 +25,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["BLOCK_SIZE", "find_root", "lstsq", "minimize_bounded"]
+__all__ = ["BLOCK_SIZE", "find_root", "lstsq", "minimize_bounded", "r_factor"]
 
 Array = NDArray[np.float64]
 
@@ -209,8 +209,30 @@ def _block_rows(cols: int) -> int:
     return max(2 * cols, BLOCK_SIZE // cols)
 
 
-def _r_factor(m: Array) -> Array:
-    """R of the QR of m, by blocks of rows while m is taller than one block."""
+def r_factor(m: Array) -> Array:
+    """R of the QR of m (n x p, n >= p): R^T R = m^T m, and a least-squares problem over any of
+    m's columns has the same solution and residual norm on R's columns. By blocks of rows
+    while m is taller than one block.
+
+    Parameters
+    ----------
+    m : ndarray
+        (n, p) matrix.
+
+    Returns
+    -------
+    ndarray
+        (min(n, p), p) upper triangular factor.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid._numerics import r_factor
+    >>> m = np.random.default_rng(0).standard_normal((5000, 3))
+    >>> r = r_factor(m)
+    >>> bool(np.allclose(r.T @ r, m.T @ m))
+    True
+    """
     rows = _block_rows(m.shape[1])
     while m.shape[0] > rows:
         m = np.vstack([np.linalg.qr(m[i : i + rows], mode="r") for i in range(0, m.shape[0], rows)])
@@ -245,6 +267,6 @@ def lstsq(a: ArrayLike, b: ArrayLike) -> Array:
     n, p = a_arr.shape
     if p == 0 or n <= 2 * _block_rows(p + 1):
         return np.linalg.lstsq(a_arr, b_arr, rcond=None)[0]
-    r = _r_factor(np.column_stack([a_arr, b_arr]))
+    r = r_factor(np.column_stack([a_arr, b_arr]))
     rcond = np.finfo(np.float64).eps * max(n, p)
     return np.linalg.lstsq(r[:p, :p], r[:p, p:] if b_arr.ndim == 2 else r[:p, p], rcond=rcond)[0]

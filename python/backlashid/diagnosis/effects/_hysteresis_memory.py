@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ... import _core
-from ..._numerics import lstsq
+from ..._numerics import lstsq, r_factor
 from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
 
 N_PLAYS = 2  # extra plays
@@ -38,11 +38,14 @@ class HysteresisMemory(Effect, rank=9, augmentation=AUGMENTATION):
         radii = sx * np.geomspace(0.01, 2.0, 10)
         # play_r(x) of weight 1 on top of the nominal output, by the augmented simulator
         plays = [(prob.simulate(theta0, self.core({"r_1": r, "w_1": 1.0, "r_2": 0.0, "w_2": 0.0})) - y_nom)[prob.warmup :] for r in radii]
-        target = r0[prob.warmup :]
+        # every pair's least squares on the R factor of [plays | residual] (same solution and
+        # residual norm as on the record's columns, 11 rows instead of N)
+        r = r_factor(np.column_stack([*plays, r0[prob.warmup :]]))
+        target = r[:, -1]
         pairs = []
         for i in range(len(radii)):
             for j in range(i + 1, len(radii)):
-                a = np.column_stack([plays[i], plays[j]])
+                a = r[:, [i, j]]
                 w = lstsq(a, target)
                 rss = float(np.sum((target - a @ w) ** 2))
                 pairs.append((rss, (float(radii[i]), float(w[0]), float(radii[j]), float(w[1]))))
