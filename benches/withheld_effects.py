@@ -13,12 +13,12 @@ median gap closed of correct attributions, and the time per case, against the is
 
 Side by side with another version of the package (e.g. ``git archive <commit> python | tar -x -C
 /tmp/old`` plus the compiled ``_core`` copied into /tmp/old/python/backlashid): ``--baseline
-/tmp/old/python`` runs every case with that tree in a child process at the same time as this
-tree runs it (one case at a time on each side, the pair started together, so both see the same
-machine and the same load: two busy processes, as ``--jobs 2``), and prints the ratio of the
-diagnosis times and both sides' accuracies.
+/tmp/old/python`` runs every case with both trees, in rounds of ``--jobs`` cases: all of a
+round's cases with one tree at the same time (as ``--jobs`` processes of that tree), then with
+the other (the order alternating), so the two trees take turns within seconds under the same
+outside load; it prints the ratio of the diagnosis times and both sides' accuracies.
 
-    python benches/withheld_effects.py --seed 4 --baseline /tmp/old/python
+    python benches/withheld_effects.py --jobs 2 --seed 4 --baseline /tmp/old/python
 """
 
 from __future__ import annotations
@@ -28,8 +28,9 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -198,7 +199,7 @@ def main() -> int:
         print("backlashid.diagnose is not available in this tree (merge main first), or run with --fit-only", file=sys.stderr)
         return 2
     specs = case_specs(args.levels, args.per_effect, args.seed, args.effects)
-    jobs = f"side by side with {args.baseline}" if args.baseline else f"{args.jobs} job(s)"
+    jobs = f"{args.jobs} job(s)" + (f", each case also by {args.baseline}" if args.baseline else "")
     print(f"withheld-effect benchmark: {len(specs)} cases, levels {args.levels}, {args.per_effect} per effect and level, "
           f"seed {args.seed}, warm-up {args.warmup}, {jobs}")  # fmt: skip
     t0 = time.perf_counter()
@@ -217,7 +218,7 @@ def main() -> int:
     print(f"\nwall time {wall:.1f} s ({wall / max(len(specs), 1):.2f} s per case, {jobs})")
     out: dict[str, Any] = {"args": vars(args), "summary": summary, "cases": results}
     if base is not None:
-        out["baseline"] = _compare(base, results, summary)
+        out["baseline"] = _compare(base, results, summary, args.jobs)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=1, default=float)
@@ -236,31 +237,60 @@ def _serve(args: argparse.Namespace) -> int:
 
 
 def _side_by_side(specs: list[CaseSpec], args: argparse.Namespace) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """Every case run by this tree and, at the same time, by the tree in args.baseline (a child
-    process): the pair of runs of a case start together, so both see the same load."""
+    """Every case run by this tree and by the tree in args.baseline, in ``args.jobs`` slots (each
+    with a child process per tree) in rounds: in a round each slot takes one case, and all slots
+    run it with one tree, wait for each other, then with the other tree (the order alternating
+    from round to round). So each tree runs as with ``--jobs`` processes of its own, and the
+    two trees take turns within seconds, under the same outside load."""
+    this_tree = os.path.dirname(os.path.dirname(os.path.abspath(bid.__file__)))
     argv = [sys.executable, os.path.abspath(__file__), "--serve", "--warmup", str(args.warmup)]
     argv += ["--known-noise"] if args.known_noise else []
     argv += ["--fit-only"] if args.fit_only else []
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.path.abspath(args.baseline), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.Popen(argv, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    assert proc.stdin is not None and proc.stdout is not None
-    mine, theirs = [], []
-    try:
-        for spec in specs:
-            proc.stdin.write(f"{spec.effect} {spec.level!r} {spec.seed}\n")
-            proc.stdin.flush()
-            mine.append(run_case(spec, args.warmup, args.fit_only, args.known_noise))
-            line = proc.stdout.readline()
-            if not line:
-                raise RuntimeError(f"the baseline run stopped (exit code {proc.wait()})")
-            theirs.append(json.loads(line))
-    finally:
-        proc.stdin.close()
-        proc.wait()
-    return mine, theirs
+
+    def server(tree: str) -> subprocess.Popen[str]:
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.path.abspath(tree), os.environ.get("PYTHONPATH", "")])}
+        return subprocess.Popen(argv, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+
+    def ask(proc: subprocess.Popen[str], spec: CaseSpec) -> dict[str, Any]:
+        assert proc.stdin is not None and proc.stdout is not None
+        proc.stdin.write(f"{spec.effect} {spec.level!r} {spec.seed}\n")
+        proc.stdin.flush()
+        line = proc.stdout.readline()
+        if not line:
+            raise RuntimeError(f"a benchmark child stopped (exit code {proc.wait()})")
+        return dict(json.loads(line))
+
+    slots = max(args.jobs, 1)
+    results: list[dict[str, Any]] = [{} for _ in specs]
+    base: list[dict[str, Any]] = [{} for _ in specs]
+
+    rounds = -(-len(specs) // slots)
+    barrier = threading.Barrier(slots)
+
+    def slot(k: int) -> None:
+        procs = {"this": server(this_tree), "baseline": server(args.baseline)}
+        try:
+            for rnd in range(rounds):
+                i = rnd * slots + k
+                for which in ("this", "baseline") if rnd % 2 == 0 else ("baseline", "this"):
+                    if i < len(specs):
+                        (results if which == "this" else base)[i] = ask(procs[which], specs[i])
+                    barrier.wait()
+        except BaseException:
+            barrier.abort()
+            raise
+        finally:
+            for proc in procs.values():
+                if proc.stdin is not None:
+                    proc.stdin.close()
+                proc.wait()
+
+    with ThreadPoolExecutor(max_workers=slots) as pool:
+        list(pool.map(slot, range(slots)))
+    return results, base
 
 
-def _compare(base: list[dict[str, Any]], results: list[dict[str, Any]], summary: dict[str, Any]) -> dict[str, Any]:
+def _compare(base: list[dict[str, Any]], results: list[dict[str, Any]], summary: dict[str, Any], jobs: int) -> dict[str, Any]:
     """The baseline's summary, and the two side by side."""
     print("\n== the baseline tree")
     b_sum = summarise(base, False)
@@ -270,7 +300,7 @@ def _compare(base: list[dict[str, Any]], results: list[dict[str, Any]], summary:
         if b.get("diagnose_seconds") and x.get("diagnose_seconds")
     ]
     new_t, old_t = summary.get("diagnose_seconds_median", float("nan")), b_sum.get("diagnose_seconds_median", float("nan"))
-    print("\n== side by side (the same cases, each run by both trees at the same time)")
+    print(f"\n== side by side (the same cases, each run by both trees in turn, {jobs} at a time)")
     print(f"diagnose median: baseline {old_t:.3f} s, this tree {new_t:.3f} s: {old_t / new_t:.2f} times faster; "
           f"median of the per-case ratios {np.median(ratios):.2f}")  # fmt: skip
     for level, lv in summary["levels"].items():
