@@ -486,7 +486,8 @@ class Effect:
         """Output-error refit of the nominal and the effect's parameters from :meth:`starts`.
 
         One start is refitted to convergence; from several, a short refit from each, then the
-        best one to convergence (Levenberg-Marquardt within :meth:`bounds`).
+        best one to convergence (the package's Levenberg-Marquardt on the core's compiled
+        refit, exact sensitivities, within :meth:`bounds`).
 
         Parameters
         ----------
@@ -561,7 +562,9 @@ class Effect:
     ) -> Fitted:
         """Output-error least squares over the nominal parameters and the effect's continuous
         parameters ``names`` (default: all but ``fixed``) from (theta0, e0), within bounds;
-        ``fixed`` effect parameters held."""
+        ``fixed`` effect parameters held: the core's AugmentedProblem (exact sensitivities)
+        searched by ``identify.levenberg_marquardt`` within the effect's bounds and the core's
+        domains."""
         n = theta0.size
         fixed = fixed or {}
         names = tuple(n_ for n_ in self.parameters if n_ not in fixed) if names is None else tuple(names)
