@@ -171,3 +171,46 @@ def test_bad_inputs_raise_actionable_errors(nominal, u) -> None:
         _core.simulate_augmented([1.0], [], 0.1, 0.1, [1.0], [1.0], u, effects=[("saturation", [1.0, -1.0])])
     with pytest.raises(bx.DataError):
         _core.simulate_augmented([1.0], [], 0.1, 0.1, [1.0], [1.0], np.array([np.nan]))
+
+
+def test_the_quantiser_search_quantises_like_the_core(nominal, u) -> None:
+    """The quantiser search quantises one nominal simulation: bitwise the core's quantiser,
+    halves rounded away from zero, and so the same cost as a simulation with the quantiser."""
+    from backlashid.diagnosis.effects._quantization import quantise
+
+    s = Structure(nominal.linear.na, nominal.linear.nb, nominal.backlash.degree)
+    theta = s.pack(nominal)
+    prob = _base.Problem(s, u, _plant(nominal, u, "quantization", {"q": 0.05}), 20, 0.0)
+    y_sim = prob.simulate(theta)
+    halves = np.array([-2.5, -0.5, 0.5, 1.5, 2.5, 0.49999999999999994]) * 0.1
+    for q in (0.013, 0.05, 0.1, 0.3777):
+        core = fx.REGISTRY["quantization"].core({"q": q})
+        assert np.array_equal(quantise(y_sim, q), prob.simulate(theta, core))
+        assert prob.output_cost(quantise(y_sim, q)) == prob.cost(theta, core)
+    np.testing.assert_array_equal(quantise(halves, 0.1), 0.1 * np.array([-3.0, -1.0, 1.0, 2.0, 3.0, 0.0]))
+
+
+def test_the_memory_search_on_a_prefix_equals_the_whole_record(nominal, u) -> None:
+    """The validation start's memory is searched on the prefix after which the start is
+    forgotten: the same memory as a search on the whole record."""
+    from backlashid.diagnosis import _diagnose as dg
+
+    def sim(uu, y0, held):
+        return nominal.simulate(uu, initial_state=dg.held_state(nominal, uu[0], y0) if held else None)
+
+    t = np.arange(3000)
+    # a slow sine holds the memory for ~190 samples (the prefix doubles to 512); a small one
+    # never moves the backlash (the whole record); white noise moves it at once (256)
+    for u_rec, settled in ((np.sin(0.005 * t), 512), (0.5 * np.sin(0.01 * t), t.size), (u, dg.MEMORY_PREFIX)):
+        y = sim(u_rec, 0.4, True) + NOISE * np.random.default_rng(5).standard_normal(u_rec.size)
+        assert dg._settled(sim, u_rec, -2.0, 2.0) == settled
+        y_prefix, m_prefix = dg.estimated_start(sim, u_rec, y, (-2.0, 2.0))
+        old, dg.MEMORY_PREFIX = dg.MEMORY_PREFIX, 10 * u_rec.size
+        try:
+            y_whole, m_whole = dg.estimated_start(sim, u_rec, y, (-2.0, 2.0))
+        finally:
+            dg.MEMORY_PREFIX = old
+        assert m_prefix == pytest.approx(m_whole, abs=1e-9)
+        np.testing.assert_allclose(y_prefix, y_whole, atol=1e-9)
+        if settled > dg.MEMORY_PREFIX:
+            assert m_prefix == pytest.approx(0.4, abs=0.01)  # the memory matters, and is found
