@@ -5,12 +5,14 @@
 //! the gradient.
 
 pub mod gradient;
+pub mod initial;
 pub mod problem;
 pub mod regressor;
 mod rows;
 pub mod sensitivity;
 
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
+pub use initial::InitialState;
 pub use problem::{Iteration, Problem, Structure};
 pub use regressor::{
     solve_factor, ArxRegression, CascadeRegression, Regression, RowRegression, SandwichRegression,
