@@ -48,9 +48,12 @@ def is_stable(structure: Structure, theta: NDArray[np.float64]) -> bool:
 
 def problem(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int = 0) -> _core.Problem:
     """The core's compiled problem of a structure and a record (u and y checked once); its
-    methods take only theta: ``simulate``, ``iteration``, ``oe_factor``, ``gradient``."""
+    methods take only theta: ``simulate``, ``iteration``, ``oe_factor``, ``gradient``. A
+    structure with ``initial_state`` has the record's initial state at the end of theta."""
     s = structure
-    return _core.Problem(u, y, s.na, s.nb, s.degree, s.nr, s.ns, s.feedthrough, s.output_feedthrough, warmup)
+    return _core.Problem(
+        u, y, s.na, s.nb, s.degree, s.nr, s.ns, s.feedthrough, s.output_feedthrough, warmup, s.initial_state
+    )
 
 
 def refine_output_error(

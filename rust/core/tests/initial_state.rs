@@ -250,6 +250,7 @@ fn a_bad_initial_state_is_refused_and_the_iteration_ignores_it() {
         other => panic!("{other:?}"),
     }
     assert!(matches!(p.simulate(&EXAMPLE1_THETA), Err(Error::Data(_))));
+    assert!(matches!(p.oe_factor(&EXAMPLE1_THETA), Err(Error::Data(_))));
     theta[12] = -0.2;
     let with_state = p.iteration(&theta, false).unwrap();
     let from_rest = Problem::new(
@@ -263,4 +264,6 @@ fn a_bad_initial_state_is_refused_and_the_iteration_ignores_it() {
     .unwrap();
     assert_eq!(with_state.ls.theta, from_rest.ls.theta);
     assert_eq!(with_state.ls.theta.len(), 11);
+    let without = p.iteration(&EXAMPLE1_THETA, false).unwrap(); // theta without the state
+    assert_eq!(without.ls.theta, from_rest.ls.theta);
 }

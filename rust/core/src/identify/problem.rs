@@ -393,12 +393,17 @@ impl Problem {
     }
 
     /// One iteration of the paper's algorithm at theta (cascade eq 18-28, sandwich eq 33-36),
-    /// streamed into a triangular factor. It is a from-rest method: theta's initial state, if
-    /// the structure has one, is ignored (the least-squares vector has the model's names). The cascade's switching signal is the measured y,
-    /// or with `simulated_switching` the estimate's own simulated output.
+    /// streamed into a triangular factor. The cascade's switching signal is the measured y,
+    /// or with `simulated_switching` the estimate's own simulated output. It is a from-rest
+    /// method: theta's initial state, if the structure has one, is ignored (the least-squares
+    /// vector has the model's names), and theta may be given without it.
     pub fn iteration(&self, theta: &[f64], simulated_switching: bool) -> Result<Iteration> {
         let names = self.structure.ls_names();
-        let blocks = self.structure.unpack(theta)?;
+        let from_rest = theta.len() == self.structure.model_size();
+        let blocks = match from_rest {
+            true => self.structure.with_initial_state(false).unpack(theta)?,
+            false => self.structure.unpack(theta)?,
+        };
         match &blocks.output {
             Some(out) => {
                 let regression = SandwichRegression::new(
