@@ -10,8 +10,7 @@ import pytest
 
 import backlashid as bid
 from backlashid import CascadeModel, SandwichModel, _core
-from backlashid.identify import Structure
-from backlashid.identify._refine import problem, refine_output_error
+from backlashid.identify import Structure, levenberg_marquardt
 
 
 def _terms(a: np.ndarray, b: np.ndarray, u_past: tuple, x_past: tuple) -> list[float]:
@@ -67,20 +66,22 @@ def test_the_initial_state_ends_theta_under_the_cores_names():
     assert s.model(theta) == Structure(2, 2, 3, 2, 2).model(theta[:14])
     assert "initial state" in str(s)
     u = np.sin(0.3 * np.arange(100))
-    prob = problem(s, u, u)
+    prob = s.problem(u, u)
     assert prob.initial_state and prob.names == s.names
-    assert not problem(Structure(2, 2, 3), u, u).initial_state
+    lower, upper = prob.bounds()  # the state is free
+    assert lower[14:] == [-np.inf] * 5 and upper[14:] == [np.inf] * 5
+    assert not Structure(2, 2, 3).problem(u, u).initial_state
 
 
 @pytest.mark.parametrize("model", [bid.example1(), bid.example2()], ids=["cascade", "sandwich"])
 def test_a_simulation_from_the_state_at_a_cut_continues_the_longer_record(model):
     u, clean, theta = _cut(model, 400, 317, seed=1)
     s = _structure(model, initial_state=True)
-    prob = problem(s, u, clean)
+    prob = s.problem(u, clean)
     np.testing.assert_allclose(prob.simulate(theta), clean, rtol=0, atol=1e-12)
     assert prob.gradient(theta)[1] < 1e-24
     # from rest the first samples are wrong
-    rest = problem(_structure(model, False), u, clean)
+    rest = _structure(model, False).problem(u, clean)
     assert abs(rest.simulate(theta[: s.model_size])[1] - clean[1]) > 1e-3
 
 
@@ -117,8 +118,8 @@ def test_refinement_with_the_initial_state_recovers_records_cut_mid_motion(model
         state = np.zeros(s_init.size - p0)
         if isinstance(model, CascadeModel):
             state[-1] = y[0]
-        rest = refine_output_error(s_rest, problem(s_rest, u, y), y, start)
-        init = refine_output_error(s_init, problem(s_init, u, y), y, np.r_[start, state])
+        rest = levenberg_marquardt(s_rest.problem(u, y), start)
+        init = levenberg_marquardt(s_init.problem(u, y), np.r_[start, state])
         assert rest.converged and init.converged
         energy = float(noise @ noise)
         assert init.cost < 1.5 * energy < 20.0 * energy < rest.cost, (cut, init.cost, rest.cost, energy)
