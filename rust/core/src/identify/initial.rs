@@ -34,6 +34,16 @@
 //! Theta's layout: the model's parameters, then x0_1..x0_n, y_prev, then (sandwich)
 //! w0_1..w0_m. The paper's iteration (eq 17-28, 29-36) stays a from-rest method: it ignores
 //! these values (`Problem::iteration`).
+//!
+//! What the data can tell: y_prev acts only while the record starts holding; when the first
+//! sample moves, its column is zero (its value does not matter, and a covariance should leave
+//! it out). Likewise x0_k reaches y only through samples that move: an FIR block's x0_k acts
+//! on x(k) alone, masked if the backlash holds there. A record that starts holding can also
+//! be explained by y_prev alone (a hold at y_prev) or by a first move: a local minimum of the
+//! output error from a start of zeros; y_prev = the first measured output is the better start
+//! for a cascade. With a feedthrough the caller's record starts `shift` samples early with
+//! zeros prepended to the measured output (exact from rest only): with a state those samples
+//! belong in the warm-up.
 
 use crate::error::Result;
 use crate::model::linear::{check_no_overflow, LinearBlock, LinearState};
