@@ -78,11 +78,15 @@ class Problem:
     def __new__(
         cls, u: _F, y: _F, na: int, nb: int, degree: int, nr: int, ns: int,
         feedthrough: bool = False, output_feedthrough: bool = False, warmup: int | None = None,
+        initial_state: bool = False,
     ) -> Self: ...
+    # initial_state: theta ends with the record's initial state x0_1..x0_n (the input block's
+    # observer-canonical state, n = max(na, nb) of the core's block), y_prev (the backlash
+    # memory y(0)) and for the sandwich w0_1..w0_m (rust/core/src/identify/initial.rs)
     @staticmethod
     def layout(
         na: int, nb: int, degree: int, nr: int, ns: int, feedthrough: bool = False, output_feedthrough: bool = False,
-        least_squares: bool = False,
+        least_squares: bool = False, initial_state: bool = False,
     ) -> list[str]: ...  # the names of theta (or of the least-squares vector) of a structure, no record needed
     @property
     def names(self) -> list[str]: ...
@@ -92,9 +96,12 @@ class Problem:
     def samples(self) -> int: ...
     @property
     def warmup(self) -> int: ...
-    def simulate(self, theta: _F) -> _F: ...  # free run from rest
+    @property
+    def initial_state(self) -> bool: ...
+    def simulate(self, theta: _F) -> _F: ...  # free run from rest or from theta's initial state
     # the paper's step (cascade eq 18-28, sandwich eq 33-36): (ls, moving_fraction, the
-    # estimate's own simulation RMSE over t >= warmup for the cascade, None for the sandwich)
+    # estimate's own simulation RMSE over t >= warmup for the cascade, None for the sandwich);
+    # from rest: theta's initial state, if any, is ignored (theta may also be given without it)
     def iteration(self, theta: _F, simulated_switching: bool = False) -> tuple[_LS, float, float | None]: ...
     # (R_aug, cost) with R_aug^T R_aug = [J | r]^T [J | r] over t >= warmup, streamed
     def oe_factor(self, theta: _F) -> tuple[_F, float]: ...
@@ -128,7 +135,7 @@ class AugmentedProblem:
     def gradient(self, theta: _F) -> tuple[_F, float]: ...  # (J^T r, cost)
     def sensitivity(self, theta: _F) -> tuple[_F, _F]: ...  # (y_sim, dense J, N x p)
     def feasible(self, theta: _F) -> bool: ...  # linear block stable, free effects in their domain
-    def bounds(self) -> tuple[list[float], list[float]]: ...
+    def bounds(self) -> tuple[list[float], list[float]]: ...  # c_L, c_R >= 0 as Problem, effects: their domain
 
 def lstsq(a: _F, b: _F, names: list[str]) -> _LS: ...
 def arx(u: _F, y: _F, na: int, nb: int, delay: int, warmup: int) -> _LS: ...

@@ -136,7 +136,8 @@ def test_bounds_feasibility_and_refusals() -> None:
         u, y, 2, 2, 3, [("compliance", [0.2, 0.5, 0.1]), ("hysteresis_memory", [0.1, 0.0])], ["omega", "r_1", "w_1"]
     )
     lower, upper = prob.bounds()
-    assert lower == [-np.inf] * 11 + [0.0, 0.0, -np.inf]
+    assert lower == [-np.inf] * 4 + [0.0] + [-np.inf] * 3 + [0.0] + [-np.inf] * 2 + [0.0, 0.0, -np.inf]
+    assert lower[:11] == _core.Problem(u, y, 2, 2, 3, 0, 0).bounds()[0]
     assert upper == [np.inf] * 11 + [np.pi, np.inf, np.inf]
     theta = np.concatenate([THETA, [0.5, 0.1, 0.0]])
     assert prob.feasible(theta)
@@ -150,8 +151,9 @@ def test_bounds_feasibility_and_refusals() -> None:
         _core.AugmentedProblem(u, y, 2, 2, 3, [("friction", [0.0, 0.0])], ["k"])
     with pytest.raises(DataError, match="warmup"):
         _core.AugmentedProblem(u, y, 2, 2, 3, warmup=200)
-    with pytest.raises(DataError):
-        prob.simulate(THETA)
+    for method in (prob.simulate, prob.feasible, prob.cost):
+        with pytest.raises(DataError, match="theta has 11 parameters"):
+            method(THETA)
     wild = _core.AugmentedProblem(np.resize(u, 2000), np.resize(y, 2000), 2, 2, 3, [("friction", [0.0, 0.0])], ["F_v"])
     with pytest.raises(ModelError, match="diverged"):
         wild.cost(np.concatenate([THETA, [-50.0]]))

@@ -13,6 +13,13 @@ r_1..r_nr in place of r_1 = 1, r_2..r_nr), the core sees the shifted blocks, and
 compares them with the measured output delayed by one sample per feedthrough
 (:attr:`Structure.shift`). Identifiability is unchanged: the normalisation m_L1 = 1 and the
 first output coefficient = 1 (r_0 with output feedthrough) hold in both readings.
+
+With ``initial_state`` the vector ends with the record's initial state, named by the core:
+x0_1..x0_n (the input block's observer-canonical state at the record's start, n = max(n_a,
+nb): x0_k is the part of x(k) its past contributes, x0_1 = x(1)), y_prev (the backlash memory
+y(0)) and for the sandwich w0_1..w0_m (the output block's, m = max(n_r, ns)); the core's
+``rust/core/src/identify/initial.rs`` says why this parametrisation is minimal. The model's
+blocks (:meth:`Structure.unpack`, :meth:`Structure.model`) ignore them; zeros are rest.
 """
 
 from __future__ import annotations
@@ -103,6 +110,9 @@ class Structure:
         a_0 u(t) in the input block.
     output_feedthrough : bool, default False
         r_0 y(t) in the sandwich's output block.
+    initial_state : bool, default False
+        The vector ends with the record's initial state (x0_1..x0_n, y_prev, w0_1..w0_m);
+        False: the record starts at rest, the paper's assumption.
 
     Raises
     ------
@@ -116,6 +126,8 @@ class Structure:
     ['a1', 'a2', 'b1', 'b2', 'c_L', 'm_L2', 'm_L3', 'm_R1', 'c_R', 'm_R2', 'm_R3']
     >>> Structure(2, 2, 3, 2, 2).size
     14
+    >>> Structure(2, 2, 3, initial_state=True).names[-3:]
+    ['x0_1', 'x0_2', 'y_prev']
     """
 
     na: int
@@ -125,6 +137,7 @@ class Structure:
     ns: int = 0
     feedthrough: bool = False
     output_feedthrough: bool = False
+    initial_state: bool = False
 
     def __post_init__(self) -> None:
         for name, value, least in (("na", self.na, 1), ("nb", self.nb, 0), ("degree", self.degree, 1)):
@@ -156,7 +169,15 @@ class Structure:
 
     def _layout(self, least_squares: bool) -> list[str]:
         return _core.Problem.layout(
-            self.na, self.nb, self.degree, self.nr, self.ns, self.feedthrough, self.output_feedthrough, least_squares
+            self.na,
+            self.nb,
+            self.degree,
+            self.nr,
+            self.ns,
+            self.feedthrough,
+            self.output_feedthrough,
+            least_squares,
+            self.initial_state,
         )
 
     @functools.cached_property
@@ -171,8 +192,13 @@ class Structure:
 
     @property
     def size(self) -> int:
-        """The number of parameters p."""
+        """The number of parameters p (the initial state's included)."""
         return len(self.names)
+
+    @property
+    def model_size(self) -> int:
+        """The number of the model's parameters (the vector without its initial state)."""
+        return len(self.ls_names)
 
     @functools.cached_property
     def _slices(self) -> dict[str, Any]:
@@ -188,6 +214,7 @@ class Structure:
             "a": block(r"a\d+"), "b": block(r"b\d+"), "c_L": names.index("c_L"), "m_L": block(r"m_L\d+"),
             "m_R1": names.index("m_R1"), "c_R": names.index("c_R"), "m_R": block(r"m_R([2-9]|\d\d+)"),
             "r": block(r"r\d+"), "s": block(r"s\d+"),
+            "x0": block(r"x0_\d+"), "y_prev": block(r"y_prev"), "w0": block(r"w0_\d+"),
         }
 
     @fill(theta=_THETA_DOC)
@@ -214,8 +241,36 @@ class Structure:
             s=t[sl["s"]].tolist() if self.is_sandwich else [],
         )
 
+    @fill(theta=_THETA_DOC)
+    def initial(self, theta: NDArray[np.float64]) -> tuple[list[float], float, list[float]]:
+        """The initial state of a physical vector (rest, all zero, without one).
+
+        {theta}
+
+        Returns
+        -------
+        tuple
+            (x0, y_prev, w0): the input block's x0_1..x0_n, the backlash memory y(0), the
+            sandwich output block's w0_1..w0_m (empty for a cascade).
+
+        Examples
+        --------
+        >>> from backlashid.identify import Structure
+        >>> s = Structure(1, 1, 1, initial_state=True)
+        >>> s.names
+        ['a1', 'b1', 'c_L', 'm_R1', 'c_R', 'x0_1', 'y_prev']
+        >>> s.initial([0.5, -0.3, 0.1, 1.0, 0.1, 0.25, -0.05])
+        ([0.25], -0.05, [])
+        """
+        if not self.initial_state:
+            return [], 0.0, []
+        sl = self._slices
+        t = np.asarray(theta, dtype=np.float64)
+        return t[sl["x0"]].tolist(), float(t[sl["y_prev"]][0]), t[sl["w0"]].tolist()
+
     def pack(self, model: Model) -> NDArray[np.float64]:
-        """The physical vector of a model, normalised so that m_L1 = 1 and r_1 = 1.
+        """The physical vector of a model, normalised so that m_L1 = 1 and r_1 = 1; its
+        initial state, if the structure has one, is rest (zeros).
 
         Parameters
         ----------
@@ -261,6 +316,7 @@ class Structure:
                     f"not nr={self.nr}, ns={self.ns}, output_feedthrough={self.output_feedthrough}"
                 )
             parts += [model.r[1:], model.s]
+        parts.append(np.zeros(self.size - self.model_size))  # the initial state: rest
         return np.concatenate([np.asarray(p, dtype=np.float64) for p in parts])
 
     def physical_from_ls(self, theta_ls: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -274,12 +330,13 @@ class Structure:
         Returns
         -------
         numpy.ndarray
-            The physical vector.
+            The physical vector (its initial state, if the structure has one, rest: the
+            paper's iteration has none).
         """
         sl = self._slices
         t = np.array(theta_ls, dtype=np.float64)
         t[sl["c_R"]] = t[sl["c_R"]] / t[sl["m_R1"]]
-        return t
+        return np.concatenate([t, np.zeros(self.size - self.model_size)])
 
     @fill(theta=_THETA_DOC)
     def model(self, theta: NDArray[np.float64]) -> Model:
@@ -317,7 +374,8 @@ class Structure:
 
         u and y are checked once here; its methods (``simulate``, ``cost``, ``iteration``,
         ``oe_factor``, ``gradient``, ``feasible``, ``bounds``) take only theta, and
-        :func:`levenberg_marquardt` searches it.
+        :func:`levenberg_marquardt` searches it. With :attr:`initial_state` theta ends with
+        the record's initial state (free in ``bounds()``).
 
         Parameters
         ----------
@@ -346,13 +404,26 @@ class Structure:
         >>> prob.names == s.names, prob.bounds()[0][4:6]
         (True, [0.0, -inf])
         """
-        return _core.Problem(u, y, self.na, self.nb, self.degree, self.nr, self.ns, self.feedthrough, self.output_feedthrough, warmup)
+        return _core.Problem(
+            u,
+            y,
+            self.na,
+            self.nb,
+            self.degree,
+            self.nr,
+            self.ns,
+            self.feedthrough,
+            self.output_feedthrough,
+            warmup,
+            self.initial_state,
+        )
 
     def __str__(self) -> str:
         text = f"na={self.na}, nb={self.nb}, degree={self.degree}"
         text += ", feedthrough" if self.feedthrough else ""
         text += f", nr={self.nr}, ns={self.ns}" if self.is_sandwich else ""
-        return text + (", output feedthrough" if self.output_feedthrough else "")
+        text += ", output feedthrough" if self.output_feedthrough else ""
+        return text + (", initial state" if self.initial_state else "")
 
 
 def normalise(model: Model) -> Model:

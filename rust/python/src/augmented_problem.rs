@@ -121,11 +121,12 @@ impl PyAugmentedProblem {
 
     /// The stability guard: the linear block stable, every effect with a free parameter
     /// inside its domain.
-    fn feasible(&self, theta: Vec<f64>) -> bool {
-        self.inner.feasible(&theta)
+    fn feasible(&self, py: Python<'_>, theta: Vec<f64>) -> PyResult<bool> {
+        run(py, || self.inner.feasible(&theta))
     }
 
-    /// (lower, upper): +-inf for the cascade's parameters, the effects' domains for theirs.
+    /// (lower, upper): the cascade's as Problem.bounds (c_L, c_R >= 0), the effects' domains
+    /// for theirs.
     fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
         self.inner.bounds()
     }

@@ -72,7 +72,9 @@ fn structure(
 }
 
 /// An identification problem: the structure (orders, degree, feedthroughs) and the record
-/// (u, y, warm-up), checked once. Rust owns the layout of theta and its names.
+/// (u, y, warm-up), checked once. Rust owns the layout of theta and its names; with
+/// `initial_state`, theta ends with the record's initial state x0_1..x0_n, y_prev (and the
+/// sandwich's w0_1..w0_m), see the core's `identify::initial`.
 #[pyclass(frozen, name = "Problem", module = "backlashid._core")]
 pub(crate) struct PyProblem {
     inner: core::Problem,
@@ -81,7 +83,7 @@ pub(crate) struct PyProblem {
 #[pymethods]
 impl PyProblem {
     #[new]
-    #[pyo3(signature = (u, y, na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false, warmup=None))]
+    #[pyo3(signature = (u, y, na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false, warmup=None, initial_state=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -95,8 +97,10 @@ impl PyProblem {
         feedthrough: bool,
         output_feedthrough: bool,
         warmup: Option<&Bound<'_, PyAny>>,
+        initial_state: bool,
     ) -> PyResult<Self> {
-        let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?;
+        let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?
+            .with_initial_state(initial_state);
         let (u, y) = (signal("u", &u)?.into_owned(), signal("y", &y)?.into_owned());
         let warmup = match warmup {
             Some(w) => warmup_of(w, u.len())?,
@@ -107,9 +111,10 @@ impl PyProblem {
     }
 
     /// The parameter names of a structure, in the order of theta (no record needed); with
-    /// `least_squares`, those of the least-squares vector of eq (19) / (31).
+    /// `least_squares`, those of the least-squares vector of eq (19) / (31) (which has no
+    /// initial state); with `initial_state`, theta's trailing x0_k, y_prev, w0_k.
     #[staticmethod]
-    #[pyo3(signature = (na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false, least_squares=false))]
+    #[pyo3(signature = (na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false, least_squares=false, initial_state=false))]
     #[allow(clippy::too_many_arguments)]
     fn layout(
         na: &Bound<'_, PyAny>,
@@ -120,8 +125,10 @@ impl PyProblem {
         feedthrough: bool,
         output_feedthrough: bool,
         least_squares: bool,
+        initial_state: bool,
     ) -> PyResult<Vec<String>> {
-        let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?;
+        let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?
+            .with_initial_state(initial_state);
         Ok(if least_squares {
             s.ls_names()
         } else {
@@ -133,6 +140,12 @@ impl PyProblem {
     #[getter]
     fn names(&self) -> Vec<String> {
         self.inner.names()
+    }
+
+    /// Whether theta ends with the record's initial state (False: from rest).
+    #[getter]
+    fn initial_state(&self) -> bool {
+        self.inner.structure().initial_state
     }
 
     /// The names of the least-squares vector of eq (19) / (31) (c_1, c_2 for c_L, c_R).
@@ -153,7 +166,7 @@ impl PyProblem {
         self.inner.warmup()
     }
 
-    /// Free-run output of the estimate theta from rest.
+    /// Free-run output of the estimate theta, from rest or from theta's initial state.
     fn simulate<'py>(&self, py: Python<'py>, theta: Vec<f64>) -> PyResult<SignalOut<'py>> {
         let out = run(py, || self.inner.simulate(&theta))?;
         Ok(vec_f64(py, out))
@@ -177,7 +190,8 @@ impl PyProblem {
 
     /// One iteration of the paper's algorithm at theta (cascade eq 18-28, sandwich eq
     /// 33-36): ((theta_ls, rss, cov, rcond), moving_fraction, rmse), rmse the estimate's own
-    /// simulation RMSE (cascade) or None (sandwich).
+    /// simulation RMSE (cascade) or None (sandwich). From rest: theta's initial state, if
+    /// any, is ignored (theta may also be given without it).
     #[pyo3(signature = (theta, simulated_switching=false))]
     fn iteration<'py>(
         &self,

@@ -181,15 +181,19 @@ impl AugmentedProblem {
         &self.start
     }
 
+    fn wrong_length(&self, theta: &[f64]) -> Error {
+        Error::Data(format!(
+            "theta has {} parameters but the problem has {}: give one value per name",
+            theta.len(),
+            self.names.len()
+        ))
+    }
+
     /// The cascade and the effects at theta (each effect checked in its domain).
     fn at(&self, theta: &[f64]) -> Result<At> {
         let p0 = self.structure.size();
         if theta.len() != self.names.len() {
-            return Err(Error::Data(format!(
-                "theta has {} parameters but the problem has {}: give one value per name",
-                theta.len(),
-                self.names.len()
-            )));
+            return Err(self.wrong_length(theta));
         }
         let blocks = self.structure.unpack(&theta[..p0])?;
         let mut params: Vec<Vec<f64>> = self.effects.iter().map(|e| e.parameters()).collect();
@@ -354,10 +358,13 @@ impl AugmentedProblem {
         )
     }
 
-    /// The refit's guard: theta of the right length, the linear block stable and every
-    /// effect with a free parameter inside its domain (`Effect::feasible`).
-    pub fn feasible(&self, theta: &[f64]) -> bool {
-        match self.at(theta) {
+    /// The refit's guard: the linear block stable and every effect with a free parameter
+    /// inside its domain (`Effect::feasible`); an error only for a theta of the wrong length.
+    pub fn feasible(&self, theta: &[f64]) -> Result<bool> {
+        if theta.len() != self.names.len() {
+            return Err(self.wrong_length(theta));
+        }
+        Ok(match self.at(theta) {
             Ok(at) => {
                 at.model.linear.is_stable()
                     && at
@@ -366,14 +373,17 @@ impl AugmentedProblem {
                         .all(|(e, c)| c.iter().all(Option::is_none) || e.feasible())
             }
             Err(_) => false,
-        }
+        })
     }
 
-    /// (lower, upper) per parameter: +-inf for the cascade's, the effects' domain boxes
-    /// (`Effect::bounds`) for the free ones.
+    /// (lower, upper) per parameter: the cascade's as `Problem::bounds` (c_L, c_R >= 0, the
+    /// others free), the effects' domain boxes (`Effect::bounds`) for the free ones.
     pub fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
         let p0 = self.structure.size();
+        let lay = self.structure.layout();
         let mut lower = vec![f64::NEG_INFINITY; p0];
+        lower[lay.c_l()] = 0.0;
+        lower[lay.c_r()] = 0.0;
         let mut upper = vec![f64::INFINITY; p0];
         for &(i, k) in &self.free {
             let (lo, hi) = self.effects[i].bounds(k);
@@ -770,16 +780,18 @@ mod tests {
         let (lo, hi) = p.bounds();
         assert_eq!(&lo[11..], &[0.0, 0.0, 0.0]);
         assert_eq!(&hi[11..], &[1.0, f64::INFINITY, f64::INFINITY]);
-        assert!(lo[..11].iter().all(|v| *v == f64::NEG_INFINITY));
+        let mut nominal = [f64::NEG_INFINITY; 11];
+        (nominal[4], nominal[8]) = (0.0, 0.0); // c_L, c_R as Problem::bounds
+        assert_eq!(&lo[..11], &nominal[..]);
         let mut th = THETA.to_vec();
         th.extend([0.1, 0.0, 0.2]);
-        assert!(p.feasible(&th));
+        assert!(p.feasible(&th).unwrap());
         th[11] = 1.0; // zeta = 1: outside the open interval
-        assert!(!p.feasible(&th));
+        assert!(!p.feasible(&th).unwrap());
         th[11] = 0.1;
         th[2] = -2.5; // an unstable linear block
-        assert!(!p.feasible(&th));
-        assert!(!p.feasible(&THETA));
+        assert!(!p.feasible(&th).unwrap());
+        assert!(matches!(p.feasible(&THETA), Err(Error::Data(_))));
         // the dead time stays as given: u delayed by 3
         let mut th = THETA.to_vec();
         th.extend([0.1, 0.0, 0.0]);

@@ -63,17 +63,63 @@ impl Ring {
         }
     }
 
+    /// Lag k >= 1 (k <= rows).
     #[inline(always)]
     fn lag(&self, k: usize) -> &[f64] {
-        let at = (self.head + k - 1) % self.rows * self.p;
-        &self.data[at..at + self.p]
+        let mut at = self.head + k - 1;
+        if at >= self.rows {
+            at -= self.rows;
+        }
+        &self.data[at * self.p..(at + 1) * self.p]
     }
 
+    /// The newest row becomes lag 1 (its columns `cols` written; the others keep zero).
     #[inline(always)]
-    fn push(&mut self, row: &[f64]) {
-        self.head = (self.head + self.rows - 1) % self.rows;
+    fn push(&mut self, row: &[f64], cols: &XCols) {
+        self.head = if self.head == 0 {
+            self.rows - 1
+        } else {
+            self.head - 1
+        };
         let at = self.head * self.p;
-        self.data[at..at + self.p].copy_from_slice(row);
+        let slot = &mut self.data[at..at + self.p];
+        slot[..cols.lead].copy_from_slice(&row[..cols.lead]);
+        for &c in &cols.extra {
+            slot[c] = row[c];
+        }
+    }
+}
+
+/// The columns in which x (and u_eff) can depend on theta: a, b (the first `lead`) and the
+/// drive effects' free parameters (`extra`, after the cascade's); the others of dx stay 0.
+struct XCols {
+    lead: usize,
+    extra: Vec<usize>,
+}
+
+impl XCols {
+    fn contains(&self, c: usize) -> bool {
+        c < self.lead || self.extra.contains(&c)
+    }
+
+    /// d[c] = 0 for c in the columns.
+    #[inline(always)]
+    fn zero(&self, d: &mut [f64]) {
+        d[..self.lead].fill(0.0);
+        for &c in &self.extra {
+            d[c] = 0.0;
+        }
+    }
+
+    /// d[c] += k v[c] for c in the columns.
+    #[inline(always)]
+    fn axpy(&self, d: &mut [f64], k: f64, v: &[f64]) {
+        for (o, w) in d[..self.lead].iter_mut().zip(&v[..self.lead]) {
+            *o += k * w;
+        }
+        for &c in &self.extra {
+            d[c] += k * v[c];
+        }
     }
 }
 
@@ -154,11 +200,41 @@ pub(crate) fn walk_augmented(
         }
     }
     let driven = !drive.is_empty();
+    // the columns x can depend on: a, b and the drive effects' free parameters (every other
+    // column of dx, du_eff stays 0; the recursions run over these only)
+    let mut extra: Vec<usize> = drive
+        .iter()
+        .flat_map(|(_, cols)| cols.iter().flatten().copied())
+        .collect();
+    extra.sort_unstable();
+    extra.dedup();
+    let xcols = XCols {
+        lead: na + nb,
+        extra,
+    };
+    if xcols.extra.iter().any(|&c| c < xcols.lead) {
+        return Err(Error::Data(
+            "augmented sensitivities: an effect's column among a, b (internal shape mismatch)"
+                .into(),
+        ));
+    }
     let len = u.len();
     let (mut u_eff, mut x) = (vec![0.0; len], vec![0.0; len]);
     // tangents: of u_eff over na lags, of x over max(nb, 1) lags (x(t-1) for friction)
     let mut du = Ring::new(na, p, &[]);
     let mut dxr = Ring::new(nb.max(1), p, if nb > 0 { start.dx_past } else { &dx0 });
+    if start
+        .dx_past
+        .iter()
+        .enumerate()
+        .any(|(k, v)| *v != 0.0 && !xcols.contains(k % p))
+    {
+        return Err(Error::Data(
+            "augmented sensitivities: d x_past outside the columns of a, b and the drive effects \
+             (internal shape mismatch)"
+                .into(),
+        ));
+    }
     let (mut dxt, mut dv, mut dy, mut dout) =
         (vec![0.0; p], vec![0.0; p], vec![0.0; p], vec![0.0; p]);
     let (mut dcl, mut dcr) = (vec![0.0; p], vec![0.0; p]);
@@ -168,19 +244,15 @@ pub(crate) fn walk_augmented(
     for t in 0..len {
         let xt = lin.output_at(&u_eff, &x, t, &state.linear);
         x[t] = xt;
-        // dx(t)
-        dxt.fill(0.0);
+        // dx(t), in the columns of xcols (the others stay 0)
+        xcols.zero(&mut dxt);
         if driven {
             for (i, ai) in a.iter().enumerate() {
-                for (d, v) in dxt.iter_mut().zip(du.lag(i + 1)) {
-                    *d += ai * v;
-                }
+                xcols.axpy(&mut dxt, *ai, du.lag(i + 1));
             }
         }
         for (j, bj) in b.iter().enumerate() {
-            for (d, v) in dxt.iter_mut().zip(dxr.lag(j + 1)) {
-                *d -= bj * v;
-            }
+            xcols.axpy(&mut dxt, -bj, dxr.lag(j + 1));
         }
         for i in 1..=na {
             dxt[i - 1] += if i <= t {
@@ -216,7 +288,7 @@ pub(crate) fn walk_augmented(
             for (e, cols) in drive.iter_mut() {
                 v = e.drive_tangent(v, &mut dv, &s, &d, cols);
             }
-            du.push(&dv);
+            du.push(&dv, &xcols);
         }
         u_eff[t] = v;
         x_prev = xt;
@@ -251,9 +323,8 @@ pub(crate) fn walk_augmented(
         if mv != Move::Hold {
             let left = mv == Move::Left;
             let sl = slope(if left { m_l } else { m_r }, xi);
-            for (d, v) in dy.iter_mut().zip(&dxt) {
-                *d = sl * v;
-            }
+            dy.fill(0.0);
+            xcols.axpy(&mut dy, sl, &dxt);
             // d c_L(t) on L, -d c_R(t) on R
             let sign = if left { 1.0 } else { -1.0 };
             if widths.is_empty() {
@@ -300,7 +371,7 @@ pub(crate) fn walk_augmented(
             visit(t, out, &dout, same)?;
             std::mem::swap(&mut dout, &mut prev_out);
         }
-        dxr.push(&dxt);
+        dxr.push(&dxt, &xcols);
     }
     Ok(())
 }
@@ -340,8 +411,12 @@ pub(crate) fn augmented_sensitivity(
 }
 
 /// R_aug of [J | r] over t >= `warmup` (J = d y_sim / d theta, r = y - y_sim) and the cost
-/// sum r^2, streamed: a run of equal rows (a held backlash) folds as one (`RowSink::repeat`),
-/// the folding on a second thread when `threads` >= 2.
+/// sum r^2, streamed with `sensitivity::cascade_oe_factor`'s two economies: a row on L is
+/// zero in R's own columns (m_R1, c_R, m_R2..) and one on R in L's (c_L, m_L2..) unless an
+/// effect mixes them (compliance's resonance filters rows of both), so each row folds into
+/// the narrowest of three factors (without R's columns, without L's, all) that holds it,
+/// tested on the row itself; and a run of equal rows (a held backlash) folds as one
+/// (`RowSink::repeat`). The folding runs on a second thread when `threads` >= 2.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn augmented_oe_factor(
     model: &CascadeModel,
@@ -355,7 +430,19 @@ pub(crate) fn augmented_oe_factor(
     p: usize,
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
-    let streamed = fold_stream_parts(&[p], threads, |sink| {
+    let lin = &model.linear;
+    let lay = Layout {
+        na: lin.na(),
+        nb: lin.nb(),
+        n: branch_degree(&model.backlash)?,
+    };
+    // L's own columns c_l..m_r1, R's m_r1..r
+    let (c_l, m_r1, r_end) = (lay.c_l(), lay.m_r1(), lay.r());
+    let left: Vec<usize> = (0..m_r1).chain(r_end..p).collect();
+    let right: Vec<usize> = (0..c_l).chain(m_r1..p).collect();
+    let all: Vec<usize> = (0..p).collect();
+    let widths = [left.len(), right.len(), p];
+    let streamed = fold_stream_parts(&widths, threads, |sink| {
         walk_augmented(
             model,
             effects,
@@ -372,14 +459,23 @@ pub(crate) fn augmented_oe_factor(
                 if same && sink.repeat(r) {
                     return Ok(());
                 }
-                sink.push(row, r)
+                if row[m_r1..r_end].iter().all(|v| *v == 0.0) {
+                    sink.push_part(0, &[&row[..m_r1], &row[r_end..]], r)
+                } else if row[c_l..m_r1].iter().all(|v| *v == 0.0) {
+                    sink.push_part(1, &[&row[..c_l], &row[m_r1..]], r)
+                } else {
+                    sink.push_part(2, &[row], r)
+                }
             },
         )
     })?;
-    let all: Vec<usize> = (0..p).collect();
     let factor = TriangularFactor::embed_sum(
         p,
-        &[(&streamed.factors[0], &all)],
+        &[
+            (&streamed.factors[0], &left),
+            (&streamed.factors[1], &right),
+            (&streamed.factors[2], &all),
+        ],
         streamed.rows,
         streamed.dispersion,
     );

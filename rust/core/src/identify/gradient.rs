@@ -10,6 +10,8 @@
 //!   nu = mu filtered backwards by 1/B (nu(t) = mu(t) - sum_k b_k nu(t+k)), the transpose of
 //!     the causal 1/B that makes dx(t)/da_i = w_u(t-i), dx(t)/db_j = -w_x(t-j);
 //!   g[a_i] = sum_t nu(t) u(t-i),   g[b_j] = -sum_t nu(t) x(t-j).
+//! With an initial state (`initial`): g[x0_k] = nu(k) (x0_k enters x as u enters through a_i)
+//! and g[y_prev] = lambda(1) if the first sample holds, else 0 (paper time).
 //! The forward pass is the model's own simulation; one backward pass does the rest, with
 //! the case flags f1, f2 recomputed as the simulation's, in straight-line code (both
 //! branches' terms, weighted by f1 and f2). The sandwich's output
@@ -17,8 +19,9 @@
 //! `sensitivity::walk_sandwich` instead.
 
 use crate::error::Result;
+use crate::identify::initial::{simulate_from, start_cols, Start};
 use crate::identify::sensitivity::{
-    branch_degree, cascade_cols, check_pair, overflowed, sandwich_cols, walk_sandwich,
+    branch_degree, cascade_cols, check_pair, overflowed, sandwich_cols, walk_sandwich_from,
 };
 use crate::model::backlash::GeneralBacklash;
 use crate::model::linear::LinearBlock;
@@ -68,11 +71,28 @@ pub(crate) fn cascade_oe_gradient_unchecked(
     y: &[f64],
     warmup: usize,
 ) -> Result<OeGradient> {
+    cascade_oe_gradient_from(linear, backlash, None, u, y, warmup)
+}
+
+/// `cascade_oe_gradient_unchecked` from an initial state (its columns after the model's), or
+/// from rest (None).
+pub(crate) fn cascade_oe_gradient_from(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    start: Option<&Start>,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+) -> Result<OeGradient> {
     branch_degree(backlash)?;
     // forward: the model's own simulation; backward: its case flags f1 (on L), f2 (on R)
     // recomputed sample by sample as `CascadeModel::simulate_internals` has them
-    let x = linear.simulate(u, &linear.rest_state())?;
-    let y_sim = backlash.simulate(&x, 0.0)?;
+    let x = match start {
+        None => linear.simulate(u, &linear.rest_state())?,
+        Some(st) => simulate_from(linear, u, &st.state.x0)?,
+    };
+    let y0 = start.map_or(0.0, |st| st.state.y_prev);
+    let y_sim = backlash.simulate(&x, y0)?;
     let reverse = Reverse {
         linear,
         backlash,
@@ -81,6 +101,7 @@ pub(crate) fn cascade_oe_gradient_unchecked(
         x: &x,
         y_sim: &y_sim,
         warmup,
+        start,
     };
     let out = match backlash.padded_step() {
         Some(padded) => reverse.run(|xt, yp| padded.switching(xt, yp)),
@@ -98,6 +119,7 @@ struct Reverse<'a> {
     x: &'a [f64],
     y_sim: &'a [f64],
     warmup: usize,
+    start: Option<&'a Start<'a>>,
 }
 
 impl Reverse<'_> {
@@ -110,14 +132,16 @@ impl Reverse<'_> {
         // columns: a, b, c_L, m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn
         let (c_l, m_r1) = (a_len + b.len(), a_len + b.len() + n);
         let (c_left, c_right) = (bl.c_left(), bl.c_right());
-        let mut out = OeGradient::new(cascade_cols(self.linear, bl));
+        let model = cascade_cols(self.linear, bl);
+        let mut out = OeGradient::new(model + start_cols(self.start));
+        let (nx, y0) = self.start.map_or((0, 0.0), |st| (st.nx(), st.state.y_prev));
         let g = &mut out.gradient;
         let mut cost = 0.0;
         let mut lambda = 0.0; // lambda(t + 1)
         let mut next_holds = 0.0; // 1 when t + 1 holds (0 past the record's end)
         let mut nu_lags = vec![0.0; b.len()]; // nu(t + 1), nu(t + 2), ..
         for t in (0..u.len()).rev() {
-            let y_prev = if t > 0 { y_sim[t - 1] } else { 0.0 };
+            let y_prev = if t > 0 { y_sim[t - 1] } else { y0 };
             let (f1, f2) = flags(x[t], y_prev);
             let r = if t >= self.warmup {
                 y[t] - y_sim[t]
@@ -159,10 +183,17 @@ impl Reverse<'_> {
             for i in 1..=a_len.min(t) {
                 g[i - 1] += nu * u[t - i];
             }
+            if t < nx {
+                g[model + t] += nu; // x0 enters x(t) as a_i u(t - i) does
+            }
             for j in 1..=b.len().min(t) {
                 g[a_len + j - 1] -= nu * x[t - j];
             }
             cost += r * r; // r = 0 before the warm-up ends
+        }
+        if nx > 0 {
+            // dy/dy_prev is 1 over the first run of holds: the residuals lambda(0) collects
+            g[model + nx] = next_holds * lambda;
         }
         out.cost = cost;
         out
@@ -182,6 +213,39 @@ pub fn sandwich_oe_gradient(
     sandwich_oe_gradient_unchecked(input_linear, backlash, output_linear, u, w, warmup)
 }
 
+/// `sandwich_oe_gradient_unchecked` from an initial state (its columns after the model's),
+/// or from rest (None).
+pub(crate) fn sandwich_oe_gradient_from(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    start: Option<&Start>,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+) -> Result<OeGradient> {
+    let cols = sandwich_cols(input_linear, backlash, output_linear) + start_cols(start);
+    let mut out = OeGradient::new(cols);
+    walk_sandwich_from(
+        input_linear,
+        backlash,
+        output_linear,
+        start,
+        u,
+        |t, wt, row| {
+            if t >= warmup {
+                let r = w[t] - wt;
+                for (gi, v) in out.gradient.iter_mut().zip(row) {
+                    *gi += r * v;
+                }
+                out.cost += r * r;
+            }
+            Ok(())
+        },
+    )?;
+    out.finished()
+}
+
 /// `sandwich_oe_gradient` of a record checked before (`Problem`).
 pub(crate) fn sandwich_oe_gradient_unchecked(
     input_linear: &LinearBlock,
@@ -191,18 +255,7 @@ pub(crate) fn sandwich_oe_gradient_unchecked(
     w: &[f64],
     warmup: usize,
 ) -> Result<OeGradient> {
-    let mut out = OeGradient::new(sandwich_cols(input_linear, backlash, output_linear));
-    walk_sandwich(input_linear, backlash, output_linear, u, |t, wt, row| {
-        if t >= warmup {
-            let r = w[t] - wt;
-            for (gi, v) in out.gradient.iter_mut().zip(row) {
-                *gi += r * v;
-            }
-            out.cost += r * r;
-        }
-        Ok(())
-    })?;
-    out.finished()
+    sandwich_oe_gradient_from(input_linear, backlash, output_linear, None, u, w, warmup)
 }
 
 #[cfg(test)]

@@ -7,6 +7,7 @@
 pub mod augmented_problem;
 mod augmented_sensitivity;
 pub mod gradient;
+pub mod initial;
 pub mod problem;
 pub mod regressor;
 mod rows;
@@ -14,6 +15,7 @@ pub mod sensitivity;
 
 pub use augmented_problem::{AugmentedProblem, RecordStart};
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
+pub use initial::InitialState;
 pub use problem::{Iteration, Problem, Structure};
 pub use regressor::{
     solve_factor, ArxRegression, CascadeRegression, Regression, RowRegression, SandwichRegression,

@@ -7,20 +7,26 @@
 //! A block with a feedthrough is the same block one sample later: the core sees coefficients
 //! at lags 1.. and the caller hands in the measured output delayed accordingly.
 //!
+//! With `initial_state` (`Structure::with_initial_state`), theta ends with the initial state
+//! of a record that does not start at rest: x0_1..x0_n (the input block's, n = max(na, nb)
+//! of the core's block), y_prev (the backlash memory y(0)) and for the sandwich w0_1..w0_m
+//! (the output block's); `identify::initial` documents the parametrisation.
+//!
 //! Every method unpacks theta once into the blocks and calls the existing numerics
 //! (`CascadeRegression`, `SandwichRegression`, the output-error factors and gradients); the
 //! record is not checked again.
 
 use crate::error::{Error, Result};
 use crate::identify::gradient::OeGradient;
-use crate::identify::gradient::{cascade_oe_gradient_unchecked, sandwich_oe_gradient_unchecked};
+use crate::identify::gradient::{cascade_oe_gradient_from, sandwich_oe_gradient_from};
+use crate::identify::initial::{self, InitialState, Start};
 use crate::identify::regressor::solve_factor;
-use crate::identify::sensitivity::{cascade_oe_factor_on, oe_threads, sandwich_oe_factor_on};
+use crate::identify::sensitivity::{cascade_oe_factor_from, oe_threads, sandwich_oe_factor_from};
 use crate::identify::{CascadeRegression, SandwichRegression};
 use crate::linalg::{LeastSquares, TriangularFactor};
 use crate::model::backlash::GeneralBacklash;
 use crate::model::cascade::CascadeModel;
-use crate::model::linear::LinearBlock;
+use crate::model::linear::{blame_feeding_block, LinearBlock};
 use crate::model::sandwich::SandwichModel;
 use crate::model::signal::{check_same_length, check_signal};
 
@@ -35,6 +41,8 @@ pub struct Structure {
     pub ns: usize,
     pub feedthrough: bool,
     pub output_feedthrough: bool,
+    /// theta ends with the initial state (`identify::initial`); false: from rest.
+    pub initial_state: bool,
 }
 
 /// The positions in theta of the input block's and the backlash's parameters (the
@@ -77,6 +85,8 @@ pub struct Blocks {
     pub linear: LinearBlock,
     pub backlash: GeneralBacklash,
     pub output: Option<LinearBlock>,
+    /// The initial state's values (None: from rest).
+    pub initial: Option<InitialState>,
 }
 
 fn whole(name: &str, value: usize, least: usize) -> Result<()> {
@@ -114,7 +124,16 @@ impl Structure {
             ns,
             feedthrough,
             output_feedthrough,
+            initial_state: false,
         })
+    }
+
+    /// The same structure with (true) or without the initial state at the end of theta.
+    pub fn with_initial_state(self, initial_state: bool) -> Self {
+        Self {
+            initial_state,
+            ..self
+        }
     }
 
     /// True for a sandwich (nr > 0).
@@ -147,6 +166,11 @@ impl Structure {
 
     /// The number of parameters p.
     pub fn size(&self) -> usize {
+        self.model_size() + self.initial_size()
+    }
+
+    /// The number of the model's parameters (theta without the initial state).
+    pub fn model_size(&self) -> usize {
         self.layout().r()
             + if self.is_sandwich() {
                 self.n_r() - 1 + self.ns
@@ -155,8 +179,44 @@ impl Structure {
             }
     }
 
-    /// The parameter names in the order of theta.
+    /// The number of initial-state values x0 of the input block (0 from rest).
+    pub fn n_x0(&self) -> usize {
+        match self.initial_state {
+            true => initial::order(self.n_a(), self.nb),
+            false => 0,
+        }
+    }
+
+    /// The number of initial-state values w0 of the sandwich's output block (0 from rest).
+    pub fn n_w0(&self) -> usize {
+        match self.initial_state && self.is_sandwich() {
+            true => initial::order(self.n_r(), self.ns),
+            false => 0,
+        }
+    }
+
+    /// The number of initial-state values: x0, y_prev, w0 (0 from rest).
+    pub fn initial_size(&self) -> usize {
+        match self.initial_state {
+            true => self.n_x0() + 1 + self.n_w0(),
+            false => 0,
+        }
+    }
+
+    /// The parameter names in the order of theta: the model's, then the initial state's
+    /// (x0_1..x0_n, y_prev, w0_1..w0_m).
     pub fn names(&self) -> Vec<String> {
+        let mut names = self.model_names();
+        if self.initial_state {
+            names.extend((1..=self.n_x0()).map(|k| format!("x0_{k}")));
+            names.push("y_prev".into());
+            names.extend((1..=self.n_w0()).map(|k| format!("w0_{k}")));
+        }
+        names
+    }
+
+    /// The names of the model's parameters (no initial state).
+    fn model_names(&self) -> Vec<String> {
         let first = usize::from(!self.feedthrough);
         let n = self.degree;
         let mut names: Vec<String> = (first..=self.na).map(|i| format!("a{i}")).collect();
@@ -174,9 +234,10 @@ impl Structure {
         names
     }
 
-    /// The names of the least-squares vector of eq (19) / (31): c_1 = c_L, c_2 = m_R1 c_R.
+    /// The names of the least-squares vector of eq (19) / (31): c_1 = c_L, c_2 = m_R1 c_R (the
+    /// paper's iteration has no initial state).
     pub fn ls_names(&self) -> Vec<String> {
-        self.names()
+        self.model_names()
             .into_iter()
             .map(|k| match k.as_str() {
                 "c_L" => "c_1".into(),
@@ -209,19 +270,36 @@ impl Structure {
             .chain(theta[c_r + 1..r].iter().copied())
             .collect();
         let backlash = GeneralBacklash::from_estimate(theta[c_l], theta[c_r], m_left, m_right)?;
+        let p0 = self.model_size();
         let output = if self.is_sandwich() {
             let s0 = r + self.n_r() - 1;
             let rs: Vec<f64> = std::iter::once(1.0)
                 .chain(theta[r..s0].iter().copied())
                 .collect();
-            Some(LinearBlock::new(rs, theta[s0..].to_vec())?)
+            Some(LinearBlock::new(rs, theta[s0..p0].to_vec())?)
         } else {
             None
         };
+        let initial = self.initial_state.then(|| {
+            let y_at = p0 + self.n_x0();
+            InitialState {
+                x0: theta[p0..y_at].to_vec(),
+                y_prev: theta[y_at],
+                w0: theta[y_at + 1..].to_vec(),
+            }
+        });
+        if let Some(k) = (p0..theta.len()).find(|&k| !theta[k].is_finite()) {
+            return Err(Error::Model(format!(
+                "the initial state's {} is {}: give finite values",
+                self.names()[k],
+                theta[k]
+            )));
+        }
         Ok(Blocks {
             linear,
             backlash,
             output,
+            initial,
         })
     }
 }
@@ -286,13 +364,22 @@ impl Problem {
         self.structure.names()
     }
 
-    /// Free-run output of the estimate theta from rest.
+    /// Free-run output of the estimate theta, from rest or from theta's initial state.
     pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
         let blocks = self.structure.unpack(theta)?;
         Self::simulate_blocks(blocks, &self.u)
     }
 
     fn simulate_blocks(blocks: Blocks, u: &[f64]) -> Result<Vec<f64>> {
+        if let Some(init) = &blocks.initial {
+            let x = initial::simulate_from(&blocks.linear, u, &init.x0)?;
+            let y = (blocks.backlash.simulate(&x, init.y_prev))
+                .map_err(|e| blame_feeding_block(e, &blocks.linear, "input"))?;
+            return match &blocks.output {
+                None => Ok(y),
+                Some(out) => initial::simulate_named(out, &y, &init.w0, "w"),
+            };
+        }
         match blocks.output {
             None => {
                 let m = CascadeModel::new(blocks.linear, blocks.backlash);
@@ -344,10 +431,16 @@ impl Problem {
 
     /// One iteration of the paper's algorithm at theta (cascade eq 18-28, sandwich eq 33-36),
     /// streamed into a triangular factor. The cascade's switching signal is the measured y,
-    /// or with `simulated_switching` the estimate's own simulated output.
+    /// or with `simulated_switching` the estimate's own simulated output. It is a from-rest
+    /// method: theta's initial state, if the structure has one, is ignored (the least-squares
+    /// vector has the model's names), and theta may be given without it.
     pub fn iteration(&self, theta: &[f64], simulated_switching: bool) -> Result<Iteration> {
         let names = self.structure.ls_names();
-        let blocks = self.structure.unpack(theta)?;
+        let from_rest = theta.len() == self.structure.model_size();
+        let blocks = match from_rest {
+            true => self.structure.with_initial_state(false).unpack(theta)?,
+            false => self.structure.unpack(theta)?,
+        };
         match &blocks.output {
             Some(out) => {
                 let regression = SandwichRegression::new(
@@ -392,32 +485,34 @@ impl Problem {
 
     /// The output-error problem at theta in factored form: R_aug of [J | y - y_sim] over
     /// t >= warmup and the cost sum (y - y_sim)^2, streamed (no N x p Jacobian).
+    /// With an initial state, J has its columns too (theta's order).
     pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
         let b = self.structure.unpack(theta)?;
         let (u, y, threads) = (&self.u[..], &self.y[..], oe_threads(self.u.len()));
+        let start = self.start(&b);
+        let (lin, bl, w) = (&b.linear, &b.backlash, self.warmup);
         match &b.output {
-            None => cascade_oe_factor_on(&b.linear, &b.backlash, u, y, self.warmup, threads),
-            Some(out) => {
-                sandwich_oe_factor_on(&b.linear, &b.backlash, out, u, y, self.warmup, threads)
-            }
+            None => cascade_oe_factor_from(lin, bl, start.as_ref(), u, y, w, threads),
+            Some(out) => sandwich_oe_factor_from(lin, bl, out, start.as_ref(), u, y, w, threads),
         }
+    }
+
+    /// The initial state's values and columns (after the model's parameters).
+    fn start<'b>(&self, blocks: &'b Blocks) -> Option<Start<'b>> {
+        blocks.initial.as_ref().map(|state| Start {
+            state,
+            col: self.structure.model_size(),
+        })
     }
 
     /// g = J^T (y - y_sim) over t >= warmup and the cost, one pass without the factor.
     pub fn gradient(&self, theta: &[f64]) -> Result<OeGradient> {
         let b = self.structure.unpack(theta)?;
+        let start = self.start(&b);
+        let (lin, bl, u, y, w) = (&b.linear, &b.backlash, &self.u, &self.y, self.warmup);
         match &b.output {
-            None => {
-                cascade_oe_gradient_unchecked(&b.linear, &b.backlash, &self.u, &self.y, self.warmup)
-            }
-            Some(out) => sandwich_oe_gradient_unchecked(
-                &b.linear,
-                &b.backlash,
-                out,
-                &self.u,
-                &self.y,
-                self.warmup,
-            ),
+            None => cascade_oe_gradient_from(lin, bl, start.as_ref(), u, y, w),
+            Some(out) => sandwich_oe_gradient_from(lin, bl, out, start.as_ref(), u, y, w),
         }
     }
 }

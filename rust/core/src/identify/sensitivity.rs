@@ -7,9 +7,12 @@
 //!   sandwich: dw(t) = sum_i r_i dy(t-i) - sum_j s_j dw(t-j) + [dw/dr_i = y(t-i), dw/ds_j = -w(t-j)].
 //! Column order: theta's layout (`problem::Layout`, its one home): a_1..a_na, b_1..b_nb, c_L,
 //! m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn, then for the sandwich r_2..r_nr, s_1..s_ns (m_L1 = 1
-//! and r_1 = 1 are fixed).
+//! and r_1 = 1 are fixed); with an initial state (`initial::Start`) x0_1..x0_n, y_prev,
+//! w0_1..w0_m follow: dx(t)/dx0_k = g(t-k) (g the impulse response of 1/B), dy/dy_prev = 1
+//! until the first move, dw(t)/dw0_k = [t = k] + the recursion.
 
 use crate::error::{Error, Result};
+use crate::identify::initial::{simulate_from, start_cols, Start};
 use crate::identify::problem::Layout;
 use crate::linalg::streaming::{default_threads, fold_stream, fold_stream_parts, TriangularFactor};
 use crate::model::backlash::GeneralBacklash;
@@ -68,7 +71,7 @@ pub fn cascade_sensitivity(
         jacobian: Vec::with_capacity(u.len() * cols),
         cols,
     };
-    walk_cascade(linear, backlash, u, |_, yt, _, row| {
+    walk_cascade(linear, backlash, None, u, |_, yt, _, row| {
         out.output.push(yt);
         out.jacobian.extend_from_slice(row);
         Ok(())
@@ -125,12 +128,17 @@ struct ChainStepper<'a> {
     /// dy(t) after `step(t)` (dy(t-1) before it).
     dy: Vec<f64>,
     y_prev: f64,
+    /// With an initial state: the column of x0_1 and g(t-1), g(t-2), .. (n lags), g the
+    /// impulse response of 1/B, dx(t)/dx0_k = g(t-k) (0-based t, k = 0..n).
+    init_col: Option<usize>,
+    g: Vec<f64>,
 }
 
 impl<'a> ChainStepper<'a> {
     fn new(
         linear: &'a LinearBlock,
         backlash: &'a GeneralBacklash,
+        start: Option<&Start>,
         u: &'a [f64],
         cols: usize,
     ) -> Result<Self> {
@@ -140,8 +148,15 @@ impl<'a> ChainStepper<'a> {
             nb: linear.nb(),
             n,
         };
-        let x = linear.simulate(u, &linear.rest_state())?;
+        let x = match start {
+            None => linear.simulate(u, &linear.rest_state())?,
+            Some(st) => simulate_from(linear, u, &st.state.x0)?,
+        };
         let lags = lay.na.max(lay.nb);
+        let mut dy = vec![0.0; cols];
+        if let Some(st) = start {
+            dy[st.y_prev_col()] = 1.0; // dy(-1)/dy_prev: y(0) is the memory itself
+        }
         Ok(Self {
             backlash,
             b: linear.b(),
@@ -149,9 +164,11 @@ impl<'a> ChainStepper<'a> {
             x,
             wu: vec![0.0; lags],
             wx: vec![0.0; lags],
-            dy: vec![0.0; cols],
+            dy,
             lay,
-            y_prev: 0.0,
+            y_prev: start.map_or(0.0, |st| st.state.y_prev),
+            init_col: start.map(|st| st.col),
+            g: vec![0.0; start.map_or(0, Start::nx)],
         })
     }
 
@@ -161,6 +178,11 @@ impl<'a> ChainStepper<'a> {
     fn step(&mut self, t: usize) -> Result<(f64, Move)> {
         let (na, n) = (self.lay.na, self.lay.n);
         let nl = self.lay.linear();
+        // g(t) = [t = 0] - sum_k b_k g(t-k), with an initial state only
+        let gt = match self.init_col {
+            Some(_) => filtered(f64::from(u8::from(t == 0)), self.b, &self.g),
+            None => 0.0,
+        };
         let bl = self.backlash;
         let xt = self.x[t];
         let yp = self.y_prev;
@@ -201,6 +223,15 @@ impl<'a> ChainStepper<'a> {
             for (k, w) in self.wx[..nl - na].iter().enumerate() {
                 dy[na + k] = slope * -w;
             }
+            if let Some(col) = self.init_col {
+                // dx(t)/dx0_k = g(t-k): g(t), then the lags; y_prev no longer matters
+                let nx = self.g.len();
+                dy[col] = slope * gt;
+                for (k, w) in self.g[..nx.saturating_sub(1)].iter().enumerate() {
+                    dy[col + 1 + k] = slope * w;
+                }
+                dy[col + nx] = 0.0;
+            }
             let mut p = xi;
             if mv == Move::Left {
                 dy[self.lay.c_l()] = slope;
@@ -226,6 +257,9 @@ impl<'a> ChainStepper<'a> {
         );
         push_lag(&mut self.wu, wu);
         push_lag(&mut self.wx, wx);
+        if self.init_col.is_some() {
+            push_lag(&mut self.g, gt);
+        }
         self.y_prev = yt;
         Ok((yt, mv))
     }
@@ -329,15 +363,31 @@ pub(crate) fn cascade_oe_factor_on(
     warmup: usize,
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
-    let cols = cascade_cols(linear, backlash);
+    cascade_oe_factor_from(linear, backlash, None, u, y, warmup, threads)
+}
+
+/// `cascade_oe_factor_on` from an initial state (its columns after the model's), or from
+/// rest (None).
+pub(crate) fn cascade_oe_factor_from(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    start: Option<&Start>,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
+    let model = cascade_cols(linear, backlash);
+    let cols = model + start_cols(start);
     let nl = linear.na() + linear.nb();
-    // L's rows: a, b, c_L, m_L2..m_Ln; R's rows: a, b, m_R1, c_R, m_R2..m_Rn
+    // L's rows: a, b, c_L, m_L2..m_Ln; R's rows: a, b, m_R1, c_R, m_R2..m_Rn; the initial
+    // state's columns (x0, y_prev) in both
     let split = nl + backlash.left().coefficients().len();
-    let left: Vec<usize> = (0..split).collect();
+    let left: Vec<usize> = (0..split).chain(model..cols).collect();
     let right: Vec<usize> = (0..nl).chain(split..cols).collect();
     let streamed = fold_stream_parts(&[left.len(), right.len()], threads, |sink| {
-        let mut on_right = false; // the branch of dy (a zero row before any move: either)
-        walk_cascade(linear, backlash, u, |t, yt, mv, dy| {
+        let mut on_right = false; // the branch of dy (before any move: only y_prev's column)
+        walk_cascade(linear, backlash, start, u, |t, yt, mv, dy| {
             match mv {
                 Move::Left => on_right = false,
                 Move::Right => on_right = true,
@@ -351,7 +401,7 @@ pub(crate) fn cascade_oe_factor_on(
                 return Ok(());
             }
             match on_right {
-                false => sink.push_part(0, &[&dy[..split]], r),
+                false => sink.push_part(0, &[&dy[..split], &dy[model..]], r),
                 true => sink.push_part(1, &[&dy[..nl], &dy[split..]], r),
             }
         })
@@ -370,13 +420,15 @@ pub(crate) fn cascade_oe_factor_on(
 
 /// The cascade's output y(t), its case and Jacobian row dy(t), handed to `visit(t, y(t),
 /// case, dy(t))` for t = 0, 1, ... (the one place the cascade's sensitivity recursions run).
-fn walk_cascade(
+pub(crate) fn walk_cascade(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
+    start: Option<&Start>,
     u: &[f64],
     mut visit: impl FnMut(usize, f64, Move, &[f64]) -> Result<()>,
 ) -> Result<()> {
-    let mut chain = ChainStepper::new(linear, backlash, u, cascade_cols(linear, backlash))?;
+    let cols = cascade_cols(linear, backlash) + start_cols(start);
+    let mut chain = ChainStepper::new(linear, backlash, start, u, cols)?;
     for t in 0..u.len() {
         let (yt, mv) = chain.step(t)?;
         visit(t, yt, mv, &chain.dy)?;
@@ -432,12 +484,38 @@ pub(crate) fn sandwich_oe_factor_on(
     warmup: usize,
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
-    let cols = sandwich_cols(input_linear, backlash, output_linear);
+    sandwich_oe_factor_from(
+        input_linear,
+        backlash,
+        output_linear,
+        None,
+        u,
+        w,
+        warmup,
+        threads,
+    )
+}
+
+/// `sandwich_oe_factor_on` from an initial state (its columns after the model's), or from
+/// rest (None).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sandwich_oe_factor_from(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    start: Option<&Start>,
+    u: &[f64],
+    w: &[f64],
+    warmup: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64)> {
+    let cols = sandwich_cols(input_linear, backlash, output_linear) + start_cols(start);
     finish(fold_stream(cols, threads, |sink| {
-        walk_sandwich(
+        walk_sandwich_from(
             input_linear,
             backlash,
             output_linear,
+            start,
             u,
             |t, wt, row| match t >= warmup {
                 true => sink.push(row, w[t] - wt),
@@ -454,13 +532,30 @@ pub(crate) fn walk_sandwich(
     backlash: &GeneralBacklash,
     output_linear: &LinearBlock,
     u: &[f64],
+    visit: impl FnMut(usize, f64, &[f64]) -> Result<()>,
+) -> Result<()> {
+    walk_sandwich_from(input_linear, backlash, output_linear, None, u, visit)
+}
+
+/// `walk_sandwich` from an initial state (its columns after the model's: x0, y_prev, w0;
+/// w0_k enters w at the record's k-th sample), or from rest (None).
+pub(crate) fn walk_sandwich_from(
+    input_linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    output_linear: &LinearBlock,
+    start: Option<&Start>,
+    u: &[f64],
     mut visit: impl FnMut(usize, f64, &[f64]) -> Result<()>,
 ) -> Result<()> {
     let (r, s) = (output_linear.a(), output_linear.b());
     let (nr, ns) = (r.len(), s.len());
     let inner = cascade_cols(input_linear, backlash);
-    let cols = inner + nr.saturating_sub(1) + ns;
-    let mut chain = ChainStepper::new(input_linear, backlash, u, cols)?;
+    let cols = inner + nr.saturating_sub(1) + ns + start_cols(start);
+    let mut chain = ChainStepper::new(input_linear, backlash, start, u, cols)?;
+    let (w0, w0_col): (&[f64], usize) = match start {
+        Some(st) => (&st.state.w0, st.w0_col()),
+        None => (&[], 0),
+    };
     // rings: y(t), dy(t) over nr + 1 samples, w(t), dw(t) over ns + 1
     let (ry, rw) = (nr + 1, ns + 1);
     let mut y_ring = vec![0.0; ry];
@@ -508,6 +603,10 @@ pub(crate) fn walk_sandwich(
                 }
                 dw[inner + nr - 1 + jj] -= w_lag;
             }
+        }
+        if let Some(v) = w0.get(t) {
+            wt += v;
+            dw[w0_col + t] += 1.0;
         }
         if !wt.is_finite() {
             return Err(crate::model::linear::overflow(output_linear, "w", t));
