@@ -13,7 +13,7 @@ use crate::errors::{run, DataError};
 
 /// A whole number >= `least` (an order, a degree, a warm-up), else a DataError with the
 /// message of `_validation.check_whole`.
-fn whole(value: &Bound<'_, PyAny>, name: &str, least: usize) -> PyResult<usize> {
+pub(crate) fn whole(value: &Bound<'_, PyAny>, name: &str, least: usize) -> PyResult<usize> {
     let bad = || {
         let text = value
             .repr()
@@ -32,7 +32,7 @@ fn whole(value: &Bound<'_, PyAny>, name: &str, least: usize) -> PyResult<usize> 
 
 /// The warm-up: a whole number >= 0, with `_validation.check_warmup`'s message (the core
 /// checks warmup < n after the signals).
-fn warmup_of(value: &Bound<'_, PyAny>, n: usize) -> PyResult<usize> {
+pub(crate) fn warmup_of(value: &Bound<'_, PyAny>, n: usize) -> PyResult<usize> {
     let ok = !value.is_instance_of::<PyBool>();
     match value.extract::<i64>() {
         Ok(v) if ok && v >= 0 => Ok(v as usize),

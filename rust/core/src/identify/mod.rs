@@ -9,6 +9,7 @@ pub mod problem;
 pub mod regressor;
 mod rows;
 pub mod sensitivity;
+pub mod wiener_hammerstein;
 
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
 pub use problem::{Iteration, Problem, Structure};
@@ -18,3 +19,4 @@ pub use regressor::{
 pub use sensitivity::{
     cascade_oe_factor, cascade_sensitivity, sandwich_oe_factor, sandwich_sensitivity, Sensitivity,
 };
+pub use wiener_hammerstein::{WhStructure, WienerHammersteinProblem};
