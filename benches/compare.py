@@ -25,6 +25,7 @@ also the agreement max |theta_lib - theta_numpy|, for simulate max |y_lib - y_nu
     python benches/compare.py                    # fits at N = 1e4, 1e5; simulate at 1e5, 1e6
     python benches/compare.py --sizes 10000      # quick (about a minute)
     python benches/compare.py --profile 100000   # also cProfile of the default fit at N = 1e5
+    python benches/compare.py --parts default --sizes 100000 1000000 --oe-max-n 1000000 --oe-methods trf
 
 Needs the bench extra (pip install -e ".[bench]") for scipy.
 """
@@ -195,6 +196,10 @@ def main() -> None:
         "--no-restart-row", dest="restart_row", action="store_false",
         help="leave out fit_cascade(restarts=0) (one LM refinement per candidate, like the scipy fit)",
     )
+    ap.add_argument(
+        "--parts", nargs="+", default=["paper", "default", "simulate"], choices=["paper", "default", "simulate"],
+        help="which comparisons to run (default all three)",
+    )
     ap.add_argument("--profile", type=int, default=0, metavar="N", help="cProfile the default fit at N")
     ap.add_argument("--top", type=int, default=15)
     args = ap.parse_args()
@@ -217,7 +222,7 @@ def main() -> None:
     notes: list[str] = []
     base = {"repeats": args.repeats, "k": args.iterations}
 
-    for n in args.sizes:
+    for n in args.sizes if "paper" in args.parts else []:
         lib = in_fresh_process("paper-lib", n, base)
         notes.append(f"paper/library N={n}: {lib['note']}")
         for kind, label in (("paper-np-loop", "paper K=%d vs NumPy loop"), ("paper-np-vec", "paper K=%d vs NumPy vectorised")):
@@ -227,7 +232,7 @@ def main() -> None:
             notes.append(f"{label % args.iterations} N={n}: max |theta_lib - theta_numpy| = {agree:.1e}")
         sys.stdout.flush()
 
-    for n in args.sizes:
+    for n in args.sizes if "default" in args.parts else []:
         lib = in_fresh_process("default-lib", n, base)
         notes.append(f"default/library N={n}: {lib['note']}")
         if n > args.oe_max_n:
@@ -253,7 +258,7 @@ def main() -> None:
             notes.append(f"scipy OE ({method}) N={n}: {ref['note']}")
         sys.stdout.flush()
 
-    for n in args.sim_sizes:
+    for n in args.sim_sizes if "simulate" in args.parts else []:
         lib = in_fresh_process("sim-lib", n, base)
         ref = in_fresh_process("sim-np", n, base)
         agree = float(np.max(np.abs(lib["y"] - ref["y"])))

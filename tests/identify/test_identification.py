@@ -297,7 +297,7 @@ def test_coarse_stage_ends_at_the_whole_record_optimum():
     # the history is the segment's: every entry is its iterate's RMSE on those samples
     seg = slice(0, 20 + 5000)
     for theta, rmse in zip(fast.history, fast.history_rmse):
-        sim = bid.identify._refine.problem(fast.structure, d.u[seg], d.noisy[seg]).simulate(theta)
+        sim = fast.structure.problem(d.u[seg], d.noisy[seg]).simulate(theta)
         assert rmse == pytest.approx(np.sqrt(np.mean((d.noisy[seg] - sim)[20:] ** 2)), rel=1e-12)
     # an explicit segment length, and none when it is not shorter than the record
     assert fit_cascade(d.u[:8000], d.noisy[:8000], coarse=3000).coarse_samples == 3000
@@ -321,9 +321,9 @@ def test_lm_stops_when_a_step_would_move_less_than_se_tol_standard_errors():
     d = bid.example_data(truth, 3000, snr=25, seed=4)
     s = bid.identify.Structure(2, 2, 3)
     start = fit_cascade(d.u, d.noisy, refine=False).theta
-    prob = bid.identify._refine.problem(s, d.u, d.noisy)
-    loose = bid.identify._refine.refine_output_error(s, prob, d.noisy, start)
-    tight = bid.identify._refine.refine_output_error(s, prob, d.noisy, start, se_tol=1e-6)
+    prob = s.problem(d.u, d.noisy)
+    loose = bid.identify.levenberg_marquardt(prob, start)
+    tight = bid.identify.levenberg_marquardt(prob, start, se_tol=1e-6)
     assert loose.converged and tight.converged and loose.iterations <= tight.iterations
     se = np.sqrt(np.diag(tight.cost / (3000 - s.size) * tight.unscaled_covariance(s.names)))
     assert np.all(np.abs(loose.theta - tight.theta) < 0.05 * se)
@@ -344,7 +344,7 @@ def test_the_gradient_pass_is_the_folded_jacobian_times_the_residual():
         d = bid.example_data(model, 4000, snr=25, seed=seed)
         theta = structure.pack(model) * (1.0 + 0.02 * np.cos(np.arange(structure.size)))
         for warmup in (0, 150):
-            prob = bid.identify._refine.problem(structure, d.u, d.noisy, warmup)
+            prob = structure.problem(d.u, d.noisy, warmup)
             r_aug, cost = prob.oe_factor(theta)
             g, g_cost = prob.gradient(theta)
             p = structure.size
@@ -360,8 +360,8 @@ def test_lm_ends_with_the_factor_of_a_point_within_one_standard_error():
     d = bid.example_data(truth, 20_000, snr=25, seed=7)
     s = bid.identify.Structure(2, 2, 3)
     start = fit_cascade(d.u, d.noisy, refine=False).theta
-    prob = bid.identify._refine.problem(s, d.u, d.noisy)
-    fit = bid.identify._refine.refine_output_error(s, prob, d.noisy, start)
+    prob = s.problem(d.u, d.noisy)
+    fit = bid.identify.levenberg_marquardt(prob, start)
     r_aug, cost = prob.oe_factor(fit.theta)
     here = np.linalg.inv(r_aug[: s.size, : s.size].T @ r_aug[: s.size, : s.size])
     kept = fit.unscaled_covariance(s.names)

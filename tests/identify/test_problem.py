@@ -10,7 +10,6 @@ import pytest
 import backlashid as bid
 from backlashid import DataError, LinearBlock, SandwichModel, _core, fit_cascade, fit_sandwich
 from backlashid.identify import Structure
-from backlashid.identify._refine import problem
 
 
 def _record(n: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -88,7 +87,7 @@ def test_the_problem_names_are_the_papers_and_the_fits(case, names):
         d = bid.example_data(model, 1500, snr=100, seed=4)
         fit = fit_sandwich(d.u, d.noisy, 2, 2, 2, 2, 3, feedthrough=ft, output_feedthrough=ft, refine=False)
         structure = Structure(2, 2, 3, 2, 2, ft, ft)
-    prob = problem(structure, d.u, d.noisy)
+    prob = structure.problem(d.u, d.noisy)
     assert prob.names == fit.names == structure.names == names
     assert prob.ls_names == [{"c_L": "c_1", "c_R": "c_2"}.get(k, k) for k in names]
     # the free run of the fitted parameters is the fitted model's (shifted by a feedthrough)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from ._fit import FitResult, fit_cascade, fit_sandwich
 from ._metrics import Metrics, evaluate, fit_percent, nrmse, one_step_prediction, rmse
+from ._refine import OutputErrorFit, levenberg_marquardt
 from ._scaling import Scaling, evaluate_scaled, simulate_scaled
 from ._structure import Estimate, Structure, normalise
 from ._wiener_hammerstein import LinearBaseline, WienerHammersteinFit, fit_wiener_hammerstein, wiener_hammerstein_model
@@ -20,6 +21,7 @@ __all__ = [
     "FitResult",
     "LinearBaseline",
     "Metrics",
+    "OutputErrorFit",
     "Scaling",
     "Structure",
     "WienerHammersteinFit",
@@ -29,6 +31,7 @@ __all__ = [
     "fit_percent",
     "fit_sandwich",
     "fit_wiener_hammerstein",
+    "levenberg_marquardt",
     "nrmse",
     "normalise",
     "one_step_prediction",

@@ -3,7 +3,7 @@
 The paper's iterative algorithm with internal-variable estimation runs first: each iteration
 is one core call (internal variables by eq 22-26 / 35, regressor eq 18 / 33, faer QR solve);
 this module only drives the iterations. By default the iterate with the lowest free-run
-simulation error is then refined by output-error Levenberg-Marquardt (``refine.py``), which
+simulation error is then refined by the package's one output-error Levenberg-Marquardt (``_refine.py``), which
 removes the bias of the equation-error iterations under noise.
 """
 
@@ -23,7 +23,7 @@ from .._docstrings import AXES, fill
 from .._validation import identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
-from ._refine import OutputErrorFit, is_stable, problem, refine_output_error, spectral_radius
+from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
 from ._structure import Structure
 
 __all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
@@ -380,9 +380,9 @@ def _run(structure: Structure, prob: _core.Problem, u: NDArray[np.float64], y: N
     return run
 
 
-def _is_valid(structure: Structure, theta: NDArray[np.float64]) -> bool:
+def _is_valid(structure: Structure, prob: _core.Problem, theta: NDArray[np.float64]) -> bool:
     """Stable blocks and branches that increase across the dead band (a model can be built)."""
-    if not is_stable(structure, theta):
+    if not prob.feasible(theta):
         return False
     try:
         structure.model(theta)
@@ -463,24 +463,24 @@ def _search(
     for r in usable:
         for th in {id(x): x for x in (r.history[r.best()], r.history[0])}.values():
             try:
-                candidates.append(refine_output_error(structure, prob, y_arr, th))
+                candidates.append(levenberg_marquardt(prob, th))
             except BacklashIdError:
                 continue
     if not candidates:
         return run, k, None
     # The cheapest candidate that is a valid model (increasing branches, stable blocks); an
     # invalid one only when no candidate is valid (it is then reported as such).
-    refined = min(candidates, key=lambda c: (not _is_valid(structure, c.theta), c.cost))
+    refined = min(candidates, key=lambda c: (not _is_valid(structure, prob, c.theta), c.cost))
     # The simulation error is piecewise smooth: LM can stop at a kink or in a shallow local
     # minimum. Restarts from seeded perturbations keep a result only if cheaper.
     rng = np.random.default_rng(seed)
     for _ in range(restarts):
         start = refined.theta + perturbation * rng.standard_normal(structure.size)
         try:
-            trial = refine_output_error(structure, prob, y_arr, start)
+            trial = levenberg_marquardt(prob, start)
         except BacklashIdError:
             continue
-        if (not _is_valid(structure, trial.theta), trial.cost) < (not _is_valid(structure, refined.theta), refined.cost):
+        if (not _is_valid(structure, prob, trial.theta), trial.cost) < (not _is_valid(structure, prob, refined.theta), refined.cost):
             refined = trial
     return run, k, refined
 
@@ -539,11 +539,11 @@ def _fit(
         restarts = RESTARTS if len(u_arr) - warmup <= RESTARTS_UP_TO else 0
 
     # one compiled problem per record: the whole record, and the coarse stage's segment
-    whole = problem(structure, u_arr, y_arr, warmup)
+    whole = structure.problem(u_arr, y_arr, warmup)
 
     def search(end: int) -> tuple[_Run, int, OutputErrorFit | None]:
         u_end, y_end = u_arr[:end], y_arr[:end]
-        prob = whole if end == len(u_arr) else problem(structure, u_end, y_end, warmup)
+        prob = whole if end == len(u_arr) else structure.problem(u_end, y_end, warmup)
         return _search(
             structure, prob, u_end, y_end, starts, paper=paper, refine=refine, restarts=restarts,
             perturbation=perturbation, seed=seed, max_iter=max_iter, tol=tol, switching=switching, step=step,
@@ -560,7 +560,7 @@ def _fit(
             run, k, refined = search(end)
             # a segment that hardly moves the backlash says nothing about its branches
             if refined is not None and _moving(structure, refined.theta, u_arr[:end], user_warmup) >= min_moving:
-                refined = refine_output_error(structure, whole, y_arr, refined.theta)
+                refined = levenberg_marquardt(whole, refined.theta)
                 found = run, k, refined
         except BacklashIdError:  # the segment is not enough: search the whole record
             pass

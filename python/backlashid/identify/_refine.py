@@ -10,27 +10,72 @@ record by :func:`problem`): each trial passes theta only.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy import linalg
 
 from .. import _core
-from ..errors import BacklashIdError
-from ._structure import Structure
+from ..errors import BacklashIdError, DataError
 
 
 @dataclass(frozen=True)
 class OutputErrorFit:
+    """The end of a :func:`levenberg_marquardt` search.
+
+    Attributes
+    ----------
+    theta : ndarray
+        The parameters, in the problem's layout.
+    cost : float
+        The sum of squared simulation errors after the warm-up at ``theta``.
+    r_aug : ndarray
+        The (p+1) x (p+1) triangular factor [R | Q^T r] of [J | r] at ``theta`` (R folded at
+        ``theta`` or at most one standard error before it).
+    n_residuals : int
+        The residuals of the cost (samples after the warm-up).
+    iterations : int
+        Accepted steps.
+    converged : bool
+        Stopped by a tolerance or at a point no damped step improves, not by ``max_iter``.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.identify import Structure, levenberg_marquardt
+    >>> d = bid.example_data(bid.example1(), 400, seed=1)
+    >>> s = Structure(2, 2, 3)
+    >>> fit = levenberg_marquardt(s.problem(d.u, d.noisy), s.pack(bid.example1()))
+    >>> fit.unscaled_covariance(s.names).shape
+    (11, 11)
+    """
+
     theta: NDArray[np.float64]
-    cost: float  # sum of squared simulation errors after the warm-up
-    r_aug: NDArray[np.float64]  # (p+1) x (p+1) factor of [J | r] at theta (or a negligible step before)
+    cost: float
+    r_aug: NDArray[np.float64]
     n_residuals: int
-    iterations: int  # accepted steps
-    converged: bool  # stopped by a tolerance or at a point no damped step improves, not by max_iter
+    iterations: int
+    converged: bool
 
     def unscaled_covariance(self, names: list[str]) -> NDArray[np.float64]:
-        """(J^T J)^{-1} = (R^T R)^{-1}."""
+        """(J^T J)^{-1} = (R^T R)^{-1} at the end.
+
+        Parameters
+        ----------
+        names : list of str
+            The parameter names (one per column of R).
+
+        Returns
+        -------
+        ndarray
+            The p x p unscaled covariance; times cost / (n - p) it is the covariance.
+
+        Raises
+        ------
+        NotIdentifiableError
+            If R is singular.
+        """
         p = len(names)
         return _core.lstsq(self.r_aug[:p, :p], self.r_aug[:p, p], names)[2]
 
@@ -41,40 +86,72 @@ def spectral_radius(den: NDArray[np.float64]) -> float:
     return _core.spectral_radius([float(v) for v in den])
 
 
-def is_stable(structure: Structure, theta: NDArray[np.float64]) -> bool:
-    p = structure.unpack(theta)
-    return all(spectral_radius(np.asarray(d)) < 1.0 for d in (p.b, p.s))
+class CompiledProblem(Protocol):
+    """What :func:`levenberg_marquardt` needs of a compiled problem.
+
+    Every problem of the Rust core has it: the cascade/sandwich ``_core.Problem``, the
+    diagnosis's augmented cascade, the Wiener-Hammerstein problem. theta's layout and names
+    are the problem's own; the record is checked once when the problem is built.
+
+    Attributes
+    ----------
+    names : list of str
+        The parameter names, in theta's order.
+    samples : int
+        The record's length.
+    warmup : int
+        Samples left out of the cost at the start.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> from backlashid.identify import Structure
+    >>> d = bid.example_data(bid.example1(), 200, seed=1)
+    >>> prob = Structure(2, 2, 3).problem(d.u, d.noisy)
+    >>> prob.bounds()[0][:5]
+    [-inf, -inf, -inf, -inf, 0.0]
+    """
+
+    @property
+    def names(self) -> list[str]: ...
+    @property
+    def samples(self) -> int: ...
+    @property
+    def warmup(self) -> int: ...
+    def cost(self, theta: NDArray[np.float64]) -> float: ...
+    def oe_factor(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]: ...
+    def gradient(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]: ...
+    def feasible(self, theta: NDArray[np.float64]) -> bool: ...
+    def bounds(self) -> tuple[list[float], list[float]]: ...
 
 
-def problem(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int = 0) -> _core.Problem:
-    """The core's compiled problem of a structure and a record (u and y checked once); its
-    methods take only theta: ``simulate``, ``iteration``, ``oe_factor``, ``gradient``."""
-    s = structure
-    return _core.Problem(u, y, s.na, s.nb, s.degree, s.nr, s.ns, s.feedthrough, s.output_feedthrough, warmup)
-
-
-def refine_output_error(
-    structure: Structure,
-    problem: _core.Problem,
-    y: NDArray[np.float64],
-    theta0: NDArray[np.float64],
+def levenberg_marquardt(
+    problem: CompiledProblem,
+    theta0: ArrayLike,
     *,
+    lower: ArrayLike | None = None,
+    upper: ArrayLike | None = None,
     max_iter: int = 200,
     se_tol: float = 1e-2,
     xtol: float = 1e-12,
 ) -> OutputErrorFit:
-    """Minimise sum_t (y(t) - y_sim(t, theta))^2 over t >= warmup from theta0 (``problem``
-    holds the record and the warm-up; ``y`` is its output, for the residuals of a plain
-    simulation); steps that make
-    a linear block unstable or overflow the simulation are rejected (the damping grows).
+    """The package's one Levenberg-Marquardt search: minimise the output-error cost
+    sum_t (y(t) - y_sim(t, theta))^2 over t >= warmup of a compiled problem from theta0,
+    within the box [lower, upper] (default: the problem's ``bounds()``, e.g. dead-band widths
+    >= 0). Steps that leave the problem's stability guard (``feasible``) or overflow the
+    simulation are rejected (the damping grows).
+
+    Bounds: a parameter at a bound whose descent direction points out of the box is held for
+    the step (its column left out of the damped problem); the others' step is projected onto
+    the box. The start is projected onto the box too.
 
     Stops when a step would move the parameters by less than ``se_tol`` standard errors: the
-    Gauss-Newton step delta of the linearised problem has delta^T J^T J delta = ||Q^T r||^2,
-    its predicted gain, and divided by the noise variance sigma^2 = cost / (n - p) that is
-    the squared length of delta in standard errors. The rule is the same for the predicted
-    gain before a step and the actual gain of an accepted step (a kink of the piecewise
-    smooth cost can make the two differ); ``xtol`` stops a step that is negligible in
-    absolute terms.
+    Gauss-Newton step delta of the linearised problem (over the parameters not held) has
+    delta^T J^T J delta = ||P Q^T r||^2, its predicted gain, and divided by the noise variance
+    sigma^2 = cost / (n - p) that is the squared length of delta in standard errors. The rule
+    is the same for the predicted gain before a step and the actual gain of an accepted step
+    (a kink of the piecewise smooth cost can make the two differ); ``xtol`` stops a step that
+    is negligible in absolute terms.
 
     A step of at most one standard error (||R delta|| <= sigma, R folded where it started)
     ends at a point where the Jacobian is that of the start to O(1/sqrt(N)): the end is
@@ -82,32 +159,73 @@ def refine_output_error(
     and the rule tested with that R, Q^T r = R^-T g. Only if a step is still worth taking is
     a factor folded there. The returned ``r_aug`` is [R | Q^T r] at theta with R folded at
     theta or at most one standard error before it (or at the point before a negligible step).
+
+    Parameters
+    ----------
+    problem : CompiledProblem
+        The compiled problem: record, structure and warm-up.
+    theta0 : array_like
+        The start, in the problem's layout.
+    lower, upper : array_like, optional
+        The box, one bound per parameter (+-inf for none); default the problem's ``bounds()``.
+    max_iter : int, default 200
+        Most accepted-or-not outer iterations.
+    se_tol : float, default 0.01
+        Stop when a step would move theta by less than this many standard errors.
+    xtol : float, default 1e-12
+        Stop at a step shorter than this relative to ``theta``.
+
+    Returns
+    -------
+    OutputErrorFit
+        The end point, its cost and factor.
+
+    Raises
+    ------
+    BacklashIdError
+        If the start is unstable or its simulation diverges.
+    DataError
+        If the bounds do not fit the problem.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.identify import Structure, levenberg_marquardt
+    >>> d = bid.example_data(bid.example1(), 2000, seed=3)
+    >>> s = Structure(2, 2, 3)
+    >>> truth = s.pack(bid.example1())
+    >>> fit = levenberg_marquardt(s.problem(d.u, d.noisy), truth + 0.02)
+    >>> bool(fit.converged and np.max(np.abs(fit.theta - truth)) < 0.05)
+    True
     """
-    names = structure.names
-    n_par = structure.size
-    warmup = problem.warmup
-    dof = max(len(y) - warmup - n_par, 1)
+    names = list(problem.names)
+    n_par = len(names)
+    n_res = problem.samples - problem.warmup
+    dof = max(n_res - n_par, 1)
+    box = problem.bounds()
+    lo = np.asarray(box[0] if lower is None else lower, dtype=np.float64)
+    hi = np.asarray(box[1] if upper is None else upper, dtype=np.float64)
+    if lo.shape != (n_par,) or hi.shape != (n_par,) or np.any(lo > hi) or np.any(np.isnan(lo) | np.isnan(hi)):
+        raise DataError(f"lower and upper: give one bound per parameter ({n_par} of them) with lower <= upper and no NaN")
 
     def cost_at(theta: NDArray[np.float64], gradient: bool) -> tuple[float, NDArray[np.float64] | None]:
         """The cost at theta (inf if unusable), and g = J^T r there if ``gradient``."""
-        if not is_stable(structure, theta):
-            return np.inf, None
         try:
+            if not problem.feasible(theta):
+                return np.inf, None
             if gradient:
                 g, c = problem.gradient(theta)
             else:
-                g, r = None, y[warmup:] - problem.simulate(theta)[warmup:]
-                with np.errstate(over="ignore", invalid="ignore"):
-                    c = float(r @ r)
+                g, c = None, problem.cost(theta)
         except BacklashIdError:
             return np.inf, None
         return (c, g) if np.isfinite(c) else (np.inf, None)
 
-    theta = np.array(theta0, dtype=np.float64)
+    theta = np.clip(np.array(theta0, dtype=np.float64), lo, hi)
     unusable = BacklashIdError("output-error refinement: the start is unstable or diverges")
-    if not is_stable(structure, theta):
-        raise unusable
     try:  # the factor's pass simulates the start: an overflow is a ModelError
+        if not problem.feasible(theta):
+            raise unusable
         r_aug, cost = problem.oe_factor(theta)
     except BacklashIdError:
         raise unusable from None
@@ -116,16 +234,20 @@ def refine_output_error(
     steps, converged = 0, False
     for _ in range(max_iter):
         r_mat, qtr = r_aug[:n_par, :n_par], r_aug[:n_par, n_par]
+        free = _free(theta, r_mat.T @ qtr, lo, hi)
         negligible = se_tol**2 * cost / dof  # a gain of se_tol standard errors, squared
-        if float(qtr @ qtr) <= negligible:  # also spares climbing the damping to ~1e12
+        if _gain(r_mat, qtr, free, names) <= negligible:  # also spares climbing the damping to ~1e12
             converged = True
             break
         scale = np.maximum(scale, np.linalg.norm(r_mat, axis=0))  # Marquardt's D: column norms of J
-        d = np.where(scale > 0, scale, 1.0)
+        d = np.where(scale > 0, scale, 1.0)[free]
+        free_names = [k for k, f in zip(names, free) if f]
         accepted = small = rejected = False
         while lam < 1e12:
-            a = np.vstack([r_mat, np.sqrt(lam) * np.diag(d)])
-            delta = _core.lstsq(a, np.concatenate([qtr, np.zeros(n_par)]), names)[0]
+            a = np.vstack([r_mat[:, free], np.sqrt(lam) * np.diag(d)])
+            delta = np.zeros(n_par)
+            delta[free] = _core.lstsq(a, np.concatenate([qtr, np.zeros(d.size)]), free_names)[0]
+            delta = np.clip(theta + delta, lo, hi) - theta  # projected onto the box
             r_delta = r_mat @ delta
             near = float(r_delta @ r_delta) <= cost / dof  # within one standard error
             # a near trial is evaluated with its gradient, as it is usually accepted; after a
@@ -142,7 +264,7 @@ def refine_output_error(
                 q_near = _kept_factor_qtr(r_mat, g) if near and not small else None
                 if small:  # done: keep this point's factor rather than fold another Jacobian
                     cost = new_cost
-                elif q_near is not None and float(q_near @ q_near) <= se_tol**2 * new_cost / dof:
+                elif q_near is not None and _gain(r_mat, q_near, _free(theta, g, lo, hi), names) <= se_tol**2 * new_cost / dof:
                     # done: the rule holds with the factor folded one standard error away
                     cost, small = new_cost, True
                     r_aug = np.vstack([np.column_stack([r_mat, q_near]), np.zeros(n_par + 1)])
@@ -156,9 +278,27 @@ def refine_output_error(
         if not accepted or small:
             converged = True
             break
-    return OutputErrorFit(
-        theta=theta, cost=cost, r_aug=r_aug, n_residuals=len(y) - warmup, iterations=steps, converged=converged
-    )
+    return OutputErrorFit(theta=theta, cost=cost, r_aug=r_aug, n_residuals=n_res, iterations=steps, converged=converged)
+
+
+def _free(theta: NDArray[np.float64], g: NDArray[np.float64] | None, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """The parameters a step may move: all but those at a bound whose descent direction
+    g = J^T r points out of the box."""
+    if g is None:
+        return np.ones(theta.size, dtype=bool)
+    return ~(((theta <= lo) & (g <= 0.0)) | ((theta >= hi) & (g >= 0.0)))
+
+
+def _gain(r_mat: NDArray[np.float64], qtr: NDArray[np.float64], free: NDArray[np.bool_], names: list[str]) -> float:
+    """The predicted gain of the Gauss-Newton step over the free parameters: ||Q^T r||^2 with
+    all free, else ||R_F delta_F||^2 of the least-squares step in the free columns."""
+    if free.all():
+        return float(qtr @ qtr)
+    if not free.any():
+        return 0.0
+    delta = _core.lstsq(r_mat[:, free], qtr, [k for k, f in zip(names, free) if f])[0]
+    step = r_mat[:, free] @ delta
+    return float(step @ step)
 
 
 def _kept_factor_qtr(r_mat: NDArray[np.float64], g: NDArray[np.float64] | None) -> NDArray[np.float64] | None:

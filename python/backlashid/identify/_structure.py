@@ -312,6 +312,42 @@ class Structure:
             return SandwichModel(lin, bl, LinearBlock(p.r, p.s, feedthrough=self.output_feedthrough))
         return CascadeModel(lin, bl)
 
+    def problem(self, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int = 0) -> _core.Problem:
+        """The core's compiled output-error problem of this structure on a record.
+
+        u and y are checked once here; its methods (``simulate``, ``cost``, ``iteration``,
+        ``oe_factor``, ``gradient``, ``feasible``, ``bounds``) take only theta, and
+        :func:`levenberg_marquardt` searches it.
+
+        Parameters
+        ----------
+        u, y : ndarray
+            The record's input and measured output, 1-D, finite, one length.
+        warmup : int, default 0
+            Samples at the start left out of the cost.
+
+        Returns
+        -------
+        _core.Problem
+            The compiled problem.
+
+        Raises
+        ------
+        DataError
+            If u or y is empty, non-finite or of another length, or warmup is out of range.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> from backlashid.identify import Structure
+        >>> s = Structure(2, 2, 3)
+        >>> d = bid.example_data(bid.example1(), 200, seed=1)
+        >>> prob = s.problem(d.u, d.noisy)
+        >>> prob.names == s.names, prob.bounds()[0][4:6]
+        (True, [0.0, -inf])
+        """
+        return _core.Problem(u, y, self.na, self.nb, self.degree, self.nr, self.ns, self.feedthrough, self.output_feedthrough, warmup)
+
     def __str__(self) -> str:
         text = f"na={self.na}, nb={self.nb}, degree={self.degree}"
         text += ", feedthrough" if self.feedthrough else ""

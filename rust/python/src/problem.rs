@@ -159,6 +159,22 @@ impl PyProblem {
         Ok(vec_f64(py, out))
     }
 
+    /// The output-error cost at theta: sum (y - y_sim)^2 over t >= warmup (ModelError where the
+    /// simulation diverges).
+    fn cost(&self, py: Python<'_>, theta: Vec<f64>) -> PyResult<f64> {
+        run(py, || self.inner.cost(&theta))
+    }
+
+    /// The stability guard: every linear block of theta stable (poles inside the unit circle).
+    fn feasible(&self, py: Python<'_>, theta: Vec<f64>) -> PyResult<bool> {
+        run(py, || self.inner.feasible(&theta))
+    }
+
+    /// The box of theta as (lower, upper): c_L, c_R >= 0, every other parameter free.
+    fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
+        self.inner.bounds()
+    }
+
     /// One iteration of the paper's algorithm at theta (cascade eq 18-28, sandwich eq
     /// 33-36): ((theta_ls, rss, cov, rcond), moving_fraction, rmse), rmse the estimate's own
     /// simulation RMSE (cascade) or None (sandwich).

@@ -305,6 +305,43 @@ impl Problem {
         }
     }
 
+    /// The output-error cost at theta: sum (y - y_sim)^2 over t >= warmup, one simulation; a
+    /// ModelError where the simulation diverges (a non-finite cost).
+    pub fn cost(&self, theta: &[f64]) -> Result<f64> {
+        let y_sim = self.simulate(theta)?;
+        let cost: f64 = self.y[self.warmup..]
+            .iter()
+            .zip(&y_sim[self.warmup..])
+            .map(|(y, s)| (y - s) * (y - s))
+            .sum();
+        if !cost.is_finite() {
+            return Err(Error::Model(
+                "the simulated output of the estimate diverges (a non-finite output error); \
+                 start from a stable estimate or scale the signals down"
+                    .into(),
+            ));
+        }
+        Ok(cost)
+    }
+
+    /// The stability guard of the output-error search: every linear block of theta has its
+    /// poles strictly inside the unit circle (eq 16, and eq 29 for the sandwich).
+    pub fn feasible(&self, theta: &[f64]) -> Result<bool> {
+        let b = self.structure.unpack(theta)?;
+        Ok(b.linear.is_stable() && b.output.as_ref().map_or(true, LinearBlock::is_stable))
+    }
+
+    /// The box of theta: the dead-band widths c_L and c_R at least 0 (eq 4-5: L meets zero at
+    /// x = -c_L, R at x = c_R, so the band [-c_L, c_R] holds), every other parameter free.
+    pub fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
+        let p = self.structure.size();
+        let lay = self.structure.layout();
+        let mut lower = vec![f64::NEG_INFINITY; p];
+        lower[lay.c_l()] = 0.0;
+        lower[lay.c_r()] = 0.0;
+        (lower, vec![f64::INFINITY; p])
+    }
+
     /// One iteration of the paper's algorithm at theta (cascade eq 18-28, sandwich eq 33-36),
     /// streamed into a triangular factor. The cascade's switching signal is the measured y,
     /// or with `simulated_switching` the estimate's own simulated output.

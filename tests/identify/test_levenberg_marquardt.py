@@ -1,0 +1,90 @@
+"""The package's one Levenberg-Marquardt search (identify._refine.levenberg_marquardt) on the
+core's compiled cascade problem: the box, the held parameters, the stopping rule."""
+
+import numpy as np
+import pytest
+
+import backlashid as bid
+from backlashid.errors import DataError
+from backlashid.identify import Structure, levenberg_marquardt
+
+S = Structure(2, 2, 3)
+TRUTH = S.pack(bid.example1())
+C_L, C_R = S.names.index("c_L"), S.names.index("c_R")
+
+
+@pytest.fixture(scope="module")
+def prob():
+    d = bid.example_data(bid.example1(), 3000, snr=25, seed=21)
+    return S.problem(d.u, d.noisy)
+
+
+def test_the_default_box_holds_the_dead_band_widths_non_negative(prob):
+    lower, upper = prob.bounds()
+    assert lower[C_L] == 0.0 and lower[C_R] == 0.0
+    assert np.isneginf(np.delete(lower, [C_L, C_R])).all() and np.isposinf(upper).all()
+
+
+def test_an_inactive_box_changes_nothing(prob):
+    start = TRUTH + 0.03
+    boxed = levenberg_marquardt(prob, start)
+    free = levenberg_marquardt(prob, start, lower=np.full(S.size, -np.inf), upper=np.full(S.size, np.inf))
+    np.testing.assert_array_equal(boxed.theta, free.theta)
+    assert boxed.converged and boxed.cost == free.cost
+
+
+def test_a_start_outside_the_box_is_projected_and_the_search_ends_inside(prob):
+    start = TRUTH.copy()
+    start[C_L] = -0.2
+    fit = levenberg_marquardt(prob, start)
+    assert fit.converged and fit.theta[C_L] >= 0.0
+    assert np.max(np.abs(fit.theta - TRUTH)) < 0.05
+
+
+def test_a_parameter_pinned_by_its_bounds_is_held_and_the_others_reach_a_stationary_point(prob):
+    lower, upper = map(np.array, prob.bounds())
+    lower[C_L] = upper[C_L] = 0.4  # truth 0.6
+    fit = levenberg_marquardt(prob, TRUTH, lower=lower, upper=upper, se_tol=1e-4)
+    assert fit.theta[C_L] == 0.4 and fit.converged
+    free = levenberg_marquardt(prob, TRUTH)
+    assert fit.cost > free.cost  # the pinned width costs fit
+    g, cost = prob.gradient(fit.theta)
+    g_free = np.delete(g, C_L)
+    # J^T r over the free parameters vanishes (relative to its scale ||J_i|| ||r||)
+    col = np.delete(np.linalg.norm(fit.r_aug[: S.size, : S.size], axis=0), C_L)
+    assert np.max(np.abs(g_free) / (col * np.sqrt(cost))) < 1e-3
+
+
+def test_a_width_that_the_data_pull_below_zero_stops_at_zero():
+    # a backlash whose left branch meets zero at x = 0 (c_L = 0): the noise pulls the
+    # unconstrained estimate to either side of it
+    m = bid.example1()
+    lin, bl = m.linear, m.backlash
+    truth = bid.CascadeModel(lin, bid.GeneralBacklash(0.0, bl.c_right, bl.m_left, bl.m_right))
+    ends = []
+    for seed in range(4):
+        d = bid.example_data(truth, 1500, snr=10, seed=seed)
+        p = S.problem(d.u, d.noisy)
+        free = levenberg_marquardt(p, S.pack(truth), lower=np.full(S.size, -np.inf), upper=np.full(S.size, np.inf))
+        boxed = levenberg_marquardt(p, S.pack(truth))
+        assert boxed.theta[C_L] >= 0.0 and boxed.cost >= free.cost * (1 - 1e-12)
+        ends.append(free.theta[C_L])
+    assert min(ends) < 0.0  # the box mattered in at least one record
+
+
+@pytest.mark.parametrize(
+    "lower, upper",
+    [(np.zeros(3), None), (None, np.full(S.size, -1.0)), (np.full(S.size, np.nan), None)],
+    ids=["wrong length", "upper below lower", "nan"],
+)
+def test_bad_bounds_are_a_data_error_that_says_what_to_give(prob, lower, upper):
+    with pytest.raises(DataError, match="lower and upper: give one bound per parameter"):
+        levenberg_marquardt(prob, TRUTH, lower=lower, upper=upper)
+
+
+def test_an_unstable_start_is_refused(prob):
+    start = TRUTH.copy()
+    start[S.names.index("b2")] = 1.5  # a pole outside the unit circle
+    assert not prob.feasible(start)
+    with pytest.raises(bid.BacklashIdError, match="start is unstable"):
+        levenberg_marquardt(prob, start)
