@@ -7,7 +7,7 @@ first 50 samples only initialising its state), in mV.
 
     python benches/wiener_hammerstein.py                  # the package's fit, degree 25, nb = ns = 3
     python benches/wiener_hammerstein.py --old            # and today's path (before issue 16) in the same run
-    python benches/wiener_hammerstein.py --degree 20 --feedthrough
+    python benches/wiener_hammerstein.py --feedthrough --no-output-feedthrough   # a lag-0 term in G1 only
 
 "Old" is a frozen copy of fit_wiener_hammerstein as it was before the one engine (commit
 b27a3c5): scipy.signal.lfilter simulations, its own Jacobian, scipy.optimize.least_squares.
@@ -274,7 +274,8 @@ def old_fit_wiener_hammerstein(
 
 
 def test_rmse_mv(model: Any, u_test: NDArray[np.float64], y_test: NDArray[np.float64], n_init: int) -> float:
-    """RMS of the free-run simulation error on test[n_init:], in mV."""
+    """RMS of the free-run simulation error on test[n_init:], in mV (``model.simulate``: the
+    sandwich of today's path, the fit with its output offset of the new one)."""
     e = (model.simulate(u_test) - y_test)[n_init:]
     return 1e3 * float(np.sqrt(np.mean(e**2)))
 
@@ -286,7 +287,8 @@ def main() -> None:
     parser.add_argument("--nb", type=int, default=3)
     parser.add_argument("--ns", type=int, default=3)
     parser.add_argument("--warmup", type=int, default=100)
-    parser.add_argument("--feedthrough", action="store_true")
+    parser.add_argument("--feedthrough", action="store_true", help="a lag-0 term in G1 (and G2 unless --no-output-feedthrough)")
+    parser.add_argument("--no-output-feedthrough", action="store_true", help="with --feedthrough: G1 only (the new fit only)")
     parser.add_argument("--old", action="store_true", help="also run today's path (frozen copy, scipy)")
     parser.add_argument("--no-new", action="store_true", help="only today's path")
     args = parser.parse_args()
@@ -306,9 +308,10 @@ def main() -> None:
                      test_rmse_mv(model, u[te], y[te], n_init), f"{nfev} evaluations"))
     if not args.no_new:
         t0 = time.perf_counter()
-        fit = bid.fit_wiener_hammerstein(u[tr], y[tr], **settings)
+        extra = {"output_feedthrough": False} if args.no_output_feedthrough else {}
+        fit = bid.fit_wiener_hammerstein(u[tr], y[tr], **settings, **extra)
         rows.append(("backlashid (Rust problem + one LM)", time.perf_counter() - t0,
-                     test_rmse_mv(fit, u[te], y[te], n_init), f"{fit.iterations} iterations"))
+                     test_rmse_mv(fit, u[te], y[te], n_init), f"{fit.iterations} final iterations, {extra or ''}"))
     for name, seconds, rmse, effort in rows:
         print(f"{name:42s} {seconds:7.2f} s   test RMSE {rmse:.4f} mV   ({effort})")
     if len(rows) == 2:
