@@ -111,7 +111,8 @@ class WienerHammersteinProblem:
     def __new__(
         cls, u: _F, y: _F, nb: int, ns: int, degree: int, k: float = 1.0, feedthrough: bool = False,
         output_feedthrough: bool = False, offset: bool = True, warmup: int | None = None,
-    ) -> Self: ...
+        fixed: list[tuple[str, float]] | None = None,
+    ) -> Self: ...  # fixed: (name, value) pairs held and left out of theta
     @property
     def names(self) -> list[str]: ...
     @property

@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from .. import _core
 from .._docstrings import AXES, fill
 from .._validation import as_signal, check_whole, identification_record
-from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
+from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError
 from ..models import GeneralBacklash, LinearBlock, SandwichModel
 from ._refine import OutputErrorFit, levenberg_marquardt
 
@@ -402,31 +402,38 @@ class _Param:
     def sizes(self) -> list[int]:
         return [self.nb + 1 - self.delay, self.nb, self.degree, self.ns + 1 - self.output_delay, self.ns, 1]
 
-    def problem(self, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int) -> _core.WienerHammersteinProblem:
+    def problem(
+        self, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, fixed: list[tuple[str, float]] | None = None
+    ) -> _core.WienerHammersteinProblem:
         return _core.WienerHammersteinProblem(
             u, y, self.nb, self.ns, self.degree, k=self.k, feedthrough=self.feedthrough,
-            output_feedthrough=self.output_feedthrough, offset=True, warmup=warmup,
+            output_feedthrough=self.output_feedthrough, offset=True, warmup=warmup, fixed=fixed,
         )
 
     def split(self, theta: NDArray[np.float64]) -> list[NDArray[np.float64]]:
         return np.split(theta, np.cumsum(self.sizes)[:-1])
 
-    def fit(self, problem: _core.WienerHammersteinProblem, theta: NDArray[np.float64], max_iter: int) -> OutputErrorFit:
-        """The one Levenberg-Marquardt from theta, with the two scale directions of the chain
-        held (the largest coefficient of G1's and of G2's numerator keep their values): a
-        gain of G1 is a rescaling of f's argument and a gain of G2 one of f, so without
-        them the Jacobian has two null directions. While f is still linear (a start) G1 and
-        G2 are one linear block and more directions are null: the search then runs free, the
-        damping taking care of them."""
-        lower, upper = np.full(theta.size, -np.inf), np.full(theta.size, np.inf)
-        a_size = self.sizes[0]
-        r_start = sum(self.sizes[:3])
-        for j in (int(np.argmax(np.abs(theta[:a_size]))), r_start + int(np.argmax(np.abs(theta[r_start : r_start + self.sizes[3]])))):
-            lower[j] = upper[j] = theta[j]
-        try:
-            return levenberg_marquardt(problem, theta, lower=lower, upper=upper, max_iter=max_iter)
-        except NotIdentifiableError:  # f still linear (a start): G1 and G2 share their poles and zeros
-            return levenberg_marquardt(problem, theta, max_iter=max_iter)
+    def fit(
+        self, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, theta: NDArray[np.float64], max_iter: int,
+        held: NDArray[np.bool_] | None = None,
+    ) -> tuple[NDArray[np.float64], OutputErrorFit]:
+        """The one Levenberg-Marquardt from theta on the record (u, y), the ``held``
+        parameters fixed in the core's problem (left out of its theta); returns the whole
+        theta and the search. By default the two scale directions of the chain are held (the
+        largest coefficient of G1's and of G2's numerator keep their values): a gain of G1 is
+        a rescaling of f's argument and a gain of G2 one of f, directions the data cannot
+        tell, which would leave J singular."""
+        if held is None:
+            held = np.zeros(theta.size, dtype=bool)
+            a_size, r_start = self.sizes[0], sum(self.sizes[:3])
+            held[int(np.argmax(np.abs(theta[:a_size])))] = True
+            held[r_start + int(np.argmax(np.abs(theta[r_start : r_start + self.sizes[3]])))] = True
+        names = self.problem(u[:2], y[:2], 0).names
+        fixed = [(names[j], float(theta[j])) for j in np.flatnonzero(held)]
+        res = levenberg_marquardt(self.problem(u, y, warmup, fixed), theta[~held], max_iter=max_iter)
+        out = theta.copy()
+        out[~held] = res.theta
+        return out, res
 
     def monomials(self, c: NDArray[np.float64]) -> NDArray[np.float64]:
         """m_1..m_n of f(x) = sum_i m_i x^i."""
@@ -459,12 +466,8 @@ def _best_linear(u: NDArray[np.float64], y: NDArray[np.float64], order: int, fee
     theta = np.r_[a, arx[n_num : n_num + order], 1.0, r, 0.0, arx[-1]]
     held = np.zeros(theta.size, dtype=bool)
     held[n_num : lin.sizes[0]] = True  # the lag G2's delay moves beyond the order
-    held[lin.sizes[0] + order :] = True  # c_1 = 1 (f(x) = x), G2's coefficients
-    held[-1] = False  # the offset
-    lower = np.where(held, theta, -np.inf)
-    upper = np.where(held, theta, np.inf)
-    fit = levenberg_marquardt(lin.problem(u, y, warmup), theta, lower=lower, upper=upper)
-    th = fit.theta
+    held[lin.sizes[0] + order : -1] = True  # c_1 = 1 (f(x) = x), G2's coefficients; the offset is free
+    th, _ = lin.fit(u, y, warmup, theta, 200, held)
     return np.r_[np.zeros(delay), th[:n_num]], np.r_[1.0, th[lin.sizes[0] : lin.sizes[0] + order]], float(th[-1])
 
 
@@ -632,7 +635,8 @@ def fit_wiener_hammerstein(
     poles, zeros = np.roots(den), np.roots(lead)
 
     short = _Param(nb, ns, short_degree, feedthrough, output_feedthrough)
-    short_problem = short.problem(u_arr[:n_short], y_arr[:n_short], warmup)
+    u_s, y_s = u_arr[:n_short], y_arr[:n_short]
+    short_problem = short.problem(u_s, y_s, warmup)
     ranked = []
     room = (nb - short.delay, ns - short.output_delay)
     for split in _splits(poles, zeros, nb, ns, room):
@@ -640,12 +644,12 @@ def fit_wiener_hammerstein(
             theta = _theta_from_split(short, u_arr, split, float(lead[0]), offset)
             if not short_problem.feasible(theta):
                 continue
-            res = short.fit(short_problem, theta, split_iter)
+            theta, res = short.fit(u_s, y_s, warmup, theta, split_iter)
         except BacklashIdError:
             continue
         rmse = float(np.sqrt(res.cost / res.n_residuals))
-        if short_problem.feasible(res.theta) and np.isfinite(rmse):
-            ranked.append((rmse, res.theta, split))
+        if short_problem.feasible(theta) and np.isfinite(rmse):
+            ranked.append((rmse, theta, split))
     if not ranked:
         raise NotConvergedError("no split of the best linear approximation's poles and zeros gives a stable start")
     ranked.sort(key=lambda item: item[0])
@@ -657,15 +661,15 @@ def fit_wiener_hammerstein(
     c[: short.degree] = c_short
     theta = np.r_[a, b, c, r, s, o]
     try:
-        final = full.problem(u_arr, y_arr, warmup)
-        if len(u_arr) > _SEGMENT_SAMPLES:  # most iterations on a segment, then the whole record
-            segment = full.problem(u_arr[:_SEGMENT_SAMPLES], y_arr[:_SEGMENT_SAMPLES], warmup)
-            res = full.fit(final, full.fit(segment, theta, _SEGMENT_ITER).theta, max_iter)
+        n_seg = _SEGMENT_SAMPLES
+        if len(u_arr) > n_seg:  # most iterations on a segment, then the whole record
+            theta, _ = full.fit(u_arr[:n_seg], y_arr[:n_seg], warmup, theta, _SEGMENT_ITER)
+            theta, res = full.fit(u_arr, y_arr, warmup, theta, max_iter)
         else:
-            res = full.fit(final, theta, _SEGMENT_ITER + max_iter)
+            theta, res = full.fit(u_arr, y_arr, warmup, theta, _SEGMENT_ITER + max_iter)
     except BacklashIdError as exc:
         raise NotConvergedError(f"the final Levenberg-Marquardt run found no usable model: {exc}") from None
-    a, b, c, r, s, o = full.split(res.theta)
+    a, b, c, r, s, o = full.split(theta)
     m = full.monomials(c)
     if m[0] < 0:  # f'(0) < 0: use -x as the internal signal, so that m_1 > 0
         a, m = -a, m * (-1.0) ** np.arange(1, degree + 1)

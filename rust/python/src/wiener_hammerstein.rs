@@ -10,7 +10,8 @@ use crate::errors::run;
 use crate::problem::{warmup_of, whole};
 
 /// u -> G1 -> x -> f(x) = sum c_i (T_i(x / k) - T_i(0)) -> G2 -> + offset -> y, with the
-/// record (u, y, warm-up). Rust owns the layout of theta and its names.
+/// record (u, y, warm-up). Rust owns the layout of theta and its names; `fixed` (name,
+/// value) pairs are held at their values and left out of theta.
 #[pyclass(frozen, name = "WienerHammersteinProblem", module = "backlashid._core")]
 pub(crate) struct PyWienerHammersteinProblem {
     inner: core::WienerHammersteinProblem,
@@ -19,7 +20,7 @@ pub(crate) struct PyWienerHammersteinProblem {
 #[pymethods]
 impl PyWienerHammersteinProblem {
     #[new]
-    #[pyo3(signature = (u, y, nb, ns, degree, k=1.0, feedthrough=false, output_feedthrough=false, offset=true, warmup=None))]
+    #[pyo3(signature = (u, y, nb, ns, degree, k=1.0, feedthrough=false, output_feedthrough=false, offset=true, warmup=None, fixed=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -33,6 +34,7 @@ impl PyWienerHammersteinProblem {
         output_feedthrough: bool,
         offset: bool,
         warmup: Option<&Bound<'_, PyAny>>,
+        fixed: Option<Vec<(String, f64)>>,
     ) -> PyResult<Self> {
         let s = core::WhStructure::new(
             whole(nb, "nb", 1)?,
@@ -48,8 +50,9 @@ impl PyWienerHammersteinProblem {
             Some(w) => warmup_of(w, u.len())?,
             None => 0,
         };
+        let fixed = fixed.unwrap_or_default();
         let inner = run(py, || {
-            core::WienerHammersteinProblem::new(s, k, u, y, warmup)
+            core::WienerHammersteinProblem::new(s, k, u, y, warmup)?.with_fixed(&fixed)
         })?;
         Ok(Self { inner })
     }

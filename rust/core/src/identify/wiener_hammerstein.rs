@@ -197,6 +197,10 @@ pub struct WienerHammersteinProblem {
     u: Vec<f64>,
     y: Vec<f64>,
     warmup: usize,
+    /// Per parameter of the structure: Some(value) when fixed (left out of theta).
+    fixed: Vec<Option<f64>>,
+    /// The positions of theta's parameters in the structure's layout.
+    free: Vec<usize>,
 }
 
 impl WienerHammersteinProblem {
@@ -223,13 +227,66 @@ impl WienerHammersteinProblem {
                 u.len()
             )));
         }
+        let p = structure.size();
         Ok(Self {
             structure,
             k,
             u,
             y,
             warmup,
+            fixed: vec![None; p],
+            free: (0..p).collect(),
         })
+    }
+
+    /// The problem with the named parameters fixed at the given values: theta, the names,
+    /// the Jacobian and the bounds then cover the other parameters only (a scale the data
+    /// cannot tell, e.g. G2's gain against f's, held without a null direction in J).
+    pub fn with_fixed(mut self, fixed: &[(String, f64)]) -> Result<Self> {
+        let names = self.structure.names();
+        for (name, value) in fixed {
+            let Some(j) = names.iter().position(|n| n == name) else {
+                return Err(Error::Data(format!(
+                    "fixed parameter {name:?} is not one of the structure's: {}",
+                    names.join(", ")
+                )));
+            };
+            if !value.is_finite() {
+                return Err(Error::Data(format!(
+                    "fixed parameter {name} = {value}: give a finite value"
+                )));
+            }
+            self.fixed[j] = Some(*value);
+        }
+        self.free = (0..names.len())
+            .filter(|&j| self.fixed[j].is_none())
+            .collect();
+        Ok(self)
+    }
+
+    /// The structure's full parameter vector of theta (the free parameters).
+    fn expand(&self, theta: &[f64]) -> Result<Vec<f64>> {
+        if theta.len() != self.free.len() {
+            return Err(Error::Data(format!(
+                "theta has {} parameters but the Wiener-Hammerstein problem has {}: give one \
+                 value per name",
+                theta.len(),
+                self.free.len()
+            )));
+        }
+        let mut full: Vec<f64> = self.fixed.iter().map(|v| v.unwrap_or(0.0)).collect();
+        for (&j, v) in self.free.iter().zip(theta) {
+            full[j] = *v;
+        }
+        Ok(full)
+    }
+
+    /// The free entries of a full row.
+    #[inline]
+    fn gather(&self, row: &[f64], out: &mut [f64]) {
+        for (o, &j) in out.iter_mut().zip(&self.free) {
+            *o = row[j];
+        }
     }
 
     pub fn structure(&self) -> &WhStructure {
@@ -244,25 +301,29 @@ impl WienerHammersteinProblem {
     pub fn warmup(&self) -> usize {
         self.warmup
     }
+    /// The names of theta's parameters (the fixed ones left out).
     pub fn names(&self) -> Vec<String> {
-        self.structure.names()
+        let names = self.structure.names();
+        self.free.iter().map(|&j| names[j].clone()).collect()
     }
 
     /// The bounds of theta: every parameter free.
     pub fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
-        let p = self.structure.size();
+        let p = self.free.len();
         (vec![f64::NEG_INFINITY; p], vec![f64::INFINITY; p])
     }
 
     /// The stability guard: every pole of G1 and G2 inside |z| < `STABILITY_MARGIN`.
     pub fn feasible(&self, theta: &[f64]) -> Result<bool> {
-        let p = self.structure.parts(theta)?;
+        let full = self.expand(theta)?;
+        let p = self.structure.parts(&full)?;
         Ok(spectral_radius(p.b) < STABILITY_MARGIN && spectral_radius(p.s) < STABILITY_MARGIN)
     }
 
     /// The internal signal x(t) = G1 u from rest.
     pub fn internal(&self, theta: &[f64]) -> Result<Vec<f64>> {
-        let p = self.structure.parts(theta)?;
+        let full = self.expand(theta)?;
+        let p = self.structure.parts(&full)?;
         let d1 = self.structure.d1();
         let mut x = vec![0.0; self.u.len()];
         for t in 0..self.u.len() {
@@ -277,7 +338,8 @@ impl WienerHammersteinProblem {
 
     /// Free-run output from rest.
     pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
-        let p = self.structure.parts(theta)?;
+        let full = self.expand(theta)?;
+        let p = self.structure.parts(&full)?;
         let x = self.internal(theta)?;
         let d2 = self.structure.d2();
         let n = self.u.len();
@@ -323,7 +385,7 @@ impl WienerHammersteinProblem {
     /// The output-error problem at theta in factored form: R_aug of [J | y - y_sim] over
     /// t >= warmup and the cost, the rows streamed (no N x p Jacobian).
     pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
-        let p = self.structure.size();
+        let p = self.free.len();
         let (y, warmup) = (&self.y, self.warmup);
         let (factor, cost) = fold_stream(p, oe_threads(self.u.len()), |sink| {
             self.walk(theta, |t, yt, row| match t >= warmup {
@@ -339,7 +401,7 @@ impl WienerHammersteinProblem {
 
     /// g = J^T (y - y_sim) over t >= warmup and the cost, one pass without the factor.
     pub fn gradient(&self, theta: &[f64]) -> Result<OeGradient> {
-        let mut g = vec![0.0; self.structure.size()];
+        let mut g = vec![0.0; self.free.len()];
         let mut cost = 0.0;
         self.walk(theta, |t, yt, row| {
             if t >= self.warmup {
@@ -359,7 +421,7 @@ impl WienerHammersteinProblem {
 
     /// The dense Jacobian d y_sim / d theta (row-major, N x p) and the output; for tests.
     pub fn jacobian(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
-        let mut jac = Vec::with_capacity(self.u.len() * self.structure.size());
+        let mut jac = Vec::with_capacity(self.u.len() * self.free.len());
         let mut out = Vec::with_capacity(self.u.len());
         self.walk(theta, |_, yt, row| {
             out.push(yt);
@@ -377,7 +439,10 @@ impl WienerHammersteinProblem {
         mut visit: impl FnMut(usize, f64, &[f64]) -> Result<()>,
     ) -> Result<()> {
         let st = &self.structure;
-        let p = st.parts(theta)?;
+        let full = self.expand(theta)?;
+        let p = st.parts(&full)?;
+        let all_free = self.free.len() == st.size();
+        let mut reduced = vec![0.0; self.free.len()];
         let (n_a, nb, n, ns) = (st.n_a(), st.nb, st.degree, st.ns);
         let (d1, d2) = (st.d1(), st.d2());
         let inner = st.inner();
@@ -478,7 +543,12 @@ impl WienerHammersteinProblem {
                 let lag = j + 1;
                 row[inner + n_r + j] = if lag <= t { -ww[t - lag] } else { 0.0 };
             }
-            visit(t, wt + p.offset, &row)?;
+            if all_free {
+                visit(t, wt + p.offset, &row)?;
+            } else {
+                self.gather(&row, &mut reduced);
+                visit(t, wt + p.offset, &reduced)?;
+            }
         }
         Ok(())
     }
@@ -633,6 +703,38 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn fixed_parameters_leave_theta_and_the_jacobian() {
+        let s = WhStructure::new(2, 2, 5, false, false, true).unwrap();
+        let (pr, th) = problem(s, 5);
+        let names = pr.names();
+        let (jac, out) = pr.jacobian(&th).unwrap();
+        let fixed = vec![("a2".to_string(), th[1]), ("r1".to_string(), th[9])];
+        let held = pr.clone().with_fixed(&fixed).unwrap();
+        let keep: Vec<usize> = (0..th.len()).filter(|&j| j != 1 && j != 9).collect();
+        let reduced: Vec<f64> = keep.iter().map(|&j| th[j]).collect();
+        let want: Vec<String> = keep.iter().map(|&j| names[j].clone()).collect();
+        assert_eq!(held.names(), want);
+        assert_eq!(held.bounds().0.len(), keep.len());
+        assert_eq!(held.simulate(&reduced).unwrap(), out);
+        let (hjac, _) = held.jacobian(&reduced).unwrap();
+        let (p, q) = (th.len(), keep.len());
+        for t in 0..out.len() {
+            for (k, &j) in keep.iter().enumerate() {
+                assert_eq!(hjac[t * q + k], jac[t * p + j]);
+            }
+        }
+        let g = held.gradient(&reduced).unwrap();
+        let full_g = pr.gradient(&th).unwrap();
+        for (k, &j) in keep.iter().enumerate() {
+            assert_eq!(g.gradient[k], full_g.gradient[j]);
+        }
+        assert_eq!(held.oe_factor(&reduced).unwrap().0.cols(), q);
+        assert!(matches!(held.simulate(&th), Err(Error::Data(_))));
+        let bad = vec![("z9".to_string(), 1.0)];
+        assert!(matches!(pr.clone().with_fixed(&bad), Err(Error::Data(_))));
     }
 
     #[test]
