@@ -494,13 +494,13 @@ impl WienerHammersteinProblem {
             let slot = t % ring;
             {
                 let df = &mut df_ring[slot * inner..(slot + 1) * inner];
-                for i in 0..n_a {
+                for (i, d) in df[..n_a].iter_mut().enumerate() {
                     let lag = d1 + i;
-                    df[i] = if lag <= t { slope * wu[t - lag] } else { 0.0 };
+                    *d = if lag <= t { slope * wu[t - lag] } else { 0.0 };
                 }
-                for j in 0..nb {
+                for (j, d) in df[n_a..n_a + nb].iter_mut().enumerate() {
                     let lag = j + 1;
-                    df[n_a + j] = if lag <= t { -slope * wx[t - lag] } else { 0.0 };
+                    *d = if lag <= t { -slope * wx[t - lag] } else { 0.0 };
                 }
                 df[n_a + nb..].copy_from_slice(&tb);
             }
