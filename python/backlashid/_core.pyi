@@ -17,6 +17,7 @@ __all__ = [
     "SandwichModel",
     "Problem",
     "AugmentedProblem",
+    "WienerHammersteinProblem",
     "lstsq",
     "arx",
     "spectral_radius",
@@ -136,6 +137,33 @@ class AugmentedProblem:
     def sensitivity(self, theta: _F) -> tuple[_F, _F]: ...  # (y_sim, dense J, N x p)
     def feasible(self, theta: _F) -> bool: ...  # linear block stable, free effects in their domain
     def bounds(self) -> tuple[list[float], list[float]]: ...  # c_L, c_R >= 0 as Problem, effects: their domain
+
+# The Wiener-Hammerstein problem compiled once (rust/core/src/identify/wiener_hammerstein.rs):
+# u -> G1 (eq 16) -> x -> f(x) = sum c_i (T_i(x / k) - T_i(0)) -> G2 (eq 29) -> + offset -> y.
+# theta = [a, b, c_1..c_n, r, s, offset] (names from the core; a0 / r0 with a feedthrough, no
+# offset when offset=False). The protocol of identify.levenberg_marquardt.
+@final
+class WienerHammersteinProblem:
+    def __new__(
+        cls, u: _F, y: _F, nb: int, ns: int, degree: int, k: float = 1.0, feedthrough: bool = False,
+        output_feedthrough: bool = False, offset: bool = True, warmup: int | None = None,
+        fixed: list[tuple[str, float]] | None = None,
+    ) -> Self: ...  # fixed: (name, value) pairs held and left out of theta
+    @property
+    def names(self) -> list[str]: ...
+    @property
+    def samples(self) -> int: ...
+    @property
+    def warmup(self) -> int: ...
+    @property
+    def k(self) -> float: ...
+    def simulate(self, theta: _F) -> _F: ...  # free run from rest, offset included
+    def internal(self, theta: _F) -> _F: ...  # x = G1 u from rest
+    def cost(self, theta: _F) -> float: ...  # sum (y - y_sim)^2 over t >= warmup
+    def oe_factor(self, theta: _F) -> tuple[_F, float]: ...  # (R_aug, cost), exact sensitivities streamed
+    def gradient(self, theta: _F) -> tuple[_F, float]: ...  # (J^T r, cost), one pass
+    def feasible(self, theta: _F) -> bool: ...  # poles of G1 and G2 of modulus < 0.9999
+    def bounds(self) -> tuple[list[float], list[float]]: ...  # all free (+-inf)
 
 def lstsq(a: _F, b: _F, names: list[str]) -> _LS: ...
 def arx(u: _F, y: _F, na: int, nb: int, delay: int, warmup: int) -> _LS: ...

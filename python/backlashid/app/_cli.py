@@ -12,7 +12,7 @@ import json
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any, Callable, TypeVar
 
@@ -188,6 +188,8 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
         stage(f"fitting the {kind}")
         result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse)
+        if kind == "wiener-hammerstein":  # the fit's output offset joins the scaling's (the sandwich has none)
+            scaling = replace(scaling, output_offset=scaling.output_offset + scaling.output_scale * result.offset)
         stage("computing metrics")
         metrics_warmup = warmup if metrics_warmup is None else metrics_warmup
         metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, warmup=max(metrics_warmup, warmup))}

@@ -2,7 +2,8 @@
 
 A sandwich (Section 4) whose backlash has zero width and tied branches (c_L = c_R = 0,
 m_L = m_R, so L = R = f and eq (1) reduces to y(t) = f(x(t)) whatever f's shape) is a
-Wiener-Hammerstein model. The fitted model is an ordinary :class:`SandwichModel`:
+Wiener-Hammerstein model. The fitted model is an ordinary :class:`SandwichModel` plus a
+constant output offset (``WienerHammersteinFit.offset``; the sandwich itself has none):
 
     x(t) = sum_{i=1}^{nb} a_i u(t-i) - sum_j b_j x(t-j)        G1, eq (16)
     y(t) = f(x(t)) = sum_{i=1}^{n} m_i x(t)^i                  tied branches, c_L = c_R = 0
@@ -13,16 +14,19 @@ How it is fitted (the standard route for this structure, e.g. Schoukens et al.):
 1. the best linear approximation (BLA): an output-error model of order nb + ns with an output
    offset (the linear baseline);
 2. its poles and zeros split between G1 and G2 in every way that keeps complex-conjugate pairs
-   together; each split is refined briefly (Levenberg-Marquardt, low degree, a sub-record) and
-   the best is kept;
-3. Levenberg-Marquardt on the free-run simulation error of the full model at the requested
-   degree, with the exact Jacobian from filtered sensitivities (scipy ``least_squares``).
+   together; each split is refined briefly (low degree, a sub-record) and the best is kept;
+3. the full model at the requested degree, first on a segment of the record, then on all of
+   it.
 
-High degrees (13-25) are well conditioned because f is fitted in a Chebyshev basis of x / k,
-with G1's gain fixed so that k = max |x| on the estimation data is 1 at the start; the
-polynomial is turned into the monomials m_i at the end. The stored model therefore has
-max |x| close to 1 on data like the estimation data, which keeps the powers x^i in range.
-Steps that move a pole of G1 or G2 onto or outside the unit circle are rejected.
+Every search is the package's one Levenberg-Marquardt (:func:`levenberg_marquardt`) on the
+core's compiled ``WienerHammersteinProblem``: the core simulates the model and streams the
+exact sensitivities of every parameter into the triangular factor; the BLA is the same
+problem with f(x) = x and G2 a pure delay held. High degrees (13-30) are well conditioned
+because f is fitted in a Chebyshev basis of x / k, with G1's gain fixed so that k = max |x|
+on the estimation data is 1 at the start; the polynomial is turned into the monomials m_i at
+the end. The stored model therefore has max |x| close to 1 on data like the estimation data,
+which keeps the powers x^i in range. Steps that move a pole of G1 or G2 to a modulus of 0.9999
+or more are rejected.
 """
 
 from __future__ import annotations
@@ -35,18 +39,19 @@ from typing import Any
 import numpy as np
 from numpy.polynomial import chebyshev
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import least_squares
-from scipy.signal import lfilter
 
+from .. import _core
 from .._docstrings import AXES, fill
 from .._validation import as_signal, check_whole, identification_record
-from ..errors import DataError, ModelError, NotConvergedError
+from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError
 from ..models import GeneralBacklash, LinearBlock, SandwichModel
+from ._refine import OutputErrorFit, levenberg_marquardt
 
 __all__ = ["LinearBaseline", "WienerHammersteinFit", "fit_wiener_hammerstein", "wiener_hammerstein_model"]
 
-_UNSTABLE = 0.9999  # a step that puts a pole beyond this modulus is rejected
-_PENALTY = 10.0  # residual returned for a rejected (unstable) parameter vector
+_UNSTABLE = 0.9999  # a pole beyond this modulus is infeasible (the core's guard)
+_SEGMENT_SAMPLES = 30_000  # the full model's first search runs on a segment this long
+_SEGMENT_ITER = 100  # ... for at most this many iterations (cheap: a third of the record)
 
 
 def _delayed(v: NDArray[np.float64], k: int) -> NDArray[np.float64]:
@@ -56,10 +61,6 @@ def _delayed(v: NDArray[np.float64], k: int) -> NDArray[np.float64]:
     out = np.zeros_like(v)
     out[k:] = v[:-k]
     return out
-
-
-def _radius(den: NDArray[np.float64]) -> float:
-    return float(np.abs(np.roots(den)).max()) if len(den) > 1 else 0.0
 
 
 def wiener_hammerstein_model(
@@ -215,15 +216,18 @@ class WienerHammersteinFit:
     fit_time : float
         Seconds, from the baseline to the end.
     iterations : int
-        Function evaluations of the final Levenberg-Marquardt run.
+        Accepted steps of the final Levenberg-Marquardt run (on the whole record).
     converged : bool
-        The final run met its tolerance (not its evaluation limit).
+        The final run met its tolerance (not its iteration limit).
     split_rmse : tuple of float
         RMSE after the short refinement of each pole/zero split, best first.
     g1_poles : numpy.ndarray
         The baseline's poles the chosen split gave to G1.
     g1_zeros : numpy.ndarray
         The baseline's zeros the chosen split gave to G1.
+    offset : float
+        The constant output offset: the fitted output is ``model.simulate(u) + offset``
+        (:meth:`simulate`).
 
     Examples
     --------
@@ -250,6 +254,22 @@ class WienerHammersteinFit:
     split_rmse: tuple[float, ...]
     g1_poles: NDArray[np.complex128] = field(repr=False)
     g1_zeros: NDArray[np.complex128] = field(repr=False)
+    offset: float = 0.0
+
+    def simulate(self, u: ArrayLike) -> NDArray[np.float64]:
+        """The fitted output from rest: the sandwich's simulation plus the output offset.
+
+        Parameters
+        ----------
+        u : array_like
+            Input u(t).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``model.simulate(u) + offset``.
+        """
+        return self.model.simulate(u) + self.offset
 
     @property
     def m(self) -> NDArray[np.float64]:
@@ -300,8 +320,8 @@ class WienerHammersteinFit:
                 f"warm-up {self.warmup}",
                 f"free-run simulation RMSE on the estimation data: {self.simulation_rmse:.6g} "
                 f"(linear baseline {self.baseline_rmse:.6g}, {self.baseline_rmse / self.simulation_rmse:.1f}x larger)",
-                f"{len(self.split_rmse)} pole/zero splits tried; final LM: {self.iterations} evaluations"
-                f" ({'converged' if self.converged else 'evaluation limit'}); {self.fit_time:.1f} s",
+                f"{len(self.split_rmse)} pole/zero splits tried; final LM: {self.iterations} steps"
+                f" ({'converged' if self.converged else 'iteration limit'}); {self.fit_time:.1f} s",
             ]
         )
 
@@ -327,6 +347,7 @@ class WienerHammersteinFit:
             "iterations": int(self.iterations),
             "converged": bool(self.converged),
             "split_rmse": [float(v) for v in self.split_rmse],
+            "offset": float(self.offset),
         }
 
     @fill(axes=AXES)
@@ -350,95 +371,69 @@ class WienerHammersteinFit:
         return plot_characteristic(self.model.backlash, sim.x, sim.y, ax=ax, title=title)
 
 
-# -- the parametrisation used while fitting ------------------------------------------------------
+# -- the compiled problem and its parameter vector ------------------------------------------------
 
 
 @dataclass(frozen=True)
 class _Param:
-    """theta = [a (lags d..nb), b (nb), c_1..c_n (Chebyshev coefficients of f in x / k),
-    r (lags d..ns), s (ns)], with f(x) = sum_i c_i (T_i(x / k) - T_i(0)) so that f(0) = 0;
-    the first lag d is 0 with feedthrough, else 1."""
+    """The structure of the core's ``WienerHammersteinProblem``, whose theta is [a (lags
+    d..nb), b (nb), c_1..c_n (Chebyshev coefficients of f in x / k), r (lags d..ns), s (ns),
+    offset], f(x) = sum_i c_i (T_i(x / k) - T_i(0)) so that f(0) = 0; the first lag d is 0
+    with feedthrough, else 1. The core owns the layout; this only splits it."""
 
     nb: int
     ns: int
     degree: int
     feedthrough: bool = False
+    output_feedthrough: bool = False
     k: float = 1.0
 
     @property
     def delay(self) -> int:
+        """G1's first input lag."""
         return 0 if self.feedthrough else 1
 
     @property
-    def sizes(self) -> list[int]:
-        d = self.delay
-        return [self.nb + 1 - d, self.nb, self.degree, self.ns + 1 - d, self.ns]
+    def output_delay(self) -> int:
+        """G2's first input lag."""
+        return 0 if self.output_feedthrough else 1
 
-    def numerator(self, coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.r_[np.zeros(self.delay), coefficients]
+    @property
+    def sizes(self) -> list[int]:
+        return [self.nb + 1 - self.delay, self.nb, self.degree, self.ns + 1 - self.output_delay, self.ns, 1]
+
+    def problem(
+        self, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, fixed: list[tuple[str, float]] | None = None
+    ) -> _core.WienerHammersteinProblem:
+        return _core.WienerHammersteinProblem(
+            u, y, self.nb, self.ns, self.degree, k=self.k, feedthrough=self.feedthrough,
+            output_feedthrough=self.output_feedthrough, offset=True, warmup=warmup, fixed=fixed,
+        )
 
     def split(self, theta: NDArray[np.float64]) -> list[NDArray[np.float64]]:
         return np.split(theta, np.cumsum(self.sizes)[:-1])
 
-    def basis(self, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """T_i(z) - T_i(0) and d/dx T_i(z), i = 1..n, z = x / k (three-term recurrences)."""
-        z = x / self.k
-        n = self.degree
-        t = np.empty((len(z), n + 1))
-        dt = np.empty((len(z), n + 1))
-        t[:, 0], dt[:, 0] = 1.0, 0.0
-        t[:, 1], dt[:, 1] = z, 1.0
-        for i in range(1, n):
-            t[:, i + 1] = 2.0 * z * t[:, i] - t[:, i - 1]
-            dt[:, i + 1] = 2.0 * t[:, i] + 2.0 * z * dt[:, i] - dt[:, i - 1]
-        t0 = chebyshev.chebval(0.0, np.eye(n + 1))  # T_i(0)
-        return t[:, 1:] - t0[1:], dt[:, 1:] / self.k
-
-    def stable(self, theta: NDArray[np.float64]) -> bool:
-        _, b, _, _, s = self.split(theta)
-        return max(_radius(np.r_[1.0, b]), _radius(np.r_[1.0, s])) < _UNSTABLE
-
-    def simulate(self, theta: NDArray[np.float64], u: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        a, b, c, r, s = self.split(theta)
-        x = lfilter(self.numerator(a), np.r_[1.0, b], u)
-        basis, dbasis = self.basis(x)
-        f = basis @ c
-        w = lfilter(self.numerator(r), np.r_[1.0, s], f)
-        return x, basis, dbasis, f, w
-
-    def residuals(self, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int) -> NDArray[np.float64]:
-        if not self.stable(theta):
-            return np.full(len(y) - warmup, _PENALTY)
-        with np.errstate(over="ignore", invalid="ignore"):
-            e = (self.simulate(theta, u)[-1] - y)[warmup:]
-        return e if np.all(np.isfinite(e)) else np.full(len(y) - warmup, _PENALTY)
-
-    def jacobian(self, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int) -> NDArray[np.float64]:
-        """d w / d theta: G1's sensitivities (filtered by 1/B) scaled by f'(x) and passed
-        through G2; f's basis functions through G2; G2's own sensitivities."""
-        if not self.stable(theta):
-            return np.zeros((len(y) - warmup, len(theta)))
-        a, b, c, r, s = self.split(theta)
-        x, basis, dbasis, f, w = self.simulate(theta, u)
-        d = self.delay
-        den1, num2, den2 = np.r_[1.0, b], self.numerator(r), np.r_[1.0, s]
-        u_f, x_f = lfilter([1.0], den1, u), lfilter([1.0], den1, x)
-        dx = np.column_stack(
-            [_delayed(u_f, i) for i in range(d, self.nb + 1)] + [-_delayed(x_f, j) for j in range(1, self.nb + 1)]
-        )
-        j_g1 = lfilter(num2, den2, dx * (dbasis @ c)[:, None], axis=0)
-        j_f = lfilter(num2, den2, basis, axis=0)
-        f_f, w_f = lfilter([1.0], den2, f), lfilter([1.0], den2, w)
-        j_g2 = np.column_stack(
-            [_delayed(f_f, i) for i in range(d, self.ns + 1)] + [-_delayed(w_f, j) for j in range(1, self.ns + 1)]
-        )
-        return np.hstack([j_g1, j_f, j_g2])[warmup:]
-
-    def fit(self, theta: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, max_nfev: int) -> Any:
-        return least_squares(
-            self.residuals, theta, jac=self.jacobian, args=(u, y, warmup), method="lm", max_nfev=max_nfev,
-            ftol=1e-10, xtol=1e-10,
-        )
+    def fit(
+        self, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, theta: NDArray[np.float64], max_iter: int,
+        held: NDArray[np.bool_] | None = None,
+    ) -> tuple[NDArray[np.float64], OutputErrorFit]:
+        """The one Levenberg-Marquardt from theta on the record (u, y), the ``held``
+        parameters fixed in the core's problem (left out of its theta); returns the whole
+        theta and the search. By default the two scale directions of the chain are held (the
+        largest coefficient of G1's and of G2's numerator keep their values): a gain of G1 is
+        a rescaling of f's argument and a gain of G2 one of f, directions the data cannot
+        tell, which would leave J singular."""
+        if held is None:
+            held = np.zeros(theta.size, dtype=bool)
+            a_size, r_start = self.sizes[0], sum(self.sizes[:3])
+            held[int(np.argmax(np.abs(theta[:a_size])))] = True
+            held[r_start + int(np.argmax(np.abs(theta[r_start : r_start + self.sizes[3]])))] = True
+        names = self.problem(u[:2], y[:2], 0).names
+        fixed = [(names[j], float(theta[j])) for j in np.flatnonzero(held)]
+        res = levenberg_marquardt(self.problem(u, y, warmup, fixed), theta[~held], max_iter=max_iter)
+        out = theta.copy()
+        out[~held] = res.theta
+        return out, res
 
     def monomials(self, c: NDArray[np.float64]) -> NDArray[np.float64]:
         """m_1..m_n of f(x) = sum_i m_i x^i."""
@@ -452,24 +447,28 @@ class _Param:
 # -- best linear approximation and its splits ----------------------------------------------------
 
 
-def _best_linear(u: NDArray[np.float64], y: NDArray[np.float64], order: int, delay: int, warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
-    """Output-error model num/den of the given order (numerator lags delay..order) plus an
-    output offset: an ARX start, then Levenberg-Marquardt on the simulation error."""
+def _best_linear(u: NDArray[np.float64], y: NDArray[np.float64], order: int, feedthrough: bool, output_feedthrough: bool, warmup: int) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Output-error model num/den of the given order (numerator lags 2..order, or 0..order
+    with feedthrough) plus an output offset: an ARX start (least squares), then the one
+    Levenberg-Marquardt on the simulation error. The model is the core's Wiener-Hammerstein
+    problem with f(x) = x and G2 = q^-1 (1 with feedthrough) held, so G = G2 G1."""
+    delay = int(not feedthrough) + int(not output_feedthrough)
     n_num = order + 1 - delay
     cols = [_delayed(u, delay + i) for i in range(n_num)] + [-_delayed(y, j) for j in range(1, order + 1)]
     lag = order + 1
     arx = np.linalg.lstsq(np.column_stack(cols + [np.ones_like(u)])[lag:], y[lag:], rcond=None)[0]
-    if _radius(np.r_[1.0, arx[n_num : n_num + order]]) >= _UNSTABLE:  # keep the ARX numerator, damp the poles
+    if _core.spectral_radius([float(v) for v in arx[n_num : n_num + order]]) >= _UNSTABLE:
+        # keep the ARX numerator, damp the poles
         arx[n_num : n_num + order] = np.poly(0.9 * np.exp(1j * np.linspace(0.3, 2.5, order))).real[1:]
-
-    def residuals(th: NDArray[np.float64]) -> NDArray[np.float64]:
-        den = np.r_[1.0, th[n_num : n_num + order]]
-        if _radius(den) >= _UNSTABLE:
-            return np.full(len(y) - warmup, _PENALTY)
-        return (lfilter(np.r_[np.zeros(delay), th[:n_num]], den, u) + th[-1] - y)[warmup:]
-
-    th = least_squares(residuals, arx, method="lm").x
-    return np.r_[np.zeros(delay), th[:n_num]], np.r_[1.0, th[n_num : n_num + order]], float(th[-1])
+    lin = _Param(order, 1, 1, feedthrough, output_feedthrough)
+    a = np.r_[arx[:n_num], np.zeros(lin.sizes[0] - n_num)]  # G1's lags 1..order: the last one 0
+    r = np.r_[1.0, np.zeros(lin.sizes[3] - 1)]
+    theta = np.r_[a, arx[n_num : n_num + order], 1.0, r, 0.0, arx[-1]]
+    held = np.zeros(theta.size, dtype=bool)
+    held[n_num : lin.sizes[0]] = True  # the lag G2's delay moves beyond the order
+    held[lin.sizes[0] + order : -1] = True  # c_1 = 1 (f(x) = x), G2's coefficients; the offset is free
+    th, _ = lin.fit(u, y, warmup, theta, 200, held)
+    return np.r_[np.zeros(delay), th[:n_num]], np.r_[1.0, th[lin.sizes[0] : lin.sizes[0] + order]], float(th[-1])
 
 
 def _conjugate_groups(roots: NDArray[np.complex128]) -> list[list[complex]]:
@@ -502,9 +501,21 @@ def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], nb: in
     """(G1 poles, G2 poles, G1 zeros, G2 zeros) with nb poles in G1, ns in G2, and at most
     nb and ns zeros (n - 1 when the block keeps a one-sample delay). Only when no split keeps
     every zero (e.g. a complex pair when each block has room for one zero) are zeros left out:
-    the refinement moves the numerators anyway."""
+    the refinement moves the numerators anyway. When no choice of whole conjugate pairs gives
+    G1 nb poles (e.g. three pairs and nb = 3), the pair nearest the real axis, a +- ib, is
+    replaced by the real poles a +- b until one does."""
+    pole_sets = _subsets(poles, range(nb, nb + 1))
+    while not pole_sets:
+        groups = _conjugate_groups(poles)
+        pairs = [k for k, g in enumerate(groups) if len(g) == 2]
+        if not pairs:
+            break
+        near = min(pairs, key=lambda k: abs(groups[k][0].imag))
+        re, im = groups[near][0].real, abs(groups[near][0].imag)
+        poles = np.array([q for k, g in enumerate(groups) if k != near for q in g] + [re - im, re + im], dtype=complex)
+        pole_sets = _subsets(poles, range(nb, nb + 1))
     whole, partial = [], []
-    for p1, p2 in _subsets(poles, range(nb, nb + 1)):
+    for p1, p2 in pole_sets:
         for z1, rest in _subsets(zeros, range(0, room[0] + 1)):
             if len(rest) <= room[1]:
                 whole.append((p1, p2, z1, rest))
@@ -515,18 +526,19 @@ def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], nb: in
     return whole or partial
 
 
-def _theta_from_split(param: _Param, u: NDArray[np.float64], split: tuple[list[complex], ...], gain: float) -> NDArray[np.float64]:
-    """G1 = Z1/P1 (lagged to its order) scaled so that max |x| = k, f(x) = x, G2 carries the gain."""
+def _theta_from_split(param: _Param, u: NDArray[np.float64], split: tuple[list[complex], ...], gain: float, offset: float) -> NDArray[np.float64]:
+    """G1 = Z1/P1 (lagged to its order) scaled so that max |x| = k on the input u (the whole
+    estimation record: T_i grows fast beyond [-1, 1]), f(x) = x, G2 carries the gain, the
+    baseline's offset."""
     p1, p2, z1, z2 = split
-    d = param.delay
     b, s = np.poly(p1).real, np.poly(p2).real
-    a = np.r_[np.zeros(param.nb - d - len(z1)), np.poly(z1).real]
-    r = np.r_[np.zeros(param.ns - d - len(z2)), np.poly(z2).real] * gain
-    x = lfilter(param.numerator(a), b, u)
-    scale = np.max(np.abs(x)) / param.k
+    a = np.r_[np.zeros(param.nb - param.delay - len(z1)), np.poly(z1).real]
+    r = np.r_[np.zeros(param.ns - param.output_delay - len(z2)), np.poly(z2).real] * gain
     c = np.zeros(param.degree)
     c[0] = param.k  # c_1 T_1(x / k) = x
-    return np.r_[a / scale, b[1:], c, r * scale, s[1:]]
+    x = LinearBlock(a, b[1:], feedthrough=param.feedthrough).simulate(u)
+    scale = np.max(np.abs(x)) / param.k
+    return np.r_[a / scale, b[1:], c, r * scale, s[1:], offset]
 
 
 def fit_wiener_hammerstein(
@@ -537,20 +549,24 @@ def fit_wiener_hammerstein(
     ns: int = 3,
     degree: int = 20,
     warmup: int = 100,
-    max_iter: int = 200,
+    max_iter: int = 20,
     split_samples: int = 20_000,
     split_degree: int = 3,
     split_iter: int = 15,
     feedthrough: bool = False,
+    output_feedthrough: bool | None = None,
 ) -> WienerHammersteinFit:
     """Identify a Wiener-Hammerstein system u -> G1 -> f -> G2 -> y (a sandwich with a tied,
     zero-width backlash).
 
     The best linear approximation first, then each split of its poles and zeros between G1
     and G2 refined briefly, then Levenberg-Marquardt on the free-run simulation error with f
-    in a Chebyshev basis. Deterministic: no random numbers are drawn. On the SYSID 2009
-    benchmark (100 000 training samples) the free-run test RMSE was 0.95 / 0.71 / 0.53 mV at
-    degree 15 / 20 / 25 (linear baseline 43.3 mV), 11-15 s per fit; degree 30 got worse.
+    in a Chebyshev basis: up to 100 iterations on the first 30 000 samples, then ``max_iter``
+    on the whole record (records of at most 30 000 samples: one run of 100 + ``max_iter``).
+    Every search is :func:`levenberg_marquardt` on the core's compiled problem (exact
+    sensitivities). Deterministic: no random numbers are drawn. The fitted output is
+    :meth:`WienerHammersteinFit.simulate`, the sandwich plus an output offset. SYSID 2009
+    benchmark figures: README and docs/performance.md (``benches/wiener_hammerstein.py``).
 
     Parameters
     ----------
@@ -568,17 +584,19 @@ def fit_wiener_hammerstein(
         iteration grows linearly with it).
     warmup : int, default 100
         Samples at the start left out of every criterion (the record does not start at rest).
-    max_iter : int, default 200
-        Function evaluations of the final Levenberg-Marquardt run at most.
+    max_iter : int, default 20
+        Iterations of the final Levenberg-Marquardt run, on the whole record, at most.
     split_samples : int, default 20000
         Samples of the short refinement that ranks the pole/zero splits.
     split_degree : int, default 3
         Degree of f in that refinement.
     split_iter : int, default 15
-        Function evaluations of that refinement per split.
+        Iterations of that refinement per split.
     feedthrough : bool, default False
-        Give both blocks a lag-0 term instead of the one-sample delay
-        (``LinearBlock(.., feedthrough=True)``).
+        Give G1 (and, unless ``output_feedthrough`` says otherwise, G2) a lag-0 term instead
+        of the one-sample delay (``LinearBlock(.., feedthrough=True)``).
+    output_feedthrough : bool, optional
+        G2's lag-0 term on its own; default: as ``feedthrough``.
 
     Returns
     -------
@@ -605,46 +623,65 @@ def fit_wiener_hammerstein(
     degree, nb, ns = check_whole(degree, "degree", 1), check_whole(nb, "nb", 1), check_whole(ns, "ns", 1)
     # a constant input has always been a DataError here (NotIdentifiableError in the iterative fits)
     u_arr, y_arr = identification_record(u, y, y_name="y", warmup=warmup, parameters=2 * (nb + ns) + degree, constant_input=DataError)
+    output_feedthrough = feedthrough if output_feedthrough is None else bool(output_feedthrough)
     started = time.perf_counter()
-    delay = 0 if feedthrough else 2
-    num, den, offset = _best_linear(u_arr, y_arr, nb + ns, delay, warmup)
-    baseline = LinearBaseline(LinearBlock(num, den[1:], feedthrough=True) if feedthrough else LinearBlock(num[1:], den[1:]), offset)
+    short_degree = min(split_degree, degree)
+    n_short = min(len(u_arr), max(split_samples, warmup + 10 * (2 * (nb + ns) + short_degree)))
+    num, den, offset = _best_linear(u_arr, y_arr, nb + ns, feedthrough, output_feedthrough, warmup)
+    linear = LinearBlock(num, den[1:], feedthrough=True) if feedthrough and output_feedthrough else LinearBlock(num[1:], den[1:])
+    baseline = LinearBaseline(linear, offset)
     baseline_rmse = float(np.sqrt(np.mean((baseline.simulate(u_arr) - y_arr)[warmup:] ** 2)))
     lead = np.trim_zeros(num, "f")
     poles, zeros = np.roots(den), np.roots(lead)
 
-    short = _Param(nb, ns, min(split_degree, degree), feedthrough)
-    n_short = min(len(u_arr), max(split_samples, warmup + 10 * (2 * (nb + ns) + short.degree)))
+    short = _Param(nb, ns, short_degree, feedthrough, output_feedthrough)
     u_s, y_s = u_arr[:n_short], y_arr[:n_short]
+    short_problem = short.problem(u_s, y_s, warmup)
     ranked = []
-    room = (nb - short.delay, ns - short.delay)
+    room = (nb - short.delay, ns - short.output_delay)
     for split in _splits(poles, zeros, nb, ns, room):
-        theta = _theta_from_split(short, u_s, split, float(lead[0]))
-        if not short.stable(theta):
+        try:
+            theta = _theta_from_split(short, u_arr, split, float(lead[0]), offset)
+            if not short_problem.feasible(theta):
+                continue
+            theta, res = short.fit(u_s, y_s, warmup, theta, split_iter)
+        except BacklashIdError:
             continue
-        res = short.fit(theta, u_s, y_s, warmup, split_iter)
-        rmse = float(np.sqrt(np.mean(res.fun**2)))
-        if short.stable(res.x) and np.isfinite(rmse):
-            ranked.append((rmse, res.x, split))
+        rmse = float(np.sqrt(res.cost / res.n_residuals))
+        if short_problem.feasible(theta) and np.isfinite(rmse):
+            ranked.append((rmse, theta, split))
     if not ranked:
         raise NotConvergedError("no split of the best linear approximation's poles and zeros gives a stable start")
     ranked.sort(key=lambda item: item[0])
     _, theta_short, split = ranked[0]
 
-    full = _Param(nb, ns, degree, feedthrough)
-    a, b, c_short, r, s = short.split(theta_short)
+    full = _Param(nb, ns, degree, feedthrough, output_feedthrough)
+    a, b, c_short, r, s, o = short.split(theta_short)
     c = np.zeros(degree)
     c[: short.degree] = c_short
-    res = full.fit(np.r_[a, b, c, r, s], u_arr, y_arr, warmup, max_iter)
-    a, b, c, r, s = full.split(res.x)
+    theta = np.r_[a, b, c, r, s, o]
+    try:
+        n_seg = _SEGMENT_SAMPLES
+        if len(u_arr) > n_seg:  # most iterations on a segment, then the whole record
+            theta, _ = full.fit(u_arr[:n_seg], y_arr[:n_seg], warmup, theta, _SEGMENT_ITER)
+            theta, res = full.fit(u_arr, y_arr, warmup, theta, max_iter)
+        else:
+            theta, res = full.fit(u_arr, y_arr, warmup, theta, _SEGMENT_ITER + max_iter)
+    except BacklashIdError as exc:
+        raise NotConvergedError(f"the final Levenberg-Marquardt run found no usable model: {exc}") from None
+    a, b, c, r, s, o = full.split(theta)
     m = full.monomials(c)
     if m[0] < 0:  # f'(0) < 0: use -x as the internal signal, so that m_1 > 0
         a, m = -a, m * (-1.0) ** np.arange(1, degree + 1)
     try:
-        model = wiener_hammerstein_model(a, b, m, r, s, feedthrough=feedthrough)
+        model = SandwichModel(
+            LinearBlock(a, b, feedthrough=feedthrough),
+            GeneralBacklash(0.0, 0.0, [float(v) for v in m], [float(v) for v in m]),
+            LinearBlock(r, s, feedthrough=output_feedthrough),
+        )
     except ModelError as exc:
         raise NotConvergedError(f"the fitted static block is not usable as tied branches: {exc}") from None
-    rmse = float(np.sqrt(np.mean((model.simulate(u_arr) - y_arr)[warmup:] ** 2)))
+    rmse = float(np.sqrt(np.mean((model.simulate(u_arr) + float(o[0]) - y_arr)[warmup:] ** 2)))
     return WienerHammersteinFit(
         model=model,
         baseline=baseline,
@@ -655,9 +692,10 @@ def fit_wiener_hammerstein(
         simulation_rmse=rmse,
         baseline_rmse=baseline_rmse,
         fit_time=time.perf_counter() - started,
-        iterations=int(res.nfev),
-        converged=bool(res.status > 0),
+        iterations=int(res.iterations),
+        converged=bool(res.converged),
         split_rmse=tuple(item[0] for item in ranked),
         g1_poles=np.asarray(split[0]),
         g1_zeros=np.asarray(split[2]),
+        offset=float(o[0]),
     )

@@ -34,7 +34,7 @@ pub use error::{Error, Result};
 pub use identify::{
     cascade_oe_factor, cascade_oe_gradient, sandwich_oe_factor, sandwich_oe_gradient, solve_factor,
     ArxRegression, AugmentedProblem, CascadeRegression, Iteration, OeGradient, Problem,
-    RecordStart, SandwichRegression, Structure,
+    RecordStart, SandwichRegression, Structure, WhStructure, WienerHammersteinProblem,
 };
 pub use linalg::{fold_parallel, LeastSquares, TriangularFactor};
 pub use model::{

@@ -10,6 +10,7 @@ mod errors;
 mod identify;
 mod models;
 mod problem;
+mod wiener_hammerstein;
 
 // The helpers the effect binding (`augmented`) shares.
 use convert::{signal, vec_f64, SignalOut};
@@ -25,6 +26,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<models::PySandwichModel>()?;
     m.add_class::<problem::PyProblem>()?;
     m.add_class::<augmented_problem::PyAugmentedProblem>()?;
+    m.add_class::<wiener_hammerstein::PyWienerHammersteinProblem>()?;
     identify::register(m)?;
     m.add_function(wrap_pyfunction!(augmented::simulate_augmented, m)?)?;
     Ok(())

@@ -12,6 +12,7 @@ pub mod problem;
 pub mod regressor;
 mod rows;
 pub mod sensitivity;
+pub mod wiener_hammerstein;
 
 pub use augmented_problem::{AugmentedProblem, RecordStart};
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
@@ -23,3 +24,4 @@ pub use regressor::{
 pub use sensitivity::{
     cascade_oe_factor, cascade_sensitivity, sandwich_oe_factor, sandwich_sensitivity, Sensitivity,
 };
+pub use wiener_hammerstein::{WhStructure, WienerHammersteinProblem};
