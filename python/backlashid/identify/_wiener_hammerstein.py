@@ -23,7 +23,8 @@ core's compiled ``WienerHammersteinProblem``: the core simulates the model and s
 exact sensitivities of every parameter into the triangular factor; the BLA is the same
 problem with f(x) = x and G2 a pure delay held. High degrees (13-30) are well conditioned
 because f is fitted in a Chebyshev basis of x / k, with G1's gain fixed so that k = max |x|
-on the estimation data is 1 at the start; the polynomial is turned into the monomials m_i at
+on the estimation data is 1 at the start of the split search and again (G1 rescaled, f
+rewritten) at the start of the full model; the polynomial is turned into the monomials m_i at
 the end. The stored model therefore has max |x| close to 1 on data like the estimation data,
 which keeps the powers x^i in range. Steps that move a pole of G1 or G2 to a modulus of 0.9999
 or more are rejected.
@@ -537,7 +538,8 @@ def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], nb: in
 
 def _rebased(c: NDArray[np.float64], k_old: float, k_new: float) -> NDArray[np.float64]:
     """The coefficients of f(x) = sum_i c_i (T_i(x / k_old) - T_i(0)) in the basis
-    T_i(x / k_new) (exact: through the monomials, for the low degree of the split search)."""
+    T_i(x / k_new) (exact: through the monomials, for the low degree of the split search);
+    with x = s x' and k_old = k / s it is f(s x') in the basis T_i(x' / k)."""
     p = chebyshev.cheb2poly(np.r_[0.0, c])  # the constant does not matter: f(0) = 0 either way
     p = np.r_[p, np.zeros(c.size + 1 - p.size)] * (k_new / k_old) ** np.arange(c.size + 1)
     out = chebyshev.poly2cheb(p)[1:]
@@ -582,7 +584,8 @@ def fit_wiener_hammerstein(
     in a Chebyshev basis: up to 100 iterations on the first 30 000 samples, then ``max_iter``
     on the whole record (records of at most 30 000 samples: one run of 100 + ``max_iter``).
     Every search is :func:`levenberg_marquardt` on the core's compiled problem (exact
-    sensitivities). Deterministic: no random numbers are drawn. The fitted output is
+    sensitivities), by variable projection: f's coefficients and the output offset, which the
+    output is affine in, at their exact optimum for each G1, G2. Deterministic: no random numbers are drawn. The fitted output is
     :meth:`WienerHammersteinFit.simulate`, the sandwich plus an output offset. SYSID 2009
     benchmark figures: README and docs/performance.md (``benches/wiener_hammerstein.py``).
 
@@ -674,12 +677,14 @@ def fit_wiener_hammerstein(
     _, theta_short, split = ranked[0]
 
     a, b, c_short, r, s, o = short.split(theta_short)
-    # the refinement moves G1's poles, and with them the range of x: the full model's basis is
-    # T_i(x / k) with k = max abs(x) on the record now (T_i grows like (2 |z|)^i beyond [-1, 1])
-    k = float(np.max(np.abs(LinearBlock(a, b, feedthrough=feedthrough).simulate(u_arr))))
-    full = _Param(nb, ns, degree, feedthrough, output_feedthrough, k)
+    # the refinement moves G1's poles, and with them the range of x (to about 2.4 on the SYSID
+    # 2009 record, where T_25 is about 1e16): G1 rescaled so that max abs(x) = k again, f(x)
+    # rewritten for the scaled x (T_i grows like (2 abs(z))^i beyond [-1, 1])
+    full = _Param(nb, ns, degree, feedthrough, output_feedthrough)
+    x_range = float(np.max(np.abs(LinearBlock(a, b, feedthrough=feedthrough).simulate(u_arr)))) / full.k
+    a = a / x_range
     c = np.zeros(degree)
-    c[: short.degree] = _rebased(c_short, short.k, k)
+    c[: short.degree] = _rebased(c_short, short.k / x_range, full.k)
     theta = np.r_[a, b, c, r, s, o]
     try:
         n_seg = _SEGMENT_SAMPLES
