@@ -88,3 +88,58 @@ def test_an_unstable_start_is_refused(prob):
     assert not prob.feasible(start)
     with pytest.raises(bid.BacklashIdError, match="start is unstable"):
         levenberg_marquardt(prob, start)
+
+
+# -- variable projection (linear=): the Chebyshev coefficients and offset of a Wiener-Hammerstein
+
+
+@pytest.fixture(scope="module")
+def wh():
+    from backlashid import _core
+    from backlashid.identify import wiener_hammerstein_model
+
+    truth = wiener_hammerstein_model([0.3, 0.1], [-0.5, 0.1], [1.0, 0.0, -0.3], [0.5, 0.2], [-0.2, 0.05])
+    rng = np.random.default_rng(0)
+    u = rng.normal(0.0, 0.5, 2000)
+    y = truth.simulate(u) + 0.01 * rng.normal(size=u.size) + 0.1
+    # the two scale directions held (a1, r1); theta = [a2, b1, b2, c1, c2, c3, r2, s1, s2, offset]
+    prob = _core.WienerHammersteinProblem(u, y, 2, 2, 3, warmup=20, fixed=[("a1", 0.3), ("r1", 0.5)])
+    assert prob.names == ["a2", "b1", "b2", "c1", "c2", "c3", "r2", "s1", "s2", "offset"]
+    return prob
+
+
+WH_LINEAR = [3, 4, 5, 9]  # f's coefficients and the offset: y is affine in them for fixed G1, G2
+WH_STARTS = [
+    np.array([0.1, -0.4, 0.05, 1.0, 0.0, 0.0, 0.25, -0.1, 0.0, 0.0]),
+    np.array([0.0, -0.2, 0.0, 3.0, 1.0, -1.0, 0.0, 0.0, 0.0, 2.0]),
+]
+
+
+@pytest.mark.parametrize("start", WH_STARTS, ids=["near", "far"])
+def test_variable_projection_reaches_the_minimum_of_the_plain_search_in_fewer_steps(wh, start):
+    plain = levenberg_marquardt(wh, start)
+    vp = levenberg_marquardt(wh, start, linear=WH_LINEAR)
+    assert plain.converged and vp.converged
+    assert vp.cost == pytest.approx(plain.cost, rel=1e-7)
+    cov = plain.unscaled_covariance(wh.names) * plain.cost / (plain.n_residuals - len(wh.names))
+    assert np.all(np.abs(vp.theta - plain.theta) < 0.1 * np.sqrt(np.diag(cov)))  # within 0.1 standard errors
+    assert vp.iterations < plain.iterations
+
+
+def test_variable_projection_returns_the_exact_linear_optimum_and_its_factor(wh):
+    fit = levenberg_marquardt(wh, WH_STARTS[1], linear=WH_LINEAR, max_iter=3)
+    p = len(wh.names)
+    assert fit.cost == pytest.approx(wh.cost(fit.theta), rel=1e-9)  # c* and the offset exact at G1, G2
+    qtr, rho = fit.r_aug[:p, p], fit.r_aug[p, p]
+    assert float(qtr @ qtr) + rho**2 == pytest.approx(fit.cost, rel=1e-9)
+    r_mat = fit.r_aug[:p, :p]
+    g = wh.gradient(fit.theta)[0]
+    # J^T r over the linear parameters vanishes at c* (relative to ||J_i|| ||r||)
+    col = np.linalg.norm(r_mat, axis=0)
+    assert np.max(np.abs(g[WH_LINEAR]) / (col[WH_LINEAR] * np.sqrt(fit.cost))) < 1e-6
+
+
+@pytest.mark.parametrize("linear", [[C_L], [0, 0], [S.size]], ids=["bounded", "twice", "out of range"])
+def test_linear_indices_must_be_distinct_unbounded_parameters(prob, linear):
+    with pytest.raises(DataError, match="linear: give distinct indices"):
+        levenberg_marquardt(prob, TRUTH, linear=linear)

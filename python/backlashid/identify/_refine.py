@@ -9,6 +9,7 @@ record by :func:`problem`): each trial passes theta only.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -134,6 +135,7 @@ def levenberg_marquardt(
     max_iter: int = 200,
     se_tol: float = 1e-2,
     xtol: float = 1e-12,
+    linear: ArrayLike | None = None,
 ) -> OutputErrorFit:
     """The package's one Levenberg-Marquardt search: minimise the output-error cost
     sum_t (y(t) - y_sim(t, theta))^2 over t >= warmup of a compiled problem from theta0,
@@ -160,6 +162,21 @@ def levenberg_marquardt(
     a factor folded there. The returned ``r_aug`` is [R | Q^T r] at theta with R folded at
     theta or at most one standard error before it (or at the point before a negligible step).
 
+    Variable projection (``linear``): when the simulated output is affine in some parameters
+    c for any fixed value of the others n (e.g. the coefficients of a static polynomial
+    between two fixed linear blocks, and an output offset), the search runs over n alone,
+    each n with its optimal c*(n) (Golub-Pereyra; Kaufman's step). From the factor of
+    [J | r] at (c, n), its columns permuted to [c | n | r] and re-triangularised (a small QR:
+    R^T R is unchanged), [[R11, R12, q1], [0, R22, q2], [0, 0, rho]]: c* = c + R11^-1 q1 is
+    exact (r is affine in c), the cost at (c*, n) is ||q2||^2 + rho^2, and the damped step of
+    n solves [R22; sqrt(lambda) D] delta_n = [q2; 0] with c following the linearised optimum
+    (delta_c = -R11^-1 R12 delta_n from c*). Every trial is evaluated by one factor there
+    (giving its own c* and cost); the stability guard, the box (over n; the linear parameters
+    must be free) and the stopping rule (over n, the Gauss-Newton gain ||q2||^2 of the
+    projected problem) are the same. The factor of a trial is folded at the linearised c,
+    within a second-order distance of its c*, where the next step is computed. The valley
+    along which c and n trade off is walked in one step rather than crept along.
+
     Parameters
     ----------
     problem : CompiledProblem
@@ -174,6 +191,11 @@ def levenberg_marquardt(
         Stop when a step would move theta by less than this many standard errors.
     xtol : float, default 1e-12
         Stop at a step shorter than this relative to ``theta``.
+    linear : array_like of int, optional
+        Indices of parameters the output is affine in jointly (for any fixed value of the
+        others): search by variable projection over the others. Their bounds must be
+        infinite. The returned ``r_aug`` is then [R | Q^T r] at ``theta`` with R folded at the
+        last trial's linearised c (Q^T r exact at ``theta``).
 
     Returns
     -------
@@ -185,7 +207,8 @@ def levenberg_marquardt(
     BacklashIdError
         If the start is unstable or its simulation diverges.
     DataError
-        If the bounds do not fit the problem.
+        If the bounds do not fit the problem, or ``linear`` names an index twice, out of
+        range, or bounded.
 
     Examples
     --------
@@ -223,6 +246,18 @@ def levenberg_marquardt(
 
     theta = np.clip(np.array(theta0, dtype=np.float64), lo, hi)
     unusable = BacklashIdError("output-error refinement: the start is unstable or diverges")
+    if linear is not None:
+        lin = np.asarray(linear, dtype=np.int64).reshape(-1)
+        if (
+            lin.size != np.unique(lin).size
+            or np.any((lin < 0) | (lin >= n_par))
+            or not (np.isneginf(lo[lin]).all() and np.isposinf(hi[lin]).all())
+        ):
+            raise DataError("linear: give distinct indices of parameters without bounds")
+        if lin.size:
+            mask = np.zeros(n_par, dtype=bool)
+            mask[lin] = True
+            return _projected(problem, theta, mask, lo, hi, max_iter, se_tol, xtol, names, dof, unusable)
     try:  # the factor's pass simulates the start: an overflow is a ModelError
         if not problem.feasible(theta):
             raise unusable
@@ -279,6 +314,118 @@ def levenberg_marquardt(
             converged = True
             break
     return OutputErrorFit(theta=theta, cost=cost, r_aug=r_aug, n_residuals=n_res, iterations=steps, converged=converged)
+
+
+@dataclass(frozen=True)
+class _Projected:
+    """A point of the variable-projection search: theta with its linear part at c*, the
+    cost there, the factor (original column order) with Q^T r at theta, and the blocks of the
+    permuted factor [[R11, R12, q1], [0, R22, q2], [0, 0, rho]] (q1 = 0 at c*)."""
+
+    theta: NDArray[np.float64]
+    cost: float
+    r_aug: NDArray[np.float64]
+    r11: NDArray[np.float64]
+    r12: NDArray[np.float64]
+    r22: NDArray[np.float64]
+    q2: NDArray[np.float64]
+    refolded: bool = False
+
+
+def _project(problem: CompiledProblem, theta: NDArray[np.float64], lin: NDArray[np.bool_], refolded: bool = False) -> _Projected | None:
+    """One factor at theta, the linear parameters moved to their exact optimum c* (None if
+    theta is infeasible, diverges, or R11 is singular)."""
+    try:
+        if not problem.feasible(theta):
+            return None
+        r_aug, cost = problem.oe_factor(theta)
+    except BacklashIdError:
+        return None
+    if not (np.isfinite(cost) and np.all(np.isfinite(r_aug))):
+        return None
+    p, nl = theta.size, int(lin.sum())
+    r_mat, qtr = r_aug[:p, :p], r_aug[:p, p]
+    order = np.r_[np.flatnonzero(lin), np.flatnonzero(~lin)]
+    rp = np.linalg.qr(np.column_stack([r_aug[:, order], r_aug[:, p]]), mode="r")  # [c | n | r], R^T R kept
+    r11 = rp[:nl, :nl]
+    if not np.all(np.abs(np.diag(r11)) > 1e-12 * np.linalg.norm(r11, axis=0)):  # each column's own scale
+        return None
+    dc = linalg.solve_triangular(r11, rp[:nl, p], check_finite=False)
+    out = theta.copy()
+    out[lin] += dc
+    qtr_star = qtr - r_mat[:, lin] @ dc
+    cost_star = float(rp[nl:, p] @ rp[nl:, p])  # ||q2||^2 + rho^2
+    kept = np.vstack([np.column_stack([r_mat, qtr_star]), np.zeros(p + 1)])
+    kept[p, p] = abs(float(rp[p, p]))
+    return _Projected(out, cost_star, kept, r11, rp[:nl, nl:p], rp[nl:p, nl:p], rp[nl:p, p], refolded)
+
+
+def _projected(
+    problem: CompiledProblem,
+    theta: NDArray[np.float64],
+    lin: NDArray[np.bool_],
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+    max_iter: int,
+    se_tol: float,
+    xtol: float,
+    names: list[str],
+    dof: int,
+    unusable: BacklashIdError,
+) -> OutputErrorFit:
+    """:func:`levenberg_marquardt` by variable projection over the parameters not in ``lin``
+    (its docstring); the same damping, stability guard, box and stopping rule."""
+    nonlin = ~lin
+    n_names = [k for k, f in zip(names, nonlin) if f]
+    lo_n, hi_n = lo[nonlin], hi[nonlin]
+    point = _project(problem, theta, lin)
+    if point is None:
+        raise unusable
+    # the Jacobian of n depends on c (e.g. through f'(x)): the start's c may be far from c*
+    point = _project(problem, point.theta, lin, refolded=True) or point
+    scale = np.zeros(int(nonlin.sum()))
+    lam = 1e-3
+    steps, converged = 0, False
+    for _ in range(max_iter):
+        r22, q2 = point.r22, point.q2
+        theta_n = point.theta[nonlin]
+        free = _free(theta_n, r22.T @ q2, lo_n, hi_n)
+        negligible = se_tol**2 * point.cost / dof
+        if _gain(r22, q2, free, n_names) <= negligible:
+            converged = True
+            break
+        scale = np.maximum(scale, np.linalg.norm(r22, axis=0))  # Marquardt's D of the projected J
+        d = np.where(scale > 0, scale, 1.0)[free]
+        free_names = [k for k, f in zip(n_names, free) if f]
+        accepted = small = False
+        while lam < 1e12:
+            a = np.vstack([r22[:, free], np.sqrt(lam) * np.diag(d)])
+            delta = np.zeros(theta_n.size)
+            delta[free] = _core.lstsq(a, np.concatenate([q2, np.zeros(d.size)]), free_names)[0]
+            delta = np.clip(theta_n + delta, lo_n, hi_n) - theta_n  # projected onto the box
+            trial = point.theta.copy()
+            trial[nonlin] += delta
+            trial[lin] -= linalg.solve_triangular(point.r11, point.r12 @ delta, check_finite=False)
+            new = _project(problem, trial, lin) if np.all(np.isfinite(trial)) else None
+            if new is not None and new.cost < point.cost:
+                small = point.cost - new.cost <= negligible or np.linalg.norm(delta) <= xtol * (
+                    np.linalg.norm(theta_n) + xtol
+                )
+                point, accepted, steps = new, True, steps + 1
+                lam = max(lam / 3.0, 1e-12)
+                break
+            lam *= 4.0
+        if not accepted and not point.refolded:  # no step from a factor folded off c*: fold at c*
+            point = _project(problem, point.theta, lin, refolded=True) or dataclasses.replace(point, refolded=True)
+            lam = 1e-3
+            continue
+        if not accepted or small:
+            converged = True
+            break
+    return OutputErrorFit(
+        theta=point.theta, cost=point.cost, r_aug=point.r_aug, n_residuals=problem.samples - problem.warmup,
+        iterations=steps, converged=converged,
+    )
 
 
 def _free(theta: NDArray[np.float64], g: NDArray[np.float64] | None, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.bool_]:

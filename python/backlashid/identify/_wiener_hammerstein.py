@@ -23,7 +23,8 @@ core's compiled ``WienerHammersteinProblem``: the core simulates the model and s
 exact sensitivities of every parameter into the triangular factor; the BLA is the same
 problem with f(x) = x and G2 a pure delay held. High degrees (13-30) are well conditioned
 because f is fitted in a Chebyshev basis of x / k, with G1's gain fixed so that k = max |x|
-on the estimation data is 1 at the start; the polynomial is turned into the monomials m_i at
+on the estimation data is 1 at the start of the split search and again (G1 rescaled, f
+rewritten) at the start of the full model; the polynomial is turned into the monomials m_i at
 the end. The stored model therefore has max |x| close to 1 on data like the estimation data,
 which keeps the powers x^i in range. Steps that move a pole of G1 or G2 to a modulus of 0.9999
 or more are rejected.
@@ -415,7 +416,7 @@ class _Param:
 
     def fit(
         self, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, theta: NDArray[np.float64], max_iter: int,
-        held: NDArray[np.bool_] | None = None,
+        held: NDArray[np.bool_] | None = None, linear: NDArray[np.bool_] | None = None, projection: bool = True,
     ) -> tuple[NDArray[np.float64], OutputErrorFit]:
         """The one Levenberg-Marquardt from theta on the record (u, y), the ``held``
         parameters fixed in the core's problem (left out of its theta); returns the whole
@@ -430,7 +431,13 @@ class _Param:
             held[r_start + int(np.argmax(np.abs(theta[r_start : r_start + self.sizes[3]])))] = True
         names = self.problem(u[:2], y[:2], 0).names
         fixed = [(names[j], float(theta[j])) for j in np.flatnonzero(held)]
-        res = levenberg_marquardt(self.problem(u, y, warmup, fixed), theta[~held], max_iter=max_iter)
+        if linear is None:
+            linear = np.zeros(theta.size, dtype=bool)
+            start = sum(self.sizes[:2])
+            linear[start : start + self.degree] = True
+            linear[-1] = True
+        lin = np.flatnonzero(linear[~held]) if projection else None
+        res = levenberg_marquardt(self.problem(u, y, warmup, fixed), theta[~held], max_iter=max_iter, linear=lin)
         out = theta.copy()
         out[~held] = res.theta
         return out, res
@@ -467,7 +474,10 @@ def _best_linear(u: NDArray[np.float64], y: NDArray[np.float64], order: int, fee
     held = np.zeros(theta.size, dtype=bool)
     held[n_num : lin.sizes[0]] = True  # the lag G2's delay moves beyond the order
     held[lin.sizes[0] + order : -1] = True  # c_1 = 1 (f(x) = x), G2's coefficients; the offset is free
-    th, _ = lin.fit(u, y, warmup, theta, 200, held)
+    linear = np.zeros(theta.size, dtype=bool)
+    linear[: lin.sizes[0]] = True  # with f(x) = x and G2 held the output is affine in G1's numerator
+    linear[-1] = True  # and the offset
+    th, _ = lin.fit(u, y, warmup, theta, 200, held, linear)
     return np.r_[np.zeros(delay), th[:n_num]], np.r_[1.0, th[lin.sizes[0] : lin.sizes[0] + order]], float(th[-1])
 
 
@@ -526,6 +536,16 @@ def _splits(poles: NDArray[np.complex128], zeros: NDArray[np.complex128], nb: in
     return whole or partial
 
 
+def _rebased(c: NDArray[np.float64], k_old: float, k_new: float) -> NDArray[np.float64]:
+    """The coefficients of f(x) = sum_i c_i (T_i(x / k_old) - T_i(0)) in the basis
+    T_i(x / k_new) (exact: through the monomials, for the low degree of the split search);
+    with x = s x' and k_old = k / s it is f(s x') in the basis T_i(x' / k)."""
+    p = chebyshev.cheb2poly(np.r_[0.0, c])  # the constant does not matter: f(0) = 0 either way
+    p = np.r_[p, np.zeros(c.size + 1 - p.size)] * (k_new / k_old) ** np.arange(c.size + 1)
+    out = chebyshev.poly2cheb(p)[1:]
+    return np.r_[out, np.zeros(c.size - out.size)]
+
+
 def _theta_from_split(param: _Param, u: NDArray[np.float64], split: tuple[list[complex], ...], gain: float, offset: float) -> NDArray[np.float64]:
     """G1 = Z1/P1 (lagged to its order) scaled so that max |x| = k on the input u (the whole
     estimation record: T_i grows fast beyond [-1, 1]), f(x) = x, G2 carries the gain, the
@@ -564,7 +584,8 @@ def fit_wiener_hammerstein(
     in a Chebyshev basis: up to 100 iterations on the first 30 000 samples, then ``max_iter``
     on the whole record (records of at most 30 000 samples: one run of 100 + ``max_iter``).
     Every search is :func:`levenberg_marquardt` on the core's compiled problem (exact
-    sensitivities). Deterministic: no random numbers are drawn. The fitted output is
+    sensitivities), by variable projection: f's coefficients and the output offset, which the
+    output is affine in, at their exact optimum for each G1, G2. Deterministic: no random numbers are drawn. The fitted output is
     :meth:`WienerHammersteinFit.simulate`, the sandwich plus an output offset. SYSID 2009
     benchmark figures: README and docs/performance.md (``benches/wiener_hammerstein.py``).
 
@@ -655,10 +676,15 @@ def fit_wiener_hammerstein(
     ranked.sort(key=lambda item: item[0])
     _, theta_short, split = ranked[0]
 
-    full = _Param(nb, ns, degree, feedthrough, output_feedthrough)
     a, b, c_short, r, s, o = short.split(theta_short)
+    # the refinement moves G1's poles, and with them the range of x (to about 2.4 on the SYSID
+    # 2009 record, where T_25 is about 1e16): G1 rescaled so that max abs(x) = k again, f(x)
+    # rewritten for the scaled x (T_i grows like (2 abs(z))^i beyond [-1, 1])
+    full = _Param(nb, ns, degree, feedthrough, output_feedthrough)
+    x_range = float(np.max(np.abs(LinearBlock(a, b, feedthrough=feedthrough).simulate(u_arr)))) / full.k
+    a = a / x_range
     c = np.zeros(degree)
-    c[: short.degree] = c_short
+    c[: short.degree] = _rebased(c_short, short.k / x_range, full.k)
     theta = np.r_[a, b, c, r, s, o]
     try:
         n_seg = _SEGMENT_SAMPLES
