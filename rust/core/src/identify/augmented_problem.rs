@@ -257,6 +257,22 @@ impl AugmentedProblem {
         ))
     }
 
+    /// `pass` on theta's model and effects from the record's start state and its derivatives
+    /// (rest, or held at u[0]): what every sensitivity pass begins with.
+    fn with_start<T>(
+        &self,
+        theta: &[f64],
+        pass: impl FnOnce(&At, &Start) -> Result<T>,
+    ) -> Result<T> {
+        let at = self.at(theta)?;
+        let (state, dx_past) = self.state(&at.model.linear)?;
+        let start = Start {
+            state: &state,
+            dx_past: &dx_past,
+        };
+        pass(&at, &start)
+    }
+
     /// The free-run output at theta (`simulate_augmented`).
     pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
         let at = self.at(theta)?;
@@ -286,22 +302,18 @@ impl AugmentedProblem {
 
     /// The output and its dense Jacobian d y_sim / d theta (N x p; tests and small records).
     pub fn sensitivity(&self, theta: &[f64]) -> Result<Sensitivity> {
-        let at = self.at(theta)?;
-        let (state, dx_past) = self.state(&at.model.linear)?;
-        let start = Start {
-            state: &state,
-            dx_past: &dx_past,
-        };
-        let s = &self.start;
-        augmented_sensitivity(
-            &at.model,
-            &at.effects,
-            &self.u,
-            s.t0,
-            s.time_scale,
-            &start,
-            self.names.len(),
-        )
+        self.with_start(theta, |at, start| {
+            let s = &self.start;
+            augmented_sensitivity(
+                &at.model,
+                &at.effects,
+                &self.u,
+                s.t0,
+                s.time_scale,
+                start,
+                self.names.len(),
+            )
+        })
     }
 
     /// R_aug of [J | y - y_sim] over t >= warmup and the cost, streamed.
@@ -315,47 +327,41 @@ impl AugmentedProblem {
         theta: &[f64],
         threads: usize,
     ) -> Result<(TriangularFactor, f64)> {
-        let at = self.at(theta)?;
-        let (state, dx_past) = self.state(&at.model.linear)?;
-        let start = Start {
-            state: &state,
-            dx_past: &dx_past,
-        };
-        let s = &self.start;
-        augmented_oe_factor(
-            &at.model,
-            &at.effects,
-            &self.u,
-            &self.y,
-            self.warmup,
-            s.t0,
-            s.time_scale,
-            &start,
-            self.names.len(),
-            threads,
-        )
+        self.with_start(theta, |at, start| {
+            let s = &self.start;
+            let (u, y, p) = (&self.u[..], &self.y[..], self.names.len());
+            augmented_oe_factor(
+                &at.model,
+                &at.effects,
+                u,
+                y,
+                self.warmup,
+                s.t0,
+                s.time_scale,
+                start,
+                p,
+                threads,
+            )
+        })
     }
 
     /// g = J^T (y - y_sim) over t >= warmup and the cost, one pass without the factor.
     pub fn gradient(&self, theta: &[f64]) -> Result<OeGradient> {
-        let at = self.at(theta)?;
-        let (state, dx_past) = self.state(&at.model.linear)?;
-        let start = Start {
-            state: &state,
-            dx_past: &dx_past,
-        };
-        let s = &self.start;
-        augmented_oe_gradient(
-            &at.model,
-            &at.effects,
-            &self.u,
-            &self.y,
-            self.warmup,
-            s.t0,
-            s.time_scale,
-            &start,
-            self.names.len(),
-        )
+        self.with_start(theta, |at, start| {
+            let s = &self.start;
+            let (u, y, p) = (&self.u[..], &self.y[..], self.names.len());
+            augmented_oe_gradient(
+                &at.model,
+                &at.effects,
+                u,
+                y,
+                self.warmup,
+                s.t0,
+                s.time_scale,
+                start,
+                p,
+            )
+        })
     }
 
     /// The refit's guard: the linear block stable and every effect with a free parameter
