@@ -9,6 +9,7 @@ removes the bias of the equation-error iterations under noise.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import inspect
 from collections.abc import Callable, Sequence
@@ -95,6 +96,10 @@ class FitResult:
         When > 0, the iterations (``history``, ``history_rmse``, ``iterative_theta``) ran on
         the first ``coarse_samples`` samples after the warm-up and the refinement on the whole
         record.
+    initial_state : dict of str to float or None
+        With ``initial_state="estimate"``, the record's estimated initial state under the
+        core's names (x0_1.., y_prev, and w0_1.. for a sandwich; nuisance parameters, not in
+        ``theta``); None when the record was assumed to start at rest.
 
     Examples
     --------
@@ -122,6 +127,7 @@ class FitResult:
     iterative_theta: NDArray[np.float64] = field(repr=False)
     refinement_steps: int = 0
     coarse_samples: int = 0
+    initial_state: dict[str, float] | None = None
 
     @property
     def names(self) -> list[str]:
@@ -233,6 +239,7 @@ class FitResult:
             "method": self.method,
             "warmup": int(self.warmup),
             "coarse_samples": int(self.coarse_samples),
+            "initial_state": self.initial_state,
             "history": self.history.tolist(),
             "history_rmse": self.history_rmse.tolist(),
         }
@@ -505,7 +512,15 @@ def _fit(
     perturbation: float = 0.05,
     seed: int = 0,
     coarse: int | None = None,
+    initial_state: str = "rest",
 ) -> FitResult:
+    if initial_state not in ("rest", "estimate"):
+        raise DataError(f"initial_state = {initial_state!r}: use 'rest' or 'estimate'")
+    if initial_state == "estimate" and (paper or not refine):
+        raise DataError(
+            "initial_state = 'estimate' is estimated by the output-error refinement: "
+            "use it with refine=True and paper=False"
+        )
     if switching not in ("measured", "simulated"):
         raise DataError(f"switching = {switching!r}: use 'measured' or 'simulated'")
     if not 0.0 < step <= 1.0:
@@ -569,6 +584,12 @@ def _fit(
         found = search(len(u_arr))
     run, k, refined = found
     theta_iter = run.history[k]
+    state: dict[str, float] | None = None
+    if initial_state == "estimate" and refined is not None:
+        # the shifted record's first `shift` samples are zeros, right only from rest
+        refined, state = _refine_with_state(  # type: ignore[assignment]
+            structure, u_arr, y_arr, max(warmup, shift), refined, restarts=restarts, perturbation=perturbation, seed=seed
+        )
     theta, steps = (refined.theta, refined.iterations) if refined is not None else (theta_iter, 0)
     # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
     # stage always ends in a whole-record refinement, so the iterate is the whole record's)
@@ -622,15 +643,84 @@ def _fit(
         iterative_theta=np.asarray(theta_iter, dtype=np.float64),
         refinement_steps=steps,
         coarse_samples=segment,
+        initial_state=state,
     )
     if failure is not None:
         raise NotConvergedError(failure, result)
     return result
 
 
-def _covariance(structure: Structure, run: _Run, refined: OutputErrorFit | None) -> tuple[float, NDArray[np.float64]]:
+@dataclass(frozen=True)
+class _StateFit:
+    """An output-error refinement with the initial state, cut to the model's parameters: the
+    fields the fit reads of an :class:`OutputErrorFit`, the parameters it spent (the model's
+    and the state's independent columns) and the model block of the unscaled covariance."""
+
+    theta: NDArray[np.float64]
+    cost: float
+    n_residuals: int
+    iterations: int
+    converged: bool
+    kept: int
+    unscaled: NDArray[np.float64]
+
+    def unscaled_covariance(self, names: list[str]) -> NDArray[np.float64]:
+        return self.unscaled
+
+
+def _refine_with_state(
+    structure: Structure,
+    u: NDArray[np.float64],
+    y: NDArray[np.float64],
+    warmup: int,
+    refined: OutputErrorFit,
+    *,
+    restarts: int,
+    perturbation: float,
+    seed: int,
+) -> tuple[_StateFit, dict[str, float]]:
+    """The output-error refinement of the model's estimate with the record's initial state as
+    further parameters, from the state x0 = 0, w0 = 0 and (cascade) y_prev at the first
+    measured output (y(1) = y_prev when the record starts holding)."""
+    with_state = dataclasses.replace(structure, initial_state=True)
+    p0 = structure.size
+    names = with_state.names
+    start = np.zeros(with_state.size)
+    start[:p0] = refined.theta
+    if not structure.is_sandwich:
+        start[names.index("y_prev")] = y[warmup]
+    prob = with_state.problem(u, y, warmup)
+    fit = levenberg_marquardt(prob, start)
+    # a state that starts the record holding leaves y_prev's column zero until it moves: LM
+    # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
+    rng = np.random.default_rng(seed)
+    for _ in range(restarts):
+        try:
+            trial = levenberg_marquardt(prob, fit.theta + perturbation * rng.standard_normal(len(start)))
+        except BacklashIdError:
+            continue
+        if (not _is_valid(with_state, prob, trial.theta), trial.cost) < (not _is_valid(with_state, prob, fit.theta), fit.cost):
+            fit = trial
+    # the model block of the covariance with the state as nuisance parameters: the model's
+    # columns of the factor projected off the span of the state's, where a state column that is
+    # zero at the estimate (y_prev once the record starts moving) or redundant adds nothing
+    r = fit.r_aug[:-1, :-1]
+    model_cols, state_cols = r[:, :p0], r[:, p0:]
+    rank = int(np.linalg.matrix_rank(state_cols, tol=1e-10 * np.linalg.norm(state_cols, 2))) if state_cols.any() else 0
+    projected = model_cols - state_cols @ (np.linalg.pinv(state_cols, rcond=1e-10) @ model_cols)
+    unscaled = _core.lstsq(projected, np.zeros(len(projected)), structure.names)[2]
+    state = dict(zip(names[p0:], map(float, fit.theta[p0:])))
+    return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, p0 + rank, unscaled), state
+
+
+def _covariance(
+    structure: Structure, run: _Run, refined: OutputErrorFit | _StateFit | None
+) -> tuple[float, NDArray[np.float64]]:
     """The noise variance and the covariance of the estimate: from the refinement's factor,
     else from the last least-squares step of the iterations."""
+    if isinstance(refined, _StateFit):
+        noise_var = refined.cost / max(refined.n_residuals - refined.kept, 1)
+        return noise_var, noise_var * refined.unscaled
     if refined is not None:
         noise_var = refined.cost / max(refined.n_residuals - structure.size, 1)
         return noise_var, noise_var * refined.unscaled_covariance(structure.names)
@@ -672,7 +762,16 @@ coarse : int, optional
     refines the best of them on the whole record (the same optimum, several times faster).
     By default the segment is max(5000, 200 p) samples for p parameters, used on records at
     least 10 times as long; 0 fits on the whole record throughout.
-    ``FitResult.coarse_samples`` says which ran; the history is then the segment's."""
+    ``FitResult.coarse_samples`` says which ran; the history is then the segment's.
+initial_state : {'rest', 'estimate'}, default 'rest'
+    The record's state at its first sample. 'rest' (the paper's assumption): the system
+    starts at rest, and ``warmup`` samples absorb a state that is not. 'estimate': the
+    iterations and the start search run from rest as usual, and the output-error refinement
+    then estimates the linear blocks' past and the backlash memory at the first sample
+    together with the model (``FitResult.initial_state``), so that a record cut from the
+    middle of a run is fitted whole, without a warm-up. Needs ``refine=True`` and
+    ``paper=False``; the standard errors treat the state as nuisance parameters. The state is
+    the one at the first sample, so a warm-up leaves it poorly determined: use ``warmup=0``."""
 _DATA_DOC = """u : array_like
     Input u(t), 1-D, finite.
 {y} : array_like
@@ -697,7 +796,7 @@ NotIdentifiableError
     rank-deficient regressor, a backlash that hardly moves).
 NotConvergedError
     If the estimate is unstable, diverges or is no valid model; its ``best`` holds it."""
-_OPTIONS = ("starts", "max_iter", "tol", "refine", "paper", "warmup", "min_moving", "restarts", "perturbation", "seed", "coarse")
+_OPTIONS = ("starts", "max_iter", "tol", "refine", "paper", "warmup", "min_moving", "restarts", "perturbation", "seed", "coarse", "initial_state")
 
 
 def _shared_options(function: Callable[..., FitResult]) -> Callable[..., FitResult]:
