@@ -35,6 +35,7 @@ TOP_LEVEL_ALL = [
     "EFFECTS",
     "ExampleData",
     "FitResult",
+    "FitWarning",
     "GeneralBacklash",
     "LinearBaseline",
     "LinearBlock",

@@ -38,7 +38,7 @@ except PackageNotFoundError:  # running from a source tree
 from .app import diagnose_many, fit_many
 from .benchmarks import ExampleData, example1, example2, example_data, shared_data_folder
 from .diagnosis import EFFECTS, DiagnosisReport, diagnose, fit_effect
-from .errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
+from .errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
 from .identify import (
     FitResult,
     LinearBaseline,
@@ -76,6 +76,7 @@ __all__ = [
     "DataError",
     "ExampleData",
     "FitResult",
+    "FitWarning",
     "GeneralBacklash",
     "LinearBaseline",
     "LinearBlock",

@@ -7,6 +7,7 @@
 - ``NotIdentifiableError``: the data cannot determine the parameters (too few samples off the
   dead band, a parameter never excited, a rank-deficient regressor).
 - ``NotConvergedError``: an identification did not converge; it carries the best iterate.
+- ``FitWarning``: a fit that ended but whose estimate looks suspicious (a ``UserWarning``).
 
 ``DataError`` and ``ModelError`` are also ``ValueError``, so generic handlers keep working.
 """
@@ -18,7 +19,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # the identify layer sits above: only its type is named here
     from .identify import FitResult
 
-__all__ = ["BacklashIdError", "DataError", "ModelError", "NotIdentifiableError", "NotConvergedError"]
+__all__ = ["BacklashIdError", "DataError", "ModelError", "NotIdentifiableError", "NotConvergedError", "FitWarning"]
 
 
 class BacklashIdError(Exception):
@@ -117,3 +118,26 @@ class NotConvergedError(BacklashIdError):
     def __reduce__(self) -> tuple[object, ...]:
         # exceptions pickle by their args only; keep the best iterate across processes
         return (type(self), (self.args[0], self.best))
+
+
+class FitWarning(UserWarning):
+    """A fit ended, but its estimate looks suspicious; the message says where and what to try.
+
+    Issued by :func:`~backlashid.fit_cascade` and :func:`~backlashid.fit_sandwich` when, on the
+    range of x the data visit, the fitted branches cross (L(x) <= R(x)) or stop increasing
+    (the paper's assumption, Section 2, fails there), or when a parameter's standard error
+    exceeds the magnitude of its estimate (the data hardly determine it). Turn it into an
+    error with ``warnings.simplefilter("error", FitWarning)``, or silence it with ``"ignore"``.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> import backlashid as bid
+    >>> issubclass(bid.FitWarning, UserWarning)
+    True
+    >>> data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("error", bid.FitWarning)  # a suspicious fit would raise here
+    ...     bid.fit_cascade(data.u, data.noisy).converged
+    True
+    """

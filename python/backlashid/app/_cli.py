@@ -117,15 +117,15 @@ def _select(data: Path | None, input_: str, output: str, split: float | None, es
 
 
 def _fit_model(kind: str, u: np.ndarray, y: np.ndarray, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int,
-               max_iter: int, feedthrough: bool, coarse: int | None = None) -> Any:
+               max_iter: int, feedthrough: bool, coarse: int | None = None, min_moving: float = 0.1) -> Any:
     from ..identify import fit_cascade, fit_sandwich, fit_wiener_hammerstein
 
     if kind == "cascade":
         return fit_cascade(u, y, na=na, nb=nb, degree=degree, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough,
-                           coarse=coarse)
+                           coarse=coarse, min_moving=min_moving)
     if kind == "sandwich":
         return fit_sandwich(u, y, na=na, nb=nb, nr=nr, ns=ns, degree=degree, warmup=warmup, max_iter=max_iter,
-                            feedthrough=feedthrough, output_feedthrough=feedthrough, coarse=coarse)
+                            feedthrough=feedthrough, output_feedthrough=feedthrough, coarse=coarse, min_moving=min_moving)
     return fit_wiener_hammerstein(u, y, nb=nb, ns=ns, degree=degree, warmup=warmup, feedthrough=feedthrough)
 
 
@@ -153,6 +153,9 @@ def _model_options(command: F) -> F:
         click.option("--max-iter", default=50, show_default=True, type=click.IntRange(min=2), help="Iterations of the paper's algorithm before the refinement (cascade, sandwich)."),
         click.option("--coarse", type=click.IntRange(min=0), help="Samples of the coarse stage: iterations on the first ones, "
                      "refinement on the whole record (cascade, sandwich) [default: max(5000, 200 p) on records 10 times as long; 0: none]."),
+        click.option("--min-moving", default=0.1, show_default=True, type=click.FloatRange(min=0.0, max=1.0),
+                     help="Smallest fraction of samples on which the fitted backlash must move (cascade, sandwich); "
+                          "lower it for records mostly at rest."),
     ]
     for option in reversed(options):
         command = option(command)
@@ -170,7 +173,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
         input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
         kind: str, feedthrough: bool, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
-        coarse: int | None, metrics_warmup: int | None, json_path: Path | None, plots_dir: Path | None) -> None:
+        coarse: int | None, min_moving: float, metrics_warmup: int | None, json_path: Path | None, plots_dir: Path | None) -> None:
     """Identify a cascade or sandwich model from logged input/output data.
 
     \b
@@ -187,7 +190,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         scaling = _scaling(sel.estimation, scale, dict(input_offset=input_offset, input_scale=input_scale, output_offset=output_offset, output_scale=output_scale))
         u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
         stage(f"fitting the {kind}")
-        result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse)
+        result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse, min_moving)
         if kind == "wiener-hammerstein":  # the fit's output offset joins the scaling's (the sandwich has none)
             scaling = replace(scaling, output_offset=scaling.output_offset + scaling.output_scale * result.offset)
         stage("computing metrics")

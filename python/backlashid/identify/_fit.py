@@ -24,6 +24,7 @@ from .._docstrings import AXES, fill
 from .._validation import identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
+from ._checks import warn_if_suspicious
 from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
 from ._structure import Structure
 
@@ -100,6 +101,9 @@ class FitResult:
         With ``initial_state="estimate"``, the record's estimated initial state under the
         core's names (x0_1.., y_prev, and w0_1.. for a sandwich; nuisance parameters, not in
         ``theta``); None when the record was assumed to start at rest.
+    refinement_converged : bool or None
+        Whether the output-error refinement met its tolerance; None when no refinement ran
+        (``refine=False``, ``paper=True``, or no start could be refined).
 
     Examples
     --------
@@ -128,6 +132,7 @@ class FitResult:
     refinement_steps: int = 0
     coarse_samples: int = 0
     initial_state: dict[str, float] | None = None
+    refinement_converged: bool | None = None
 
     @property
     def names(self) -> list[str]:
@@ -191,11 +196,7 @@ class FitResult:
         kind = "Sandwich" if self.structure.is_sandwich else "Cascade"
         lines = [
             f"{kind} fit ({self.method}), {self.structure}, warm-up {self.warmup} samples",
-            f"ended: {self.reason} after {self.iterations} iterations"
-            + (f" on the first {self.coarse_samples} samples" if self.coarse_samples else "")
-            + (f", then {self.refinement_steps} output-error steps" if self.refinement_steps else "")
-            + (" on the whole record" if self.coarse_samples else "")
-            + f" ({'converged' if self.converged else 'NOT converged'})",
+            self._ending(),
             f"free-run simulation RMSE on the estimation data: {self.simulation_rmse:.6g} "
             f"(implied noise std {self.noise_std:.4g}); backlash moving on "
             f"{100 * self.moving_fraction:.1f} % of samples",
@@ -216,6 +217,28 @@ class FitResult:
         if truth is not None:
             lines.append(f"max |error| = {max(abs(e) for e in truth.values()):.3e}")
         return "\n".join(lines)
+
+    def _ending(self) -> str:
+        """How the fit ended, in one sentence: the paper's iterations, then the refinement."""
+        n = self.iterations
+        iterations = {
+            "tolerance": f"the paper's iterations converged in {n}",
+            "2-cycle": f"the paper's iterations stopped after {n} (a 2-cycle between two iterates)",
+            "iteration limit": f"the paper's iterations stopped after {n} (the iteration limit, max_iter)",
+            "diverged": f"the paper's iterations stopped after {n} (diverging)",
+        }.get(self.reason, f"the paper's iterations stopped after {n} ({self.reason})")
+        if self.coarse_samples:
+            iterations += f" on the first {self.coarse_samples} samples"
+        steps = f"{self.refinement_steps} step{'' if self.refinement_steps == 1 else 's'}"
+        where = " on the whole record" if self.coarse_samples else ""
+        if self.refinement_converged is None:
+            refinement = "no output-error refinement" + (" (the paper's algorithm)" if self.method == "paper" else "")
+        elif self.refinement_converged:
+            refinement = f"output-error refinement converged in {steps}{where}"
+        else:
+            refinement = f"output-error refinement stopped after {steps}{where} without converging"
+        verdict = "the fit converged" if self.converged else "the fit did NOT converge"
+        return f"ended: {iterations}; {refinement}; {verdict}"
 
     def to_dict(self) -> dict[str, Any]:
         """The fit as a JSON-safe dict.
@@ -240,6 +263,8 @@ class FitResult:
             "warmup": int(self.warmup),
             "coarse_samples": int(self.coarse_samples),
             "initial_state": self.initial_state,
+            "refinement_steps": int(self.refinement_steps),
+            "refinement_converged": self.refinement_converged,
             "history": self.history.tolist(),
             "history_rmse": self.history_rmse.tolist(),
         }
@@ -605,7 +630,8 @@ def _fit(
         if not radius < 1.0:
             failure = (
                 f"the estimated {name} linear block is unstable (spectral radius {radius:.3f}); "
-                "use the default algorithm (it reflects unstable poles) or other initial values"
+                + ("use the default algorithm (it reflects unstable poles) or other initial values" if paper else
+                   "try other initial values or starts, other orders, or a warm-up if the record does not start at rest")
             )
             break
     if failure is None and not np.isfinite(rmse):
@@ -621,7 +647,9 @@ def _fit(
     elif moving < min_moving:
         raise NotIdentifiableError(
             f"only {100 * moving:.1f} % of samples move the backlash output off its dead band "
-            f"(need {100 * min_moving:.0f} %): excite the system with a larger input amplitude"
+            f"(need {100 * min_moving:.0f} %, min_moving = {min_moving:g}): excite the system with a larger input amplitude, "
+            f"or, if the record is mostly at rest, lower min_moving (e.g. min_moving={max(moving * 0.9, 0.001):.2g}; "
+            "--min-moving on the command line)"
         )
     else:
         noise_var, covariance = _covariance(structure, run, refined)
@@ -644,9 +672,11 @@ def _fit(
         refinement_steps=steps,
         coarse_samples=segment,
         initial_state=state,
+        refinement_converged=refined.converged if refined is not None else None,
     )
     if failure is not None:
         raise NotConvergedError(failure, result)
+    warn_if_suspicious(result, u_arr)  # FitWarning: crossed or turning branches, uncertain parameters
     return result
 
 
