@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import json
 import sys
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, replace
@@ -20,7 +21,7 @@ import click
 import numpy as np
 
 from .. import __version__
-from ..errors import BacklashIdError, DataError
+from ..errors import BacklashIdError, DataError, FitWarning
 from ..models import SandwichModel
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -42,16 +43,25 @@ def main() -> None:
 
 
 def _clean_errors(command: F) -> F:
-    """Expected failures become one line on stderr and exit code 1 (click.ClickException)."""
+    """Expected failures become one line on stderr and exit code 1 (click.ClickException); a
+    FitWarning becomes one "Warning: ..." line on stderr (other warnings as Python shows them)."""
 
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return command(*args, **kwargs)
-        except BacklashIdError as exc:
-            raise click.ClickException(str(exc)) from None
-        except OSError as exc:  # writing outputs: a missing folder, no permission, a full disk
-            raise click.ClickException(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", FitWarning)
+            try:
+                return command(*args, **kwargs)
+            except BacklashIdError as exc:
+                raise click.ClickException(str(exc)) from None
+            except OSError as exc:  # writing outputs: a missing folder, no permission, a full disk
+                raise click.ClickException(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
+            finally:
+                for w in caught:
+                    if issubclass(w.category, FitWarning):
+                        click.echo(f"Warning: {w.message}", err=True)
+                    else:
+                        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
     return wrapper  # type: ignore[return-value]
 
