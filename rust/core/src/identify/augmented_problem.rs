@@ -14,6 +14,7 @@ use crate::identify::augmented_sensitivity::{
     augmented_oe_factor, augmented_oe_gradient, augmented_sensitivity, Start,
 };
 use crate::identify::gradient::OeGradient;
+use crate::identify::output_error_cost;
 use crate::identify::problem::Structure;
 use crate::identify::sensitivity::{check_pair, oe_threads, Sensitivity};
 use crate::linalg::TriangularFactor;
@@ -284,20 +285,7 @@ impl AugmentedProblem {
 
     /// sum (y - y_sim)^2 over t >= warmup.
     pub fn cost(&self, theta: &[f64]) -> Result<f64> {
-        let sim = self.simulate(theta)?;
-        let cost: f64 = self.y[self.warmup..]
-            .iter()
-            .zip(&sim[self.warmup..])
-            .map(|(y, s)| (y - s) * (y - s))
-            .sum();
-        if !cost.is_finite() {
-            return Err(Error::Model(
-                "the output error overflowed: the simulated output is far from the measured one \
-                 (an unstable or badly scaled estimate)"
-                    .into(),
-            ));
-        }
-        Ok(cost)
+        output_error_cost(&self.y, &self.simulate(theta)?, self.warmup)
     }
 
     /// The output and its dense Jacobian d y_sim / d theta (N x p; tests and small records).

@@ -25,3 +25,25 @@ pub use sensitivity::{
     cascade_oe_factor, cascade_sensitivity, sandwich_oe_factor, sandwich_sensitivity, Sensitivity,
 };
 pub use wiener_hammerstein::{WhStructure, WienerHammersteinProblem};
+
+/// The output-error cost of every compiled problem: sum (y - y_sim)^2 over t >= `warmup`; a
+/// ModelError where the simulation diverged (a non-finite cost).
+pub(crate) fn output_error_cost(
+    y: &[f64],
+    y_sim: &[f64],
+    warmup: usize,
+) -> crate::error::Result<f64> {
+    let cost: f64 = y[warmup..]
+        .iter()
+        .zip(&y_sim[warmup..])
+        .map(|(y, s)| (y - s) * (y - s))
+        .sum();
+    if !cost.is_finite() {
+        return Err(crate::error::Error::Model(
+            "the simulated output of the estimate diverges (a non-finite output error); start \
+             from a stable estimate or scale the signals down"
+                .into(),
+        ));
+    }
+    Ok(cost)
+}

@@ -20,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::identify::gradient::OeGradient;
 use crate::identify::gradient::{cascade_oe_gradient_from, sandwich_oe_gradient_from};
 use crate::identify::initial::{self, InitialState, Start};
+use crate::identify::output_error_cost;
 use crate::identify::regressor::solve_factor;
 use crate::identify::sensitivity::{cascade_oe_factor_from, oe_threads, sandwich_oe_factor_from};
 use crate::identify::{CascadeRegression, SandwichRegression};
@@ -395,20 +396,7 @@ impl Problem {
     /// The output-error cost at theta: sum (y - y_sim)^2 over t >= warmup, one simulation; a
     /// ModelError where the simulation diverges (a non-finite cost).
     pub fn cost(&self, theta: &[f64]) -> Result<f64> {
-        let y_sim = self.simulate(theta)?;
-        let cost: f64 = self.y[self.warmup..]
-            .iter()
-            .zip(&y_sim[self.warmup..])
-            .map(|(y, s)| (y - s) * (y - s))
-            .sum();
-        if !cost.is_finite() {
-            return Err(Error::Model(
-                "the simulated output of the estimate diverges (a non-finite output error); \
-                 start from a stable estimate or scale the signals down"
-                    .into(),
-            ));
-        }
-        Ok(cost)
+        output_error_cost(&self.y, &self.simulate(theta)?, self.warmup)
     }
 
     /// The stability guard of the output-error search: every linear block of theta has its

@@ -20,6 +20,7 @@
 
 use crate::error::{Error, Result};
 use crate::identify::gradient::OeGradient;
+use crate::identify::output_error_cost;
 use crate::identify::sensitivity::{oe_threads, overflowed};
 use crate::linalg::streaming::{fold_stream, TriangularFactor};
 use crate::model::polynomial::spectral_radius;
@@ -370,16 +371,7 @@ impl WienerHammersteinProblem {
 
     /// The cost sum (y - y_sim)^2 over t >= warmup; a ModelError if the simulation diverges.
     pub fn cost(&self, theta: &[f64]) -> Result<f64> {
-        let sim = self.simulate(theta)?;
-        let cost: f64 = sim[self.warmup..]
-            .iter()
-            .zip(&self.y[self.warmup..])
-            .map(|(s, y)| (y - s).powi(2))
-            .sum();
-        if !cost.is_finite() {
-            return Err(diverged("cost", self.u.len()));
-        }
-        Ok(cost)
+        output_error_cost(&self.y, &self.simulate(theta)?, self.warmup)
     }
 
     /// The output-error problem at theta in factored form: R_aug of [J | y - y_sim] over
