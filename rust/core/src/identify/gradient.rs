@@ -21,7 +21,7 @@
 use crate::error::Result;
 use crate::identify::initial::{simulate_from, start_cols, Start};
 use crate::identify::sensitivity::{
-    branch_degree, cascade_cols, check_pair, overflowed, sandwich_cols, walk_sandwich_from,
+    branch_degree, cascade_cols, check_pair, overflowed, sandwich_cols, walk_sandwich,
 };
 use crate::model::backlash::GeneralBacklash;
 use crate::model::linear::LinearBlock;
@@ -60,21 +60,10 @@ pub fn cascade_oe_gradient(
     warmup: usize,
 ) -> Result<OeGradient> {
     check_pair(u, y, "y")?;
-    cascade_oe_gradient_unchecked(linear, backlash, u, y, warmup)
-}
-
-/// `cascade_oe_gradient` of a record checked before (`Problem`).
-pub(crate) fn cascade_oe_gradient_unchecked(
-    linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    u: &[f64],
-    y: &[f64],
-    warmup: usize,
-) -> Result<OeGradient> {
     cascade_oe_gradient_from(linear, backlash, None, u, y, warmup)
 }
 
-/// `cascade_oe_gradient_unchecked` from an initial state (its columns after the model's), or
+/// `cascade_oe_gradient` of a record checked before (`Problem`) from an initial state (its columns after the model's), or
 /// from rest (None).
 pub(crate) fn cascade_oe_gradient_from(
     linear: &LinearBlock,
@@ -210,10 +199,10 @@ pub fn sandwich_oe_gradient(
     warmup: usize,
 ) -> Result<OeGradient> {
     check_pair(u, w, "w")?;
-    sandwich_oe_gradient_unchecked(input_linear, backlash, output_linear, u, w, warmup)
+    sandwich_oe_gradient_from(input_linear, backlash, output_linear, None, u, w, warmup)
 }
 
-/// `sandwich_oe_gradient_unchecked` from an initial state (its columns after the model's),
+/// `sandwich_oe_gradient` of a record checked before (`Problem`) from an initial state (its columns after the model's),
 /// or from rest (None).
 pub(crate) fn sandwich_oe_gradient_from(
     input_linear: &LinearBlock,
@@ -226,7 +215,7 @@ pub(crate) fn sandwich_oe_gradient_from(
 ) -> Result<OeGradient> {
     let cols = sandwich_cols(input_linear, backlash, output_linear) + start_cols(start);
     let mut out = OeGradient::new(cols);
-    walk_sandwich_from(
+    walk_sandwich(
         input_linear,
         backlash,
         output_linear,
@@ -244,18 +233,6 @@ pub(crate) fn sandwich_oe_gradient_from(
         },
     )?;
     out.finished()
-}
-
-/// `sandwich_oe_gradient` of a record checked before (`Problem`).
-pub(crate) fn sandwich_oe_gradient_unchecked(
-    input_linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    output_linear: &LinearBlock,
-    u: &[f64],
-    w: &[f64],
-    warmup: usize,
-) -> Result<OeGradient> {
-    sandwich_oe_gradient_from(input_linear, backlash, output_linear, None, u, w, warmup)
 }
 
 #[cfg(test)]

@@ -93,11 +93,18 @@ pub fn sandwich_sensitivity(
         jacobian: Vec::with_capacity(u.len() * cols),
         cols,
     };
-    walk_sandwich(input_linear, backlash, output_linear, u, |_, wt, row| {
-        out.output.push(wt);
-        out.jacobian.extend_from_slice(row);
-        Ok(())
-    })?;
+    walk_sandwich(
+        input_linear,
+        backlash,
+        output_linear,
+        None,
+        u,
+        |_, wt, row| {
+            out.output.push(wt);
+            out.jacobian.extend_from_slice(row);
+            Ok(())
+        },
+    )?;
     Ok(out)
 }
 
@@ -351,22 +358,10 @@ pub fn cascade_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, y, "y")?;
-    cascade_oe_factor_on(linear, backlash, u, y, warmup, threads)
-}
-
-/// `cascade_oe_factor_threads` of a record checked before (`Problem`, which checks it once).
-pub(crate) fn cascade_oe_factor_on(
-    linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    u: &[f64],
-    y: &[f64],
-    warmup: usize,
-    threads: usize,
-) -> Result<(TriangularFactor, f64)> {
     cascade_oe_factor_from(linear, backlash, None, u, y, warmup, threads)
 }
 
-/// `cascade_oe_factor_on` from an initial state (its columns after the model's), or from
+/// `cascade_oe_factor_threads` of a record checked before (`Problem`) from an initial state (its columns after the model's), or from
 /// rest (None).
 pub(crate) fn cascade_oe_factor_from(
     linear: &LinearBlock,
@@ -471,19 +466,6 @@ pub fn sandwich_oe_factor_threads(
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
     check_pair(u, w, "w")?;
-    sandwich_oe_factor_on(input_linear, backlash, output_linear, u, w, warmup, threads)
-}
-
-/// `sandwich_oe_factor_threads` of a record checked before (`Problem`, which checks it once).
-pub(crate) fn sandwich_oe_factor_on(
-    input_linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    output_linear: &LinearBlock,
-    u: &[f64],
-    w: &[f64],
-    warmup: usize,
-    threads: usize,
-) -> Result<(TriangularFactor, f64)> {
     sandwich_oe_factor_from(
         input_linear,
         backlash,
@@ -496,7 +478,7 @@ pub(crate) fn sandwich_oe_factor_on(
     )
 }
 
-/// `sandwich_oe_factor_on` from an initial state (its columns after the model's), or from
+/// `sandwich_oe_factor_threads` of a record checked before (`Problem`) from an initial state (its columns after the model's), or from
 /// rest (None).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sandwich_oe_factor_from(
@@ -511,7 +493,7 @@ pub(crate) fn sandwich_oe_factor_from(
 ) -> Result<(TriangularFactor, f64)> {
     let cols = sandwich_cols(input_linear, backlash, output_linear) + start_cols(start);
     finish(fold_stream(cols, threads, |sink| {
-        walk_sandwich_from(
+        walk_sandwich(
             input_linear,
             backlash,
             output_linear,
@@ -527,19 +509,9 @@ pub(crate) fn sandwich_oe_factor_from(
 
 /// The sandwich's output w(t) and Jacobian row dw(t), handed to `visit(t, w(t), dw(t))` for
 /// t = 0, 1, ...; y, dy, w, dw are kept in rings of nr + 1 and ns + 1 samples.
+/// From an initial state (its columns after the model's: x0, y_prev, w0; w0_k enters w at
+/// the record's k-th sample), or from rest (None).
 pub(crate) fn walk_sandwich(
-    input_linear: &LinearBlock,
-    backlash: &GeneralBacklash,
-    output_linear: &LinearBlock,
-    u: &[f64],
-    visit: impl FnMut(usize, f64, &[f64]) -> Result<()>,
-) -> Result<()> {
-    walk_sandwich_from(input_linear, backlash, output_linear, None, u, visit)
-}
-
-/// `walk_sandwich` from an initial state (its columns after the model's: x0, y_prev, w0;
-/// w0_k enters w at the record's k-th sample), or from rest (None).
-pub(crate) fn walk_sandwich_from(
     input_linear: &LinearBlock,
     backlash: &GeneralBacklash,
     output_linear: &LinearBlock,
