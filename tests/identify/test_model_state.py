@@ -160,3 +160,25 @@ def test_an_fir_output_block_holds_only_some_core_states():
     # w0_2 = r_2 y_prev is the one a physical past gives
     state = model_state(model, {"x0_1": 0.0, "x0_2": 0.0, "y_prev": 0.5, "w0_1": 0.7, "w0_2": 0.4 * 0.5})
     assert state.y_past[0] == 0.5
+
+
+def test_a_state_column_that_vanishes_is_held_not_fatal():
+    # two samples, the model held: x0_1's column is zero (the backlash holds), which ends the
+    # plain search in NotIdentifiableError; the state's search holds it and goes on
+    from backlashid import NotIdentifiableError
+    from backlashid.identify import levenberg_marquardt
+    from backlashid.identify._state import lm_holding_vanishing
+
+    model = bid.example1()
+    u, y = _cut(model, seed=0)
+    structure = _structure(model)
+    p0 = structure.model_size
+    prob = structure.problem(u[:2], y[:2])
+    theta = np.concatenate([structure.pack(model)[:p0], np.zeros(structure.size - p0)])
+    theta[structure.names.index("y_prev")] = y[0]
+    lo, hi = (np.asarray(b, dtype=float) for b in prob.bounds())
+    lo[:p0] = hi[:p0] = theta[:p0]
+    with pytest.raises(NotIdentifiableError):
+        levenberg_marquardt(prob, theta, lower=lo, upper=hi)
+    fit = lm_holding_vanishing(prob, theta, p0, lo, hi)
+    assert fit.cost <= prob.cost(theta)

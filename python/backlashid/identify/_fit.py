@@ -26,6 +26,7 @@ from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, 
 from ..models import Model
 from ._checks import warn_if_suspicious
 from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
+from ._state import lm_holding_vanishing
 from ._structure import Structure
 
 __all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
@@ -720,13 +721,13 @@ def _refine_with_state(
     if not structure.is_sandwich:
         start[names.index("y_prev")] = y[warmup]
     prob = with_state.problem(u, y, warmup)
-    fit = levenberg_marquardt(prob, start)
+    fit = lm_holding_vanishing(prob, start, p0)  # y_prev's column vanishes when the first sample moves
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
     # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
     rng = np.random.default_rng(seed)
     for _ in range(restarts):
         try:
-            trial = levenberg_marquardt(prob, fit.theta + perturbation * rng.standard_normal(len(start)))
+            trial = lm_holding_vanishing(prob, fit.theta + perturbation * rng.standard_normal(len(start)), p0)
         except BacklashIdError:
             continue
         if (not _is_valid(with_state, prob, trial.theta), trial.cost) < (not _is_valid(with_state, prob, fit.theta), fit.cost):

@@ -294,6 +294,25 @@ def _held_lm(
     return theta, _cost(prob, theta)
 
 
+def lm_holding_vanishing(prob: Any, theta: NDArray[np.float64], p0: int, lower: NDArray[np.float64] | None = None, upper: NDArray[np.float64] | None = None) -> Any:
+    """:func:`levenberg_marquardt` on a problem with the initial state as parameters (from
+    index ``p0``): a state value whose column vanishes on the way (y_prev once the backlash
+    moves at the first sample, x0_k masked by a backlash that holds) is held at its start and
+    the search repeated, instead of ending in the core's NotIdentifiableError. An error that
+    names no state value is raised as it is."""
+    names = list(prob.names)
+    lo, hi = (np.asarray(b, dtype=np.float64).copy() for b in prob.bounds()) if lower is None else (lower.copy(), upper.copy())  # type: ignore[union-attr]
+    theta = np.clip(np.asarray(theta, dtype=np.float64), lo, hi)
+    while True:
+        try:
+            return levenberg_marquardt(prob, theta, lower=lo, upper=hi)
+        except NotIdentifiableError as exc:
+            named = [i for i in range(p0, len(theta)) if lo[i] < hi[i] and f" {names[i]} " in f" {exc} "]
+            if not named:
+                raise
+            lo[named[0]] = hi[named[0]] = theta[named[0]]
+
+
 def _dependent(prob: Any, theta: NDArray[np.float64], p0: int) -> list[int]:
     """Indices of the state's columns of the factor at theta that add nothing to the earlier
     state columns (zero, or a combination of them)."""
