@@ -10,6 +10,7 @@ measured records to model units.
 from __future__ import annotations
 
 from ._fit import FitResult, fit_cascade, fit_sandwich
+from ._hammerstein import as_hammerstein, fit_hammerstein_backlash, hammerstein_backlash
 from ._metrics import Metrics, evaluate, fit_percent, nrmse, one_step_prediction, rmse
 from ._refine import OutputErrorFit, levenberg_marquardt
 from ._scaling import Scaling, evaluate_scaled, simulate_scaled
@@ -26,13 +27,16 @@ __all__ = [
     "Scaling",
     "Structure",
     "WienerHammersteinFit",
+    "as_hammerstein",
     "evaluate",
     "estimate_state",
     "evaluate_scaled",
     "fit_cascade",
+    "fit_hammerstein_backlash",
     "fit_percent",
     "fit_sandwich",
     "fit_wiener_hammerstein",
+    "hammerstein_backlash",
     "levenberg_marquardt",
     "model_state",
     "nrmse",
