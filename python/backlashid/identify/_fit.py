@@ -638,7 +638,7 @@ def _fit(
     if failure is None and not np.isfinite(rmse):
         failure = "the identification diverged: the estimate simulates to no finite output"
     if failure is None and invalid is not None:
-        failure = f"the final estimate is not a valid model ({invalid})"
+        failure = f"the final estimate is not a valid model ({invalid}); try a lower branch degree, other orders or other starts"
     moving = _moving(structure, theta, u_arr, user_warmup, model) if model is not None else 0.0
     if failure is not None:
         try:
@@ -693,10 +693,12 @@ class _StateFit:
     iterations: int
     converged: bool
     kept: int
-    unscaled: NDArray[np.float64]
+    projected: NDArray[np.float64]
 
     def unscaled_covariance(self, names: list[str]) -> NDArray[np.float64]:
-        return self.unscaled
+        # computed when asked, after the fit's checks of the estimate (a degenerate estimate
+        # with a zero column is reported by them, as on the path without a state)
+        return _core.lstsq(self.projected, np.zeros(len(self.projected)), names)[2]
 
 
 def _refine_with_state(
@@ -739,9 +741,8 @@ def _refine_with_state(
     model_cols, state_cols = r[:, :p0], r[:, p0:]
     rank = int(np.linalg.matrix_rank(state_cols, tol=1e-10 * np.linalg.norm(state_cols, 2))) if state_cols.any() else 0
     projected = model_cols - state_cols @ (np.linalg.pinv(state_cols, rcond=1e-10) @ model_cols)
-    unscaled = _core.lstsq(projected, np.zeros(len(projected)), structure.names)[2]
     state = dict(zip(names[p0:], map(float, fit.theta[p0:])))
-    return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, p0 + rank, unscaled), state
+    return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, p0 + rank, projected), state
 
 
 def _covariance(
@@ -751,7 +752,7 @@ def _covariance(
     else from the last least-squares step of the iterations."""
     if isinstance(refined, _StateFit):
         noise_var = refined.cost / max(refined.n_residuals - refined.kept, 1)
-        return noise_var, noise_var * refined.unscaled
+        return noise_var, noise_var * refined.unscaled_covariance(structure.names)
     if refined is not None:
         noise_var = refined.cost / max(refined.n_residuals - structure.size, 1)
         return noise_var, noise_var * refined.unscaled_covariance(structure.names)
