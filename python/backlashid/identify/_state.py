@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docstrings import fill
 from .._validation import check_whole, one_record
 from ..errors import BacklashIdError, DataError, ModelError, NotIdentifiableError
 from ..models import CascadeModel, CascadeState, LinearBlock, Model, SandwichModel, SandwichState
@@ -354,6 +355,7 @@ dimension max(na, nb) the later values), and the backlash memory y_prev keeps it
 the first sample moves the backlash (it then acts on nothing)."""
 
 
+@fill(estimate=_ESTIMATE_DOC)
 def estimate_state(model: Model, u: ArrayLike, y: ArrayLike, *, samples: int | None = None) -> CascadeState | SandwichState:
     """The model's state before the first sample, estimated from the first measured samples
     (the benchmark protocols' "n samples to initialise the state").
@@ -403,12 +405,15 @@ def estimate_state(model: Model, u: ArrayLike, y: ArrayLike, *, samples: int | N
     return _scaled(model, _normalised_state(normalise(model), np.asarray(x0), y_prev, np.asarray(w0)))
 
 
+@fill(estimate=_ESTIMATE_DOC)
 def simulate_from_samples(model: Model, u: ArrayLike, y: ArrayLike, init_samples: int) -> NDArray[np.float64]:
     """The free-run simulation of the whole record from the state estimated on its first
     ``init_samples`` measured samples.
 
-    {estimate} The simulation is the core's, from the estimated values themselves (exact also
-    where the model's own state cannot hold them, see :func:`model_state`).
+    {estimate}
+
+    The simulation is the core's, from the estimated values themselves (exact also where the
+    model's own state cannot hold them, see :func:`model_state`).
 
     Parameters
     ----------
@@ -452,7 +457,3 @@ def simulate_from_samples(model: Model, u: ArrayLike, y: ArrayLike, init_samples
     # normalisation leaves the output unchanged: the core's output is the model's
     return np.asarray(whole.simulate(theta))[structure.shift :]
 
-
-for _f in (estimate_state, simulate_from_samples):
-    _f.__doc__ = _f.__doc__.replace("{estimate}", _ESTIMATE_DOC)  # type: ignore[union-attr]
-del _f
