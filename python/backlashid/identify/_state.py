@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._docstrings import fill
 from .._validation import check_whole, one_record
 from ..errors import BacklashIdError, DataError, ModelError, NotIdentifiableError
-from ..models import CascadeModel, CascadeState, LinearBlock, Model, SandwichModel, SandwichState
+from ..models import CascadeModel, CascadeState, LinearBlock, Model, SandwichModel, SandwichSimulation, SandwichState
 from ._refine import levenberg_marquardt
 from ._structure import Structure, normalise
 
@@ -86,10 +86,7 @@ def _solve(
     columns: NDArray[np.float64], target: NDArray[np.float64], what: str
 ) -> NDArray[np.float64]:
     """The minimum-norm past whose free response is ``target``; ModelError if none is exact."""
-    if columns.shape[1] == 0:
-        solution = np.zeros(0)
-    else:
-        solution = np.linalg.lstsq(columns, target, rcond=None)[0]
+    solution: NDArray[np.float64] = np.linalg.lstsq(columns, target, rcond=None)[0] if columns.shape[1] else np.zeros(0)
     miss = float(np.max(np.abs(columns @ solution - target), initial=0.0))
     if miss > _EXACT * (1.0 + float(np.max(np.abs(target), initial=0.0))):
         raise ModelError(
@@ -107,7 +104,7 @@ def _normalised_state(model: Model, x0: NDArray[np.float64], y_prev: float, w0: 
     length = 2 * (lin.na + lin.nb) + 8
     g = _canonical(x0, lin.b, np.zeros(0), length + shift_in)
     past = _solve(_free_response(lin, length), g[shift_in : shift_in + length], "input block")
-    u_past, x_past = past[: lin.na], past[lin.na :]
+    u_past, x_past = tuple(past[: lin.na].tolist()), tuple(past[lin.na :].tolist())
     # y(0): the core's memory, or with a feedthrough one backlash step on from it at x(0) = g(1)
     y0 = float(model.backlash.simulate([g[0]], y0=y_prev)[0]) if shift_in else y_prev
     if isinstance(model, CascadeModel):
@@ -120,15 +117,16 @@ def _normalised_state(model: Model, x0: NDArray[np.float64], y_prev: float, w0: 
     h = _canonical(w0, out.b, forced, length + shift)
     columns = _free_response(out, length)
     rest = _solve(columns[:, 1:], h[shift : shift + length] - y0 * columns[:, 0], "output block")
-    return SandwichState(u_past, x_past, np.concatenate([[y0], rest[: out.na - 1]]), rest[out.na - 1 :])
+    return SandwichState(u_past, x_past, (y0, *rest[: out.na - 1].tolist()), tuple(rest[out.na - 1 :].tolist()))
 
 
 def _scaled(model: Model, state: CascadeState | SandwichState) -> CascadeState | SandwichState:
     """The normalised model's state as the state of ``model`` (x = x' / k, y = y' / g)."""
     k, g = _scales(model)
+    x_past = tuple(v / k for v in state.x_past)
     if isinstance(state, CascadeState):
-        return CascadeState(state.u_past, np.divide(state.x_past, k), state.y_prev / g)
-    return SandwichState(state.u_past, np.divide(state.x_past, k), np.divide(state.y_past, g), state.w_past)
+        return CascadeState(state.u_past, x_past, state.y_prev / g)
+    return SandwichState(state.u_past, x_past, tuple(v / g for v in state.y_past), state.w_past)
 
 
 def model_state(model: Model, state: dict[str, float]) -> CascadeState | SandwichState:
@@ -212,7 +210,7 @@ def _estimate(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samp
     # local minima where it holds
     norm = normalise(model)
     sim = norm.simulate(u, internals=True)
-    inner = sim.y if isinstance(norm, SandwichModel) else sim.output
+    inner = sim.y if isinstance(sim, SandwichSimulation) else sim.output
     grid_x = np.linspace(*_widened(sim.x), _GRID)
     grid_y = np.linspace(*_widened(inner), _GRID) if isinstance(norm, SandwichModel) else np.array([0.0, float(y[0])])
     # x(1) is x0_1, or with an input feedthrough (the core's record one sample earlier) x0_2
