@@ -86,7 +86,7 @@ def _solve(
     columns: NDArray[np.float64], target: NDArray[np.float64], what: str
 ) -> NDArray[np.float64]:
     """The minimum-norm past whose free response is ``target``; ModelError if none is exact."""
-    solution: NDArray[np.float64] = np.linalg.lstsq(columns, target, rcond=None)[0] if columns.shape[1] else np.zeros(0)
+    solution = np.asarray(np.linalg.lstsq(columns, target, rcond=None)[0] if columns.shape[1] else np.zeros(0), dtype=np.float64)
     miss = float(np.max(np.abs(columns @ solution - target), initial=0.0))
     if miss > _EXACT * (1.0 + float(np.max(np.abs(target), initial=0.0))):
         raise ModelError(
