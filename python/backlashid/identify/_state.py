@@ -38,6 +38,7 @@ _GRID = 21
 # _SEARCHED cheapest of them all
 _RANDOM = 200
 _SEARCHED = 20
+_SCREEN = 200
 
 
 def _check_model(model: Any) -> None:
@@ -231,7 +232,9 @@ def _estimate(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samp
         t = theta.copy()
         t[p0:] = [rng.uniform(*spans[k]) for k in kinds]
         candidates.append(t)
-    costs = np.array([_cost(prob, t) for t in candidates])
+    # ranked on the first _SCREEN samples at most (the state acts at the start of the record)
+    screen = prob if samples <= _SCREEN else _record(model, structure, u[:_SCREEN], y[:_SCREEN])
+    costs = np.array([_cost(screen, t) for t in candidates])
     best = None
     for k in np.argsort(costs)[:_SEARCHED]:
         if not np.isfinite(costs[k]):
