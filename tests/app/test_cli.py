@@ -313,3 +313,22 @@ def test_fit_min_moving_option_for_a_record_mostly_at_rest(tmp_path):
     assert "--min-moving" in run("fit", "--help").output
     r = run("fit", data, "-i", "u", "-o", "y", "--min-moving", "2")
     assert r.exit_code != 0 and "--min-moving" in r.output
+
+
+def test_simulate_init_samples_starts_from_the_state_of_the_first_samples(tmp_path):
+    # a record cut from the middle of a run: from rest the simulation misses its start, from
+    # the state of its first 30 samples it follows the record exactly after them
+    model = bx.example1()
+    u = np.random.default_rng(5).uniform(-2.0, 2.0, 600)
+    y = model.simulate(u)
+    data = tmp_path / "cut.npz"
+    np.savez(data, u=u[200:], y=y[200:])
+    path = tmp_path / "model.json"
+    path.write_text(model.to_json())
+    out = tmp_path / "sim.csv"
+    r = run("simulate", path, data, "-i", "u", "-o", "y", "--init-samples", "30", "--out", out)
+    assert r.exit_code == 0, r.output
+    assert "after a warm-up of 30" in r.output
+    table = np.genfromtxt(out, delimiter=",", names=True)
+    assert np.max(np.abs(table["residual"][30:])) < 1e-8
+    assert run("simulate", path, data, "-i", "u", "--init-samples", "30", "--out", out).exit_code != 0

@@ -305,11 +305,12 @@ def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:
 @click.option("--range", "range_", help="Samples a:b of DATA to simulate (0-based, b excluded).")
 @click.option("--decimate", "decimate_by", type=click.IntRange(min=1), help="As in fit [default: the fit's value stored in MODEL_FILE].")
 @click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="Initial samples left out of the metrics (unknown initial state).")
+@click.option("--init-samples", default=0, show_default=True, type=click.IntRange(min=0), help="With --output: start the simulation from the state estimated on the first samples of the measured output (0: at rest); the metrics leave them out.")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="CSV to write: u, y_sim (and y, residual with --output).")
 @_clean_errors
-def simulate(model_file: Path, data: Path, input_: str, output: str | None, range_: str | None, decimate_by: int | None, warmup: int, out: Path) -> None:
+def simulate(model_file: Path, data: Path, input_: str, output: str | None, range_: str | None, decimate_by: int | None, warmup: int, init_samples: int, out: Path) -> None:
     """Simulate a model (JSON from fit --json, or a model's to_json) on an input record."""
-    from ..identify import evaluate_scaled, simulate_scaled
+    from ..identify import evaluate_scaled, simulate_from_samples, simulate_scaled
     from ._io import Record, decimate, parse_range, read_signals
 
     model, scaling, described = _read_model_file(model_file)
@@ -322,7 +323,10 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
         record = record.slice(parse_range(range_, len(record), "--range"), "--range")
     factor = decimate_by if decimate_by is not None else int(described.get("decimate", 1))
     record = decimate(record, factor)
-    y_sim = simulate_scaled(model, scaling, record.u)
+    if init_samples and not output:
+        raise click.UsageError("--init-samples needs the measured --output to estimate the state from")
+    y_sim = simulate_scaled(model, scaling, record.u) if not init_samples else scaling.output_from_model(
+        simulate_from_samples(model, scaling.input_to_model(record.u), scaling.output_to_model(record.y), init_samples))
     columns = {"u": record.u, "y_sim": y_sim}
     if output:
         columns.update({"y": record.y, "residual": record.y - y_sim})
@@ -330,7 +334,7 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
     np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
     click.echo(f"simulated {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else ""))
     if output:
-        click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, warmup=warmup)))
+        click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, warmup=warmup, init_samples=init_samples)))
     click.echo(f"wrote {out}")
 
 

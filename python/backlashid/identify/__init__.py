@@ -10,9 +10,11 @@ measured records to model units.
 from __future__ import annotations
 
 from ._fit import FitResult, fit_cascade, fit_sandwich
+from ._hammerstein import as_hammerstein, fit_hammerstein_backlash, hammerstein_backlash
 from ._metrics import Metrics, evaluate, fit_percent, nrmse, one_step_prediction, rmse
 from ._refine import OutputErrorFit, levenberg_marquardt
 from ._scaling import Scaling, evaluate_scaled, simulate_scaled
+from ._state import estimate_state, model_state, simulate_from_samples
 from ._structure import Estimate, Structure, normalise
 from ._wiener_hammerstein import LinearBaseline, WienerHammersteinFit, fit_wiener_hammerstein, wiener_hammerstein_model
 
@@ -25,17 +27,23 @@ __all__ = [
     "Scaling",
     "Structure",
     "WienerHammersteinFit",
+    "as_hammerstein",
     "evaluate",
+    "estimate_state",
     "evaluate_scaled",
     "fit_cascade",
+    "fit_hammerstein_backlash",
     "fit_percent",
     "fit_sandwich",
     "fit_wiener_hammerstein",
+    "hammerstein_backlash",
     "levenberg_marquardt",
+    "model_state",
     "nrmse",
     "normalise",
     "one_step_prediction",
     "rmse",
+    "simulate_from_samples",
     "simulate_scaled",
     "wiener_hammerstein_model",
 ]

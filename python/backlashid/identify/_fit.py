@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import inspect
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -22,11 +23,13 @@ from numpy.typing import ArrayLike, NDArray
 from .. import _core
 from .._docstrings import AXES, fill
 from .._validation import identification_record
-from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
+from ..errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
 from ._checks import warn_if_suspicious
 from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
+from ._state import lm_holding_vanishing
 from ._structure import Structure
+from ._valid import ValidOnly, why_not_acceptable
 
 __all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
 
@@ -539,6 +542,7 @@ def _fit(
     coarse: int | None = None,
     initial_state: str = "rest",
 ) -> FitResult:
+    arguments = dict(locals())  # the call, for a fit of lower degree (_lower_degree_fallback)
     if initial_state not in ("rest", "estimate"):
         raise DataError(f"initial_state = {initial_state!r}: use 'rest' or 'estimate'")
     if initial_state == "estimate" and (paper or not refine):
@@ -609,12 +613,31 @@ def _fit(
         found = search(len(u_arr))
     run, k, refined = found
     theta_iter = run.history[k]
+    # an optimum that is no valid backlash or hardly moves it: continue from the fit of the
+    # next lower degree, the search kept among valid models that move (_valid.py)
+    why = guard = None
+    if refined is not None and structure.degree > 1:
+        why = why_not_acceptable(structure, whole, refined.theta, u_arr, user_warmup, min_moving)
+        lower = _lower_degree_fallback(structure, whole, u_arr, user_warmup, min_moving, arguments) if why else None
+        if lower is None:
+            why = None
+        else:
+            refined, guard = lower, (u_arr, user_warmup, min_moving)
     state: dict[str, float] | None = None
     if initial_state == "estimate" and refined is not None:
         # the shifted record's first `shift` samples are zeros, right only from rest
-        refined, state = _refine_with_state(  # type: ignore[assignment]
-            structure, u_arr, y_arr, max(warmup, shift), refined, restarts=restarts, perturbation=perturbation, seed=seed
-        )
+        def with_state(fit: OutputErrorFit, guard: Any) -> tuple[_StateFit, dict[str, float]]:
+            return _refine_with_state(
+                structure, u_arr, y_arr, max(warmup, shift), fit, restarts=restarts, perturbation=perturbation, seed=seed,
+                guard=guard,
+            )
+
+        kept = refined
+        refined, state = with_state(kept, guard)  # type: ignore[assignment]
+        if guard is None and why_not_acceptable(structure, whole, refined.theta, u_arr, user_warmup, min_moving) is not None:
+            if why_not_acceptable(structure, whole, kept.theta, u_arr, user_warmup, min_moving) is None:
+                # the state's refinement left the valid models: again, kept among them
+                refined, state = with_state(kept, (u_arr, user_warmup, min_moving))  # type: ignore[assignment]
     theta, steps = (refined.theta, refined.iterations) if refined is not None else (theta_iter, 0)
     # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
     # stage always ends in a whole-record refinement, so the iterate is the whole record's)
@@ -637,7 +660,7 @@ def _fit(
     if failure is None and not np.isfinite(rmse):
         failure = "the identification diverged: the estimate simulates to no finite output"
     if failure is None and invalid is not None:
-        failure = f"the final estimate is not a valid model ({invalid})"
+        failure = f"the final estimate is not a valid model ({invalid}); try a lower branch degree, other orders or other starts"
     moving = _moving(structure, theta, u_arr, user_warmup, model) if model is not None else 0.0
     if failure is not None:
         try:
@@ -676,8 +699,33 @@ def _fit(
     )
     if failure is not None:
         raise NotConvergedError(failure, result)
+    if why is not None:
+        warnings.warn(
+            f"{'fit_sandwich' if structure.is_sandwich else 'fit_cascade'}: the best fit of degree {structure.degree} {why}; "
+            f"the result is the best valid model found from the degree-{structure.degree - 1} fit, the search kept among "
+            "valid backlash models that move (it may lie on their boundary: a branch turning at the dead band's edge)",
+            FitWarning,
+            stacklevel=4,
+        )
     warn_if_suspicious(result, u_arr)  # FitWarning: crossed or turning branches, uncertain parameters
     return result
+
+
+def _lower_degree_fallback(
+    structure: Structure, whole: _core.Problem, u: NDArray[np.float64], warmup: int, min_moving: float, arguments: dict[str, Any]
+) -> OutputErrorFit | None:
+    """The output-error fit of ``structure`` from the fit of the next lower branch degree
+    (its higher coefficients zero), Levenberg-Marquardt restricted to stable, valid models
+    that move the backlash on ``min_moving`` of the samples; None if the lower fit fails or
+    no step is possible."""
+    lower_args = {**arguments, "structure": dataclasses.replace(structure, degree=structure.degree - 1), "initial_state": "rest"}
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            lower = _fit(**lower_args)
+        return levenberg_marquardt(ValidOnly(whole, structure, u, warmup, min_moving), structure.pack(lower.model))  # type: ignore[arg-type]
+    except BacklashIdError:
+        return None
 
 
 @dataclass(frozen=True)
@@ -692,10 +740,12 @@ class _StateFit:
     iterations: int
     converged: bool
     kept: int
-    unscaled: NDArray[np.float64]
+    projected: NDArray[np.float64]
 
     def unscaled_covariance(self, names: list[str]) -> NDArray[np.float64]:
-        return self.unscaled
+        # computed when asked, after the fit's checks of the estimate (a degenerate estimate
+        # with a zero column is reported by them, as on the path without a state)
+        return _core.lstsq(self.projected, np.zeros(len(self.projected)), names)[2]
 
 
 def _refine_with_state(
@@ -708,6 +758,7 @@ def _refine_with_state(
     restarts: int,
     perturbation: float,
     seed: int,
+    guard: tuple[NDArray[np.float64], int, float] | None = None,
 ) -> tuple[_StateFit, dict[str, float]]:
     """The output-error refinement of the model's estimate with the record's initial state as
     further parameters, from the state x0 = 0, w0 = 0 and (cascade) y_prev at the first
@@ -720,13 +771,20 @@ def _refine_with_state(
     if not structure.is_sandwich:
         start[names.index("y_prev")] = y[warmup]
     prob = with_state.problem(u, y, warmup)
-    fit = levenberg_marquardt(prob, start)
+    if guard is not None:  # (u, warm-up, min_moving): kept among valid models that move (_valid.py)
+        prob = ValidOnly(prob, with_state, *guard)  # type: ignore[assignment]
+        # the state first, the model held: on the boundary of the valid models the joint
+        # steps are rejected, and the state would stay at its start
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in prob.bounds())
+        lo[:p0] = hi[:p0] = start[:p0]
+        start = lm_holding_vanishing(prob, start, p0, lo, hi).theta
+    fit = lm_holding_vanishing(prob, start, p0)  # y_prev's column vanishes when the first sample moves
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
     # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
     rng = np.random.default_rng(seed)
     for _ in range(restarts):
         try:
-            trial = levenberg_marquardt(prob, fit.theta + perturbation * rng.standard_normal(len(start)))
+            trial = lm_holding_vanishing(prob, fit.theta + perturbation * rng.standard_normal(len(start)), p0)
         except BacklashIdError:
             continue
         if (not _is_valid(with_state, prob, trial.theta), trial.cost) < (not _is_valid(with_state, prob, fit.theta), fit.cost):
@@ -738,9 +796,8 @@ def _refine_with_state(
     model_cols, state_cols = r[:, :p0], r[:, p0:]
     rank = int(np.linalg.matrix_rank(state_cols, tol=1e-10 * np.linalg.norm(state_cols, 2))) if state_cols.any() else 0
     projected = model_cols - state_cols @ (np.linalg.pinv(state_cols, rcond=1e-10) @ model_cols)
-    unscaled = _core.lstsq(projected, np.zeros(len(projected)), structure.names)[2]
     state = dict(zip(names[p0:], map(float, fit.theta[p0:])))
-    return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, p0 + rank, unscaled), state
+    return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, p0 + rank, projected), state
 
 
 def _covariance(
@@ -750,7 +807,7 @@ def _covariance(
     else from the last least-squares step of the iterations."""
     if isinstance(refined, _StateFit):
         noise_var = refined.cost / max(refined.n_residuals - refined.kept, 1)
-        return noise_var, noise_var * refined.unscaled
+        return noise_var, noise_var * refined.unscaled_covariance(structure.names)
     if refined is not None:
         noise_var = refined.cost / max(refined.n_residuals - structure.size, 1)
         return noise_var, noise_var * refined.unscaled_covariance(structure.names)

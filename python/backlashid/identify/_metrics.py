@@ -18,9 +18,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docstrings import AXES, fill
-from .._validation import as_signal, check_warmup, one_record
+from .._validation import as_signal, check_warmup, check_whole, one_record
 from ..errors import DataError
 from ..models import CascadeModel, Model, SandwichModel
+from ._state import simulate_from_samples
 
 __all__ = ["Metrics", "evaluate", "fit_percent", "nrmse", "one_step_prediction", "rmse"]
 
@@ -265,8 +266,14 @@ class Metrics:
         return plot_simulation(ys, y_sim, warmup=self.warmup, ax=ax, title=title)
 
 
-def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0) -> Metrics:
+def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_samples: int = 0) -> Metrics:
     """Both kinds of error of ``model`` on the record (u, y), from sample ``warmup`` on.
+
+    With ``init_samples=n`` (the benchmark protocols' "n samples to initialise the state") the
+    simulation starts from the state estimated on the first n measured samples
+    (:func:`~backlashid.identify.simulate_from_samples`: the model's parameters held, its state fitted; what n
+    samples do not determine stays at rest), and every metric is computed after them (a
+    warm-up of at least n). Without it the simulation starts at rest.
 
     Parameters
     ----------
@@ -278,16 +285,19 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0) -> Me
         Measured output (w for a sandwich), as long as ``u``.
     warmup : int, default 0
         Samples at the start left out (the record's initial state is unknown).
+    init_samples : int, default 0
+        Samples at the start that initialise the simulation's state; 0: start at rest.
 
     Returns
     -------
     Metrics
-        The free-run simulation RMSE, NRMSE and fit % and the one-step prediction RMSE.
+        The free-run simulation RMSE, NRMSE and fit % and the one-step prediction RMSE;
+        ``warmup`` is max(warmup, init_samples).
 
     Raises
     ------
     DataError
-        If the record cannot be used or ``warmup`` is not inside it.
+        If the record cannot be used, or ``warmup`` or ``init_samples`` is not inside it.
 
     Examples
     --------
@@ -296,9 +306,18 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0) -> Me
     >>> data = bid.example_data(truth, 1500, snr=None, seed=0)
     >>> bid.evaluate(truth, data.u, data.noisy).simulation_rmse
     0.0
+    >>> bid.evaluate(truth, data.u[700:], data.noisy[700:], init_samples=50).simulation_rmse < 1e-8
+    True
     """
     u_arr, y_arr = as_signal(u, "u").ravel(), as_signal(y, "y").ravel()
-    simulated = model.simulate(u_arr)
+    init = check_whole(init_samples, "init_samples", 0)
+    if init == 0:
+        simulated = model.simulate(u_arr)
+    else:
+        if init >= y_arr.size:
+            raise DataError(f"init_samples = {init}: leave samples to evaluate, give fewer than the record's {y_arr.size}")
+        simulated = simulate_from_samples(model, u_arr, y_arr, init)
+        warmup = max(check_warmup(warmup, y_arr.size), init)
     predicted = one_step_prediction(model, u_arr, y_arr)
     return Metrics(
         simulation_rmse=rmse(y_arr, simulated, warmup=warmup),

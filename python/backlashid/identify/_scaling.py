@@ -221,7 +221,7 @@ def simulate_scaled(model: Model, scaling: Scaling, u: ArrayLike) -> NDArray[np.
 
 
 @fill(scaled=_SCALED_DOC)
-def evaluate_scaled(model: Model, scaling: Scaling, u: ArrayLike, y: ArrayLike, *, warmup: int = 0) -> Metrics:
+def evaluate_scaled(model: Model, scaling: Scaling, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_samples: int = 0) -> Metrics:
     """:func:`backlashid.evaluate` in measured units.
 
     The affine map leaves NRMSE and fit % unchanged and multiplies both RMSEs by
@@ -232,6 +232,9 @@ def evaluate_scaled(model: Model, scaling: Scaling, u: ArrayLike, y: ArrayLike, 
         Measured output, as long as ``u``.
     warmup : int, default 0
         Samples at the start left out.
+    init_samples : int, default 0
+        Samples at the start that initialise the simulation's state (see
+        :func:`backlashid.evaluate`); 0: start at rest.
 
     Returns
     -------
@@ -251,6 +254,6 @@ def evaluate_scaled(model: Model, scaling: Scaling, u: ArrayLike, y: ArrayLike, 
     >>> evaluate_scaled(bid.example1(), Scaling(), data.u, data.noisy).simulation_rmse
     0.0
     """
-    m = evaluate(model, scaling.input_to_model(u), scaling.output_to_model(y), warmup=warmup)
+    m = evaluate(model, scaling.input_to_model(u), scaling.output_to_model(y), warmup=warmup, init_samples=init_samples)
     k = abs(scaling.output_scale)
     return replace(m, simulation_rmse=m.simulation_rmse * k, prediction_rmse=m.prediction_rmse * k)

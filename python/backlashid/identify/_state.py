@@ -1,0 +1,460 @@
+"""A model's state at the start of a record: estimated from the first measured samples, or
+converted from the core's parameters of a fit with ``initial_state="estimate"``.
+
+The core parametrises a record's initial state minimally (identify/_structure.py,
+rust/core/src/identify/initial.rs): the input block's observer-canonical values x0_1..x0_n
+(the part of x(k) its past contributes), the backlash memory y_prev and, for the sandwich, the
+output block's w0_1..w0_m. A model simulates from its own physical state (past inputs and
+outputs of each block, :class:`~backlashid.CascadeState`, :class:`~backlashid.SandwichState`),
+which over-parametrises that free response: many pasts give the same one. :func:`model_state`
+picks the one of minimum norm that reproduces the free response exactly, so that
+``model.simulate(u, initial_state=model_state(model, state))`` is the core's simulation.
+
+A block with a direct feedthrough is fitted as the same block one sample later (the core's
+record starts one sample earlier per feedthrough); the conversion undoes that shift.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._docstrings import fill
+from .._validation import check_whole, one_record
+from ..errors import BacklashIdError, DataError, ModelError, NotIdentifiableError
+from ..models import CascadeModel, CascadeState, LinearBlock, Model, SandwichModel, SandwichSimulation, SandwichState
+from ._refine import levenberg_marquardt
+from ._structure import Structure, normalise
+
+__all__ = ["estimate_state", "model_state", "simulate_from_samples"]
+
+# a conversion is exact when the free responses agree to this, relative to their size
+_EXACT = 1e-9
+# the start search of the state: grid points of the first internal value (x0_1, and y_prev)
+_GRID = 21
+# and seeded random starts of the whole state; the Levenberg-Marquardt search runs from the
+# _SEARCHED cheapest of them all
+_RANDOM = 200
+_SEARCHED = 20
+_SCREEN = 200
+
+
+def _check_model(model: Any) -> None:
+    if not isinstance(model, (CascadeModel, SandwichModel)):
+        raise DataError(f"model must be a CascadeModel or SandwichModel, got {type(model).__name__}")
+
+
+def _structure(model: Model) -> Structure:
+    """The model's structure with the initial state as parameters."""
+    if isinstance(model, SandwichModel):
+        lin, out = model.input_linear, model.output_linear
+        return Structure(
+            lin.na, lin.nb, model.backlash.degree, out.na, out.nb, lin.feedthrough, out.feedthrough, initial_state=True
+        )
+    return Structure(model.linear.na, model.linear.nb, model.backlash.degree, feedthrough=model.linear.feedthrough, initial_state=True)
+
+
+def _scales(model: Model) -> tuple[float, float]:
+    """(k, g) of :func:`normalise`: the normalised model's x is k x and its y is g y."""
+    g = float(model.r[0]) if isinstance(model, SandwichModel) else 1.0
+    return float(model.backlash.m_left[0]) * g, g
+
+
+def _free_response(block: LinearBlock, length: int) -> NDArray[np.float64]:
+    """Columns: the block's free response over ``length`` samples from each unit past value
+    (its u_past, then its x_past), the block's own simulation."""
+    zeros = np.zeros(length)
+    cols = []
+    for k in range(block.na + block.nb):
+        e = np.zeros(block.na + block.nb)
+        e[k] = 1.0
+        cols.append(block.simulate(zeros, u_past=e[: block.na], x_past=e[block.na :]))
+    return np.column_stack(cols) if cols else np.zeros((length, 0))
+
+
+def _canonical(values: NDArray[np.float64], b: NDArray[np.float64], forced: NDArray[np.float64], length: int) -> NDArray[np.float64]:
+    """The core's recursion from rest with the state's values added: h(t) = v(t) - sum_j
+    b_j h(t-j), v = the values (at t = 1..) plus ``forced``, over ``length`` samples."""
+    v = np.zeros(length)
+    v[: min(len(values), length)] += values[:length]
+    v[: min(len(forced), length)] += forced[:length]
+    return LinearBlock([1.0, 0.0], b, feedthrough=True).simulate(v)
+
+
+def _solve(
+    columns: NDArray[np.float64], target: NDArray[np.float64], what: str
+) -> NDArray[np.float64]:
+    """The minimum-norm past whose free response is ``target``; ModelError if none is exact."""
+    solution = np.asarray(np.linalg.lstsq(columns, target, rcond=None)[0] if columns.shape[1] else np.zeros(0), dtype=np.float64)
+    miss = float(np.max(np.abs(columns @ solution - target), initial=0.0))
+    if miss > _EXACT * (1.0 + float(np.max(np.abs(target), initial=0.0))):
+        raise ModelError(
+            f"the {what}'s free response of this state is no free response of the model's {what} "
+            f"(off by {miss:.3g}): its orders cannot hold it (e.g. a sandwich output block with ns = 0, "
+            "or a last coefficient that is zero)"
+        )
+    return solution
+
+
+def _normalised_state(model: Model, x0: NDArray[np.float64], y_prev: float, w0: NDArray[np.float64]) -> CascadeState | SandwichState:
+    """The state of the normalised ``model`` (m_L1 = 1, r_1 = 1) from the core's values."""
+    lin = model.input_linear if isinstance(model, SandwichModel) else model.linear
+    shift_in = int(lin.feedthrough)
+    length = 2 * (lin.na + lin.nb) + 8
+    g = _canonical(x0, lin.b, np.zeros(0), length + shift_in)
+    past = _solve(_free_response(lin, length), g[shift_in : shift_in + length], "input block")
+    u_past, x_past = tuple(past[: lin.na].tolist()), tuple(past[lin.na :].tolist())
+    # y(0): the core's memory, or with a feedthrough one backlash step on from it at x(0) = g(1)
+    y0 = float(model.backlash.simulate([g[0]], y0=y_prev)[0]) if shift_in else y_prev
+    if isinstance(model, CascadeModel):
+        return CascadeState(u_past, x_past, y0)
+    out = model.output_linear
+    shift = shift_in + int(out.feedthrough)
+    length = 2 * (out.na + out.nb) + 8
+    # with an input feedthrough the core's output block sees y(0) as its first input
+    forced = np.concatenate([[0.0], out.a * y0]) if shift_in else np.zeros(0)
+    h = _canonical(w0, out.b, forced, length + shift)
+    columns = _free_response(out, length)
+    rest = _solve(columns[:, 1:], h[shift : shift + length] - y0 * columns[:, 0], "output block")
+    return SandwichState(u_past, x_past, (y0, *rest[: out.na - 1].tolist()), tuple(rest[out.na - 1 :].tolist()))
+
+
+def _scaled(model: Model, state: CascadeState | SandwichState) -> CascadeState | SandwichState:
+    """The normalised model's state as the state of ``model`` (x = x' / k, y = y' / g)."""
+    k, g = _scales(model)
+    x_past = tuple(v / k for v in state.x_past)
+    if isinstance(state, CascadeState):
+        return CascadeState(state.u_past, x_past, state.y_prev / g)
+    return SandwichState(state.u_past, x_past, tuple(v / g for v in state.y_past), state.w_past)
+
+
+def model_state(model: Model, state: dict[str, float]) -> CascadeState | SandwichState:
+    """The model's own state from the core's initial-state values, e.g. a fit's
+    ``FitResult.initial_state``.
+
+    The core's values (x0_1..x0_n, y_prev, and for a sandwich w0_1..w0_m; see
+    :class:`Structure`) fix each linear block's free response; the returned state is the
+    past of minimum norm with exactly that free response (each block's pasts over-parametrise
+    it), so that ``model.simulate(u, initial_state=model_state(model, state))`` reproduces the
+    fit's simulation of its record. The values are in the units of ``normalise(model)`` (a
+    fit's model is normalised: m_L1 = 1, r_1 = 1); another scaling of the same model gets its
+    state scaled accordingly.
+
+    Parameters
+    ----------
+    model : CascadeModel or SandwichModel
+        The model the state belongs to.
+    state : dict of str to float
+        The core's values by name: x0_1..x0_n with n = max(na, nb) (one more with a
+        feedthrough), y_prev, and w0_1..w0_m for a sandwich.
+
+    Returns
+    -------
+    CascadeState or SandwichState
+        The model's state before the first sample.
+
+    Raises
+    ------
+    DataError
+        If ``model`` is not a model, or ``state`` misses a value or has one it does not use.
+    ModelError
+        If the model's orders cannot hold the free response (a sandwich whose output block has
+        ns = 0 has one value fewer than the core's w0, so only some w0 are representable; a
+        block whose last coefficient is zero).
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> from backlashid.identify import model_state
+    >>> model = bid.example1()
+    >>> s = model_state(model, {"x0_1": 0.3, "x0_2": -0.1, "y_prev": 0.05})
+    >>> y = model.simulate([0.0, 0.0], initial_state=s)
+    >>> bool(abs(y[0] - model.backlash.simulate([0.3], y0=0.05)[0]) < 1e-12)  # x(1) = x0_1
+    True
+    """
+    _check_model(model)
+    if not isinstance(state, dict):
+        raise DataError(f"state must be a dict of the core's values by name, got {type(state).__name__}")
+    structure = _structure(model)
+    names = structure.names[structure.model_size :]
+    if set(state) != set(names):
+        raise DataError(f"state has the values {sorted(state)}; this model's are {names}")
+    theta = np.concatenate([np.zeros(structure.model_size), [float(state[k]) for k in names]])
+    if not np.all(np.isfinite(theta)):
+        raise DataError("state: every value must be a finite number")
+    x0, y_prev, w0 = structure.initial(theta)
+    return _scaled(model, _normalised_state(normalise(model), np.asarray(x0), y_prev, np.asarray(w0)))
+
+
+def _record(model: Model, structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64]) -> Any:
+    """The core's problem of the model's structure on (u, y), shifted for the feedthroughs
+    (zeros after u, before y: the core's output at t + shift is the measured output at t)."""
+    shift = structure.shift
+    z = np.zeros(shift)
+    return structure.problem(np.concatenate([u, z]), np.concatenate([z, y]), shift)
+
+
+def _estimate(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samples: int) -> tuple[Structure, NDArray[np.float64]]:
+    """The parameter vector of the normalised model with the state estimated on the first
+    ``samples`` samples: the model's parameters held (lower == upper), the state free."""
+    structure = _structure(model)
+    p0, size = structure.model_size, structure.size
+    theta = np.concatenate([structure.pack(model)[:p0], np.zeros(size - p0)])
+    prob = _record(model, structure, u[:samples], y[:samples])
+    names = structure.names
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in prob.bounds())
+    lo[:p0] = hi[:p0] = theta[:p0]
+    # starts: rest, and a grid over x(1) (x0_1) and the memory y_prev over the ranges the
+    # model's simulation from rest visits; the backlash makes the cost piecewise, with
+    # local minima where it holds
+    norm = normalise(model)
+    sim = norm.simulate(u, internals=True)
+    inner = sim.y if isinstance(sim, SandwichSimulation) else sim.output
+    grid_x = np.linspace(*_widened(sim.x), _GRID)
+    grid_y = np.linspace(*_widened(inner), _GRID) if isinstance(norm, SandwichModel) else np.array([0.0, float(y[0])])
+    # x(1) is x0_1, or with an input feedthrough (the core's record one sample earlier) x0_2
+    first = f"x0_{1 + int(structure.feedthrough)}"
+    i_x, i_y = names.index(first if first in names else "x0_1"), names.index("y_prev")
+    candidates = [theta]
+    for gx in grid_x:
+        for gy in grid_y:
+            t = theta.copy()
+            t[i_x] = gx
+            t[i_y] = gy
+            candidates.append(t)
+    # and seeded random states over those ranges (x0 from x's, w0 from w's)
+    rng = np.random.default_rng(0)
+    spans = {"x0": _widened(sim.x), "y_prev": _widened(inner), "w0": _widened(sim.output)}
+    kinds = [next(k for k in spans if n.startswith(k)) for n in names[p0:]]
+    for _ in range(_RANDOM):
+        t = theta.copy()
+        t[p0:] = [rng.uniform(*spans[k]) for k in kinds]
+        candidates.append(t)
+    # ranked on the first _SCREEN samples at most (the state acts at the start of the record)
+    screen = prob if samples <= _SCREEN else _record(model, structure, u[:_SCREEN], y[:_SCREEN])
+    costs = np.array([_cost(screen, t) for t in candidates])
+    best = None
+    for k in np.argsort(costs)[:_SEARCHED]:
+        if not np.isfinite(costs[k]):
+            break
+        fit = _held_lm(prob, candidates[k], lo, hi, p0, i_y)
+        if best is None or fit[1] < best[1]:
+            best = fit
+    if best is None:
+        raise ModelError("the model's simulation from every start of the state diverges on these samples")
+    return structure, best[0]
+
+
+def _widened(values: NDArray[np.float64]) -> tuple[float, float]:
+    lo, hi = float(np.min(values)), float(np.max(values))
+    pad = 0.1 * (hi - lo) + 1e-12
+    return lo - pad, hi + pad
+
+
+def _cost(prob: Any, theta: NDArray[np.float64]) -> float:
+    try:
+        return float(prob.cost(theta))
+    except BacklashIdError:
+        return np.inf
+
+
+def _held_lm(
+    prob: Any, theta: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64], p0: int, y_prev: int
+) -> tuple[NDArray[np.float64], float]:
+    """The one LM over the state's determined part. State values whose columns of the factor
+    are zero or a combination of earlier ones at the start are held (x0 and w0 at rest where
+    that costs nothing); a column that vanishes on the way (the backlash starts holding, or
+    stops) ends the search with the core's NotIdentifiableError naming it, and the search is
+    repeated from the start with that value held too."""
+    names = list(prob.names)
+    held = set(_dependent(prob, theta, p0))
+    for _ in range(len(theta) - p0 + 1):
+        start = theta.copy()
+        lo_k, hi_k = lo.copy(), hi.copy()
+        for i in sorted(held):
+            if i != y_prev:  # the undetermined part of x0 and w0 at rest, where that costs nothing
+                rest = start.copy()
+                rest[i] = 0.0
+                if _cost(prob, rest) <= _cost(prob, start) * (1.0 + 1e-12):
+                    start = rest
+            lo_k[i] = hi_k[i] = start[i]
+        if len(held) == len(theta) - p0:
+            return start, _cost(prob, start)
+        try:
+            fit = levenberg_marquardt(prob, start, lower=lo_k, upper=hi_k)
+        except NotIdentifiableError as exc:
+            named = [i for i in range(p0, len(theta)) if i not in held and f" {names[i]} " in f" {exc} "]
+            if not named:
+                return start, _cost(prob, start)
+            held.add(named[0])
+            continue
+        except BacklashIdError:
+            return start, _cost(prob, start)
+        return fit.theta, float(fit.cost)
+    return theta, _cost(prob, theta)
+
+
+def lm_holding_vanishing(prob: Any, theta: NDArray[np.float64], p0: int, lower: NDArray[np.float64] | None = None, upper: NDArray[np.float64] | None = None) -> Any:
+    """:func:`levenberg_marquardt` on a problem with the initial state as parameters (from
+    index ``p0``): a state value whose column vanishes on the way (y_prev once the backlash
+    moves at the first sample, x0_k masked by a backlash that holds) is held at its start and
+    the search repeated, instead of ending in the core's NotIdentifiableError. An error that
+    names no state value is raised as it is."""
+    names = list(prob.names)
+    lo, hi = (np.asarray(b, dtype=np.float64).copy() for b in prob.bounds()) if lower is None else (lower.copy(), upper.copy())  # type: ignore[union-attr]
+    theta = np.clip(np.asarray(theta, dtype=np.float64), lo, hi)
+    while True:
+        try:
+            return levenberg_marquardt(prob, theta, lower=lo, upper=hi)
+        except NotIdentifiableError as exc:
+            named = [i for i in range(p0, len(theta)) if lo[i] < hi[i] and f" {names[i]} " in f" {exc} "]
+            if not named:
+                raise
+            lo[named[0]] = hi[named[0]] = theta[named[0]]
+
+
+def _dependent(prob: Any, theta: NDArray[np.float64], p0: int) -> list[int]:
+    """Indices of the state's columns of the factor at theta that add nothing to the earlier
+    state columns (zero, or a combination of them)."""
+    try:
+        r = prob.oe_factor(theta)[0][:-1, :-1]
+    except BacklashIdError:
+        return []
+    cols = r[:, p0:]
+    scale = float(np.max(np.linalg.norm(cols, axis=0), initial=0.0))
+    kept: list[NDArray[np.float64]] = []
+    out = []
+    for j in range(cols.shape[1]):
+        v = cols[:, j].copy()
+        for q in kept:
+            v -= q * float(q @ v)
+        norm = float(np.linalg.norm(v))
+        if scale == 0.0 or norm <= 1e-8 * scale:
+            out.append(p0 + j)
+        else:
+            kept.append(v / norm)
+    return out
+
+
+def _samples(init_samples: Any, n: int, name: str) -> int:
+    k = check_whole(init_samples, name, 1)
+    if k > n:
+        raise DataError(f"{name} = {k}: the record has only {n} samples")
+    return k
+
+
+_ESTIMATE_DOC = """The state is estimated by the package's one Levenberg-Marquardt search
+(:func:`levenberg_marquardt`) on the core's problem with the initial state as parameters
+(``Structure(..., initial_state=True)``), the model's parameters held (lower == upper), from
+rest and from a grid of starts over the first internal value x(1) (and the backlash memory),
+the backlash making the output error piecewise with local minima. What ``samples`` samples
+do not determine keeps its rest value: a state value whose column is zero or a combination of
+earlier ones is held at zero (x0_k of k > samples; with fewer samples than the state's
+dimension max(na, nb) the later values), and the backlash memory y_prev keeps its start when
+the first sample moves the backlash (it then acts on nothing)."""
+
+
+@fill(estimate=_ESTIMATE_DOC)
+def estimate_state(model: Model, u: ArrayLike, y: ArrayLike, *, samples: int | None = None) -> CascadeState | SandwichState:
+    """The model's state before the first sample, estimated from the first measured samples
+    (the benchmark protocols' "n samples to initialise the state").
+
+    {estimate}
+
+    Parameters
+    ----------
+    model : CascadeModel or SandwichModel
+        The model, its parameters fixed.
+    u : array_like
+        Input u(t), 1-D, finite.
+    y : array_like
+        Measured output (w for a sandwich), as long as ``u``.
+    samples : int, optional
+        Estimate from the first ``samples`` samples only (default: the whole record).
+
+    Returns
+    -------
+    CascadeState or SandwichState
+        The state (see :func:`model_state`) to pass to ``model.simulate(..,
+        initial_state=..)``.
+
+    Raises
+    ------
+    DataError
+        If the record is not finite, u and y differ in length, or ``samples`` is not in 1..N.
+    ModelError
+        As :func:`model_state`, or if the model's simulation diverges from every start.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.identify import estimate_state
+    >>> model = bid.example1()
+    >>> d = bid.example_data(model, 300, snr=None, seed=1)
+    >>> u, y = d.u[100:], d.noisy[100:]  # cut from the middle of the run
+    >>> state = estimate_state(model, u, y, samples=30)
+    >>> bool(np.max(np.abs(model.simulate(u, initial_state=state) - y)) < 1e-8)
+    True
+    """
+    _check_model(model)
+    u_arr, y_arr = one_record(u, y, flatten=True)
+    n = _samples(len(u_arr) if samples is None else samples, len(u_arr), "samples")
+    structure, theta = _estimate(model, u_arr, y_arr, n)
+    x0, y_prev, w0 = structure.initial(theta)
+    return _scaled(model, _normalised_state(normalise(model), np.asarray(x0), y_prev, np.asarray(w0)))
+
+
+@fill(estimate=_ESTIMATE_DOC)
+def simulate_from_samples(model: Model, u: ArrayLike, y: ArrayLike, init_samples: int) -> NDArray[np.float64]:
+    """The free-run simulation of the whole record from the state estimated on its first
+    ``init_samples`` measured samples.
+
+    {estimate}
+
+    The simulation is the core's, from the estimated values themselves (exact also where the
+    model's own state cannot hold them, see :func:`model_state`).
+
+    Parameters
+    ----------
+    model : CascadeModel or SandwichModel
+        The model, its parameters fixed.
+    u : array_like
+        Input u(t), 1-D, finite.
+    y : array_like
+        Measured output (w for a sandwich), as long as ``u``; only its first
+        ``init_samples`` samples are used.
+    init_samples : int
+        Samples that initialise the state, 1..N.
+
+    Returns
+    -------
+    numpy.ndarray
+        The model's output for every sample of u (in the model's units).
+
+    Raises
+    ------
+    DataError
+        As :func:`estimate_state`.
+    ModelError
+        If the model's simulation diverges.
+
+    Examples
+    --------
+    >>> import numpy as np, backlashid as bid
+    >>> from backlashid.identify import simulate_from_samples
+    >>> model = bid.example2()
+    >>> d = bid.example_data(model, 300, snr=None, seed=2)
+    >>> sim = simulate_from_samples(model, d.u[150:], d.noisy[150:], 40)
+    >>> bool(np.max(np.abs(sim - d.noisy[150:])) < 1e-8)
+    True
+    """
+    _check_model(model)
+    u_arr, y_arr = one_record(u, y, flatten=True)
+    n = _samples(init_samples, len(u_arr), "init_samples")
+    structure, theta = _estimate(model, u_arr, y_arr, n)
+    whole = _record(model, structure, u_arr, y_arr)
+    # normalisation leaves the output unchanged: the core's output is the model's
+    return np.asarray(whole.simulate(theta))[structure.shift :]
+

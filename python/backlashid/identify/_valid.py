@@ -1,0 +1,54 @@
+"""Keeping a fit among valid backlash models: the search's optimum can be a vector that is no
+backlash (a branch that falls across the dead band) or one that hardly moves, where the data
+(e.g. a measured ``abs(speed)`` that no backlash represents) pull the branches outside the
+model class. The fit then continues from a valid model of a lower branch degree with the one
+Levenberg-Marquardt search restricted to valid models: :class:`ValidOnly` adds the model's
+validity and motion to the compiled problem's stability guard ``feasible``, whose failing
+trial steps the search rejects.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import ModelError
+from ._structure import Structure
+
+__all__ = ["ValidOnly", "why_not_acceptable"]
+
+
+def why_not_acceptable(
+    structure: Structure, prob: Any, theta: NDArray[np.float64], u: NDArray[np.float64], warmup: int, min_moving: float
+) -> str | None:
+    """None for a stable, valid model that moves the backlash on at least ``min_moving`` of
+    the samples after ``warmup`` (from rest), else what is wrong."""
+    if not prob.feasible(theta):
+        return "is unstable"
+    try:
+        model = structure.model(theta)
+    except ModelError as exc:
+        return f"is no valid backlash ({exc})"
+    try:
+        moving = model.moving_fraction(u, warmup=warmup)
+    except ModelError as exc:
+        return f"does not simulate ({exc})"
+    if moving < min_moving:
+        return f"moves the backlash on only {100 * moving:.1f} % of samples (min_moving = {min_moving:g})"
+    return None
+
+
+class ValidOnly:
+    """A compiled problem whose ``feasible`` also requires a valid model that moves enough
+    (:func:`why_not_acceptable`); everything else is the problem's."""
+
+    def __init__(self, prob: Any, structure: Structure, u: NDArray[np.float64], warmup: int, min_moving: float) -> None:
+        self._prob, self._structure, self._u, self._warmup, self._min_moving = prob, structure, u, warmup, min_moving
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._prob, name)
+
+    def feasible(self, theta: NDArray[np.float64]) -> bool:
+        return why_not_acceptable(self._structure, self._prob, theta, self._u, self._warmup, self._min_moving) is None
