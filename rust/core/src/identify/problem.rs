@@ -332,10 +332,18 @@ impl Record {
         };
         check_signal(&u_name, &u)?;
         check_signal(&y_name, &y)?;
-        check_same_length(&u, &y, &y_name).map_err(|e| match (at, e) {
-            (Some(i), Error::Data(m)) => Error::Data(format!("record {i}: {m}")),
-            (_, e) => e,
-        })?;
+        match at {
+            Some(i) if u.len() != y.len() => {
+                return Err(Error::Data(format!(
+                    "record {i}: {u_name} has {} samples but {y_name} has {}: give input and \
+                     output of the same record",
+                    u.len(),
+                    y.len()
+                )))
+            }
+            Some(_) => {}
+            None => check_same_length(&u, &y, &y_name)?,
+        }
         if warmup >= u.len() {
             let of = at.map_or(String::new(), |i| format!(" of record {i}"));
             return Err(Error::Data(format!(
