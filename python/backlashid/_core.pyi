@@ -20,6 +20,7 @@ __all__ = [
     "WienerHammersteinProblem",
     "lstsq",
     "arx",
+    "arx_records",
     "spectral_radius",
     "simulate_augmented",
 ]

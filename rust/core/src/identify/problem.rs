@@ -12,6 +12,9 @@
 //! of the core's block), y_prev (the backlash memory y(0)) and for the sandwich w0_1..w0_m
 //! (the output block's); `identify::initial` documents the parametrisation.
 //!
+//! Several records of one system (`Problem::several`) share the model's parameters, each
+//! record with its own initial-state block (`Problem` documents the layout and the sums).
+//!
 //! Every method unpacks theta once into the blocks and calls the existing numerics
 //! (`CascadeRegression`, `SandwichRegression`, the output-error factors and gradients); the
 //! record is not checked again.
