@@ -20,6 +20,7 @@ __all__ = [
     "WienerHammersteinProblem",
     "lstsq",
     "arx",
+    "arx_records",
     "spectral_radius",
     "simulate_augmented",
 ]
@@ -84,6 +85,15 @@ class Problem:
     # initial_state: theta ends with the record's initial state x0_1..x0_n (the input block's
     # observer-canonical state, n = max(na, nb) of the core's block), y_prev (the backlash
     # memory y(0)) and for the sandwich w0_1..w0_m (rust/core/src/identify/initial.rs)
+    # several records of one system (record i = (u[i], y[i]), the warm-up applied to each):
+    # theta = the model's parameters, then with initial_state one block per record (x0_1@1 ..
+    # y_prev@1, x0_1@2 ..); criteria summed, simulate concatenates the records' outputs
+    @staticmethod
+    def from_records(
+        u: list[_F], y: list[_F], na: int, nb: int, degree: int, nr: int, ns: int,
+        feedthrough: bool = False, output_feedthrough: bool = False, warmup: int | None = None,
+        initial_state: bool = False,
+    ) -> Problem: ...
     @staticmethod
     def layout(
         na: int, nb: int, degree: int, nr: int, ns: int, feedthrough: bool = False, output_feedthrough: bool = False,
@@ -94,9 +104,13 @@ class Problem:
     @property
     def ls_names(self) -> list[str]: ...  # c_1, c_2 in place of c_L, c_R (eq 20, 32)
     @property
-    def samples(self) -> int: ...
+    def samples(self) -> int: ...  # of all records
     @property
-    def warmup(self) -> int: ...
+    def warmup(self) -> int: ...  # several records: their warm-ups summed (samples - warmup residuals)
+    @property
+    def records(self) -> int: ...
+    @property
+    def lengths(self) -> list[int]: ...  # each record's samples (how simulate's output splits)
     @property
     def initial_state(self) -> bool: ...
     def simulate(self, theta: _F) -> _F: ...  # free run from rest or from theta's initial state
@@ -167,6 +181,7 @@ class WienerHammersteinProblem:
 
 def lstsq(a: _F, b: _F, names: list[str]) -> _LS: ...
 def arx(u: _F, y: _F, na: int, nb: int, delay: int, warmup: int) -> _LS: ...
+def arx_records(u: list[_F], y: list[_F], na: int, nb: int, delay: int, warmup: int) -> _LS: ...  # rows of all records stacked
 def spectral_radius(den: list[float]) -> float: ...
 
 # Augmented cascade of the diagnosis (rust/core/src/augmented.rs): the nominal cascade plus the

@@ -135,6 +135,19 @@ def test_fit_sandwich_from_joined_files(tmp_path):
     assert sorted(p.name for p in (tmp_path / "figs").glob("*.png")) == ["characteristic.png", "iterations.png", "residuals.png", "simulation.png"]
 
 
+def test_fit_several_estimation_files_gives_one_model_of_the_records(tmp_path):
+    records = [bx.example_data(bx.example1(), n, snr=30, seed=10 + n) for n in (1200, 900)]
+    for name, d in zip("ab", records):
+        np.savez(tmp_path / f"{name}.npz", u=d.u, y=d.noisy)
+    r = run("fit", "--estimation-file", tmp_path / "a.npz", "--estimation-file", tmp_path / "b.npz", "-i", "u", "-o", "y",
+            "--json", tmp_path / "m.json")
+    assert r.exit_code == 0, r.output
+    assert "fitted 2 estimation records as one model, each from its own start" in r.output
+    joint = bx.fit_cascade([d.u for d in records], [d.noisy for d in records])
+    payload = json.loads((tmp_path / "m.json").read_text())
+    assert payload["parameters"] == joint.parameters and payload["data"]["estimation_samples"] == 2100
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [

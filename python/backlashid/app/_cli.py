@@ -94,7 +94,7 @@ def _data_options(command: F) -> F:
         click.option("--split", type=float, help="Estimation fraction of DATA; the rest validates (e.g. 0.5)."),
         click.option("--estimation", help="Estimation samples a:b of DATA (0-based, b excluded), or of each --estimation-file."),
         click.option("--validation", help="Validation samples c:d of DATA (or of the joined --validation-file records)."),
-        click.option("--estimation-file", "estimation_files", multiple=True, type=click.Path(dir_okay=False, path_type=Path), help="Estimation record file; repeat to join several one after the other."),
+        click.option("--estimation-file", "estimation_files", multiple=True, type=click.Path(dir_okay=False, path_type=Path), help="Estimation record file; repeat for several records of one system, fitted as one model each from its own start (joined one after the other for wiener-hammerstein and the metrics)."),
         click.option("--validation-file", "validation_files", multiple=True, type=click.Path(dir_okay=False, path_type=Path), help="Validation record file; repeat to join several."),
         click.option("--decimate", "decimate_by", default=1, show_default=True, type=click.IntRange(min=1), help="Keep every N-th sample after an anti-alias filter (ranges count samples before it)."),
         click.option("--scale", type=click.Choice(["none", "auto"]), default="none", show_default=True, help="auto: zero mean, unit std of input and output on the estimation record."),
@@ -126,7 +126,7 @@ def _select(data: Path | None, input_: str, output: str, split: float | None, es
     )
 
 
-def _fit_model(kind: str, u: np.ndarray, y: np.ndarray, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int,
+def _fit_model(kind: str, u: Any, y: Any, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int,
                max_iter: int, feedthrough: bool, coarse: int | None = None, min_moving: float = 0.1) -> Any:
     from ..identify import fit_cascade, fit_sandwich, fit_wiener_hammerstein
 
@@ -199,6 +199,8 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         sel = _select(data, input_, output, split, estimation, validation, estimation_files, validation_files, decimate_by)
         scaling = _scaling(sel.estimation, scale, dict(input_offset=input_offset, input_scale=input_scale, output_offset=output_offset, output_scale=output_scale))
         u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
+        if len(sel.estimation_parts) > 1 and kind != "wiener-hammerstein":  # several records, one model
+            u_m, y_m = [scaling.input_to_model(p.u) for p in sel.estimation_parts], [scaling.output_to_model(p.y) for p in sel.estimation_parts]
         stage(f"fitting the {kind}")
         result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse, min_moving)
         if kind == "wiener-hammerstein":  # the fit's output offset joins the scaling's (the sandwich has none)
@@ -214,6 +216,8 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
             figures = _fit_figures(plots_dir, result, scaling, sel, metrics_warmup)
     click.echo(f"data: {sel.description['estimation']} ({len(sel.estimation)} samples) for estimation"
                + (f", {sel.description['validation']} ({len(sel.validation)} samples) for validation" if sel.validation is not None else ", no validation record"))
+    if isinstance(u_m, list):
+        click.echo(f"fitted {len(u_m)} estimation records as one model, each from its own start")
     if not scaling.is_identity:
         click.echo("model units: " + ", ".join(f"{k} {v:.6g}" for k, v in scaling.to_dict().items()))
     click.echo(result.summary())

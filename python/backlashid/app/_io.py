@@ -485,11 +485,15 @@ class Selection:
     description : dict
         The input and output selectors, the sources and sample counts of both records and the
         decimation (written into the JSON of ``backlashid fit``).
+    estimation_parts : tuple of Record
+        The estimation files' records one by one (``estimation`` joins them), for a joint fit
+        of several records; empty for one file.
     """
 
     estimation: Record
     validation: Record | None
     description: dict[str, object]
+    estimation_parts: tuple[Record, ...] = ()
 
 
 def select_records(
@@ -557,10 +561,10 @@ def select_records(
     if split is not None and (estimation or validation):
         raise DataError("give either --split or --estimation/--validation ranges, not both")
     val: Record | None = None
+    parts: list[Record] = []
     if estimation_files:
         if split is not None:
             raise DataError("--split divides one file; with --estimation-file give --validation-file or a DATA file for validation")
-        parts = []
         for f in estimation_files:
             rec = load_record(f, input, output)
             parts.append(rec.slice(parse_range(estimation, len(rec), "--estimation"), "--estimation") if estimation else rec)
@@ -599,4 +603,5 @@ def select_records(
         "validation_samples": len(val) if val is not None else 0,
         "decimate": decimate_by,
     }
-    return Selection(est, val, description)
+    parts = tuple(decimate(p, decimate_by) for p in parts) if estimation_files else ()
+    return Selection(est, val, description, parts)

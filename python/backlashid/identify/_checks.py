@@ -26,7 +26,8 @@ def _intervals(found: list[tuple[float, float]]) -> str:
 def branch_problems(model: Any, u: NDArray[np.float64], warmup: int) -> str | None:
     """What is wrong with the fitted branches on the x range the record visits (after the
     warm-up), in words, or None when both increase and do not cross there."""
-    x = np.asarray(model.simulate(u, internals=True).x)[warmup:]
+    records = u if isinstance(u, list) else [u]  # several records: the x range of them all
+    x = np.concatenate([np.asarray(model.simulate(r, internals=True).x)[warmup:] for r in records])
     x = x[np.isfinite(x)]
     if x.size == 0:
         return None

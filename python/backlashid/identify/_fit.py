@@ -25,6 +25,7 @@ from .._docstrings import AXES, fill
 from .._validation import identification_record
 from ..errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
+from . import _records
 from ._checks import warn_if_suspicious
 from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
 from ._state import lm_holding_vanishing
@@ -100,10 +101,11 @@ class FitResult:
         When > 0, the iterations (``history``, ``history_rmse``, ``iterative_theta``) ran on
         the first ``coarse_samples`` samples after the warm-up and the refinement on the whole
         record.
-    initial_state : dict of str to float or None
+    initial_state : dict of str to float, list of dict, or None
         With ``initial_state="estimate"``, the record's estimated initial state under the
         core's names (x0_1.., y_prev, and w0_1.. for a sandwich; nuisance parameters, not in
-        ``theta``); None when the record was assumed to start at rest.
+        ``theta``), one dict per record for several records; None when the records were
+        assumed to start at rest.
     refinement_converged : bool or None
         Whether the output-error refinement met its tolerance; None when no refinement ran
         (``refine=False``, ``paper=True``, or no start could be refined).
@@ -134,7 +136,7 @@ class FitResult:
     iterative_theta: NDArray[np.float64] = field(repr=False)
     refinement_steps: int = 0
     coarse_samples: int = 0
-    initial_state: dict[str, float] | None = None
+    initial_state: dict[str, float] | list[dict[str, float]] | None = None
     refinement_converged: bool | None = None
 
     @property
@@ -314,6 +316,8 @@ class _Run:
 
 
 def _rmse(prob: _core.Problem, theta: NDArray[np.float64], y: NDArray[np.float64]) -> float:
+    if prob.records > 1:  # several records: over each one's samples after its warm-up
+        return _records.rmse(prob, theta)
     warmup = prob.warmup
     try:
         e = y[warmup:] - prob.simulate(theta)[warmup:]
@@ -342,7 +346,7 @@ def _initial_theta(structure: Structure, u: NDArray[np.float64], y: NDArray[np.f
     gain makes the paper's sandwich iterations diverge; NOTES.md item 5)."""
     s = structure
     delay = 2 if s.is_sandwich and not literal else 1
-    lin = _core.arx(u, y, s.n_a, s.nb, delay, warmup)[0]
+    lin = _records.arx(u, y, s.n_a, s.nb, delay, warmup)[0]  # several records: their rows stacked
     m_r1, c_l, c_r = start
     n = s.degree
     theta = np.concatenate([lin, [c_l], np.zeros(n - 1), [m_r1, c_r], np.zeros(n - 1)])
@@ -370,7 +374,7 @@ def _run(structure: Structure, prob: _core.Problem, u: NDArray[np.float64], y: N
     # iteration at an iterate returns its RMSE on the way (one pass over x); the others, and
     # the last iterate, are simulated after the loop.
     run = _Run(history=[theta], rmse=[], reason="iteration limit", last_ls=None, moving=0.0)
-    rows = len(u) - max(warmup, 1 if s.is_sandwich else 0)
+    rows = _records.rows(u, max(warmup, 1 if s.is_sandwich else 0))
     was_cycling = False
     for _ in range(2, max_iter + 1):
         try:
@@ -446,7 +450,7 @@ def _moving(
     """The fraction of samples after the warm-up on which the model of ``theta`` moves the
     backlash (f1 or f2); 0 for an estimate that is no valid model."""
     try:
-        return (model or structure.model(theta)).moving_fraction(u, warmup=warmup)
+        return _records.moving(model or structure.model(theta), u, warmup)
     except ModelError:
         return 0.0
 
@@ -559,10 +563,16 @@ def _fit(
             f"max_iter = {max_iter}: give at least 2 (iterate 1 is the linear ARX start; the backlash "
             "is first estimated by iterate 2)"
         )
-    u_arr, y_arr = identification_record(
-        u, y, y_name=y_name, warmup=warmup, parameters=structure.size, constant_input=NotIdentifiableError
-    )
-    if np.ptp(y_arr[warmup:]) == 0.0:
+    several = _records.is_records(u) or _records.is_records(y)
+    if several:  # several records of one system, one model (_records.py)
+        u_arr, y_arr = _records.validate(u, y, y_name=y_name, warmup=warmup, parameters=structure.size)
+        if len(u_arr) == 1:  # one record in a list: the plain fit (bit for bit)
+            (u_arr,), (y_arr,) = u_arr, y_arr
+    else:
+        u_arr, y_arr = identification_record(
+            u, y, y_name=y_name, warmup=warmup, parameters=structure.size, constant_input=NotIdentifiableError
+        )
+    if not several and np.ptp(y_arr[warmup:]) == 0.0:
         raise NotIdentifiableError(
             f"{y_name} never changes: 0 % of samples move the output off the backlash dead band; "
             "excite the system with a larger input amplitude"
@@ -572,7 +582,7 @@ def _fit(
     # with `shift` zeros, exact from rest and otherwise inside the (then lengthened) warm-up.
     user_warmup, shift = warmup, structure.shift
     if shift:
-        y_arr = np.concatenate([np.zeros(shift), y_arr[:-shift]])
+        y_arr = _records.delayed(y_arr, shift)
         warmup = warmup + shift if warmup else 0
     if paper:
         starts, switching, step, refine, reflect = [initial], "measured", 1.0, False, False
@@ -580,7 +590,7 @@ def _fit(
         starts = [initial] + [tuple(s) for s in (starts or []) if tuple(s) != tuple(initial)]  # type: ignore[misc]
         reflect = True
     if restarts is None:  # kinks and shallow minima matter on short records only
-        restarts = RESTARTS if len(u_arr) - warmup <= RESTARTS_UP_TO else 0
+        restarts = RESTARTS if _records.rows(u_arr, warmup) <= RESTARTS_UP_TO else 0
 
     # one compiled problem per record: the whole record, and the coarse stage's segment
     whole = structure.problem(u_arr, y_arr, warmup)
@@ -594,7 +604,7 @@ def _fit(
             reflect=reflect, warmup=warmup,
         )
 
-    segment = _coarse_samples(structure, len(u_arr) - warmup, coarse) * refine
+    segment = _coarse_samples(structure, _records.rows(u_arr, warmup), coarse) * refine * (not isinstance(u_arr, list))
     found = None
     if segment:
         # coarse to fine: the iterations and the choice of LM start on the first `segment`
@@ -623,10 +633,10 @@ def _fit(
             why = None
         else:
             refined, guard = lower, (u_arr, user_warmup, min_moving)
-    state: dict[str, float] | None = None
+    state: dict[str, float] | list[dict[str, float]] | None = None
     if initial_state == "estimate" and refined is not None:
         # the shifted record's first `shift` samples are zeros, right only from rest
-        def with_state(fit: OutputErrorFit, guard: Any) -> tuple[_StateFit, dict[str, float]]:
+        def with_state(fit: OutputErrorFit, guard: Any) -> tuple[_StateFit, dict[str, float] | list[dict[str, float]]]:
             return _refine_with_state(
                 structure, u_arr, y_arr, max(warmup, shift), fit, restarts=restarts, perturbation=perturbation, seed=seed,
                 guard=guard,
@@ -638,6 +648,7 @@ def _fit(
             if why_not_acceptable(structure, whole, kept.theta, u_arr, user_warmup, min_moving) is None:
                 # the state's refinement left the valid models: again, kept among them
                 refined, state = with_state(kept, (u_arr, user_warmup, min_moving))  # type: ignore[assignment]
+        state = [state] if several and isinstance(state, dict) else state  # one dict per record
     theta, steps = (refined.theta, refined.iterations) if refined is not None else (theta_iter, 0)
     # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
     # stage always ends in a whole-record refinement, so the iterate is the whole record's)
@@ -750,27 +761,28 @@ class _StateFit:
 
 def _refine_with_state(
     structure: Structure,
-    u: NDArray[np.float64],
-    y: NDArray[np.float64],
+    u: NDArray[np.float64] | list[NDArray[np.float64]],
+    y: NDArray[np.float64] | list[NDArray[np.float64]],
     warmup: int,
     refined: OutputErrorFit,
     *,
     restarts: int,
     perturbation: float,
     seed: int,
-    guard: tuple[NDArray[np.float64], int, float] | None = None,
-) -> tuple[_StateFit, dict[str, float]]:
+    guard: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float] | None = None,
+) -> tuple[_StateFit, dict[str, float] | list[dict[str, float]]]:
     """The output-error refinement of the model's estimate with the record's initial state as
     further parameters, from the state x0 = 0, w0 = 0 and (cascade) y_prev at the first
     measured output (y(1) = y_prev when the record starts holding)."""
     with_state = dataclasses.replace(structure, initial_state=True)
     p0 = structure.size
-    names = with_state.names
-    start = np.zeros(with_state.size)
+    prob = with_state.problem(u, y, warmup)
+    names = prob.names  # several records: one state block per record (x0_1@1, ..)
+    start = np.zeros(len(names))
     start[:p0] = refined.theta
     if not structure.is_sandwich:
-        start[names.index("y_prev")] = y[warmup]
-    prob = with_state.problem(u, y, warmup)
+        for k, first in _records.y_prev_starts(names, y, warmup):
+            start[k] = first
     if guard is not None:  # (u, warm-up, min_moving): kept among valid models that move (_valid.py)
         prob = ValidOnly(prob, with_state, *guard)  # type: ignore[assignment]
         # the state first, the model held: on the boundary of the valid models the joint
@@ -796,7 +808,7 @@ def _refine_with_state(
     model_cols, state_cols = r[:, :p0], r[:, p0:]
     rank = int(np.linalg.matrix_rank(state_cols, tol=1e-10 * np.linalg.norm(state_cols, 2))) if state_cols.any() else 0
     projected = model_cols - state_cols @ (np.linalg.pinv(state_cols, rcond=1e-10) @ model_cols)
-    state = dict(zip(names[p0:], map(float, fit.theta[p0:])))
+    state = _records.states(names, p0, fit.theta, isinstance(y, list))
     return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, p0 + rank, projected), state
 
 
@@ -859,10 +871,13 @@ initial_state : {'rest', 'estimate'}, default 'rest'
     middle of a run is fitted whole, without a warm-up. Needs ``refine=True`` and
     ``paper=False``; the standard errors treat the state as nuisance parameters. The state is
     the one at the first sample, so a warm-up leaves it poorly determined: use ``warmup=0``."""
-_DATA_DOC = """u : array_like
-    Input u(t), 1-D, finite.
-{y} : array_like
-    Measured output {y}(t), 1-D, finite, as long as ``u``.
+_DATA_DOC = """u : array_like or list of array_like
+    Input u(t), 1-D, finite; or a list of records of one system (several experiments), fitted
+    as one model: one parameter vector, each record run from its own start (``warmup`` and
+    ``initial_state`` apply to each), the standard errors from all records.
+{y} : array_like or list of array_like
+    Measured output {y}(t), 1-D, finite, as long as ``u``; a list with one output per record
+    of ``u``.
 na : int, default 2
     Input lags of the {block} (a_1..a_na of eq 16).
 nb : int, default 2

@@ -441,6 +441,7 @@ def _gain(r_mat: NDArray[np.float64], qtr: NDArray[np.float64], free: NDArray[np
     all free, else ||R_F delta_F||^2 of the least-squares step in the free columns."""
     if free.all():
         return float(qtr @ qtr)
+    free = free & np.any(r_mat != 0.0, axis=0)  # a zero column (a state the data never excite) gains nothing
     if not free.any():
         return 0.0
     delta = _core.lstsq(r_mat[:, free], qtr, [k for k, f in zip(names, free) if f])[0]

@@ -369,20 +369,33 @@ class Structure:
             return SandwichModel(lin, bl, LinearBlock(p.r, p.s, feedthrough=self.output_feedthrough))
         return CascadeModel(lin, bl)
 
-    def problem(self, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int = 0) -> _core.Problem:
-        """The core's compiled output-error problem of this structure on a record.
+    def problem(
+        self,
+        u: NDArray[np.float64] | list[NDArray[np.float64]],
+        y: NDArray[np.float64] | list[NDArray[np.float64]],
+        warmup: int = 0,
+    ) -> _core.Problem:
+        """The core's compiled output-error problem of this structure on a record, or on
+        several records of one system.
 
         u and y are checked once here; its methods (``simulate``, ``cost``, ``iteration``,
         ``oe_factor``, ``gradient``, ``feasible``, ``bounds``) take only theta, and
         :func:`levenberg_marquardt` searches it. With :attr:`initial_state` theta ends with
         the record's initial state (free in ``bounds()``).
 
+        Several records (u and y lists of 1-D arrays, record i = (u[i], y[i])) share the
+        model's parameters; each runs from its own start, the criteria sum over them (one
+        output-error factor), ``simulate`` returns their outputs concatenated (``lengths``
+        splits them), and with :attr:`initial_state` theta ends with one initial-state block
+        per record, named x0_1@1, .., y_prev@1, x0_1@2, .. (records counted from 1).
+
         Parameters
         ----------
-        u, y : ndarray
-            The record's input and measured output, 1-D, finite, one length.
+        u, y : ndarray or list of ndarray
+            The record's input and measured output, 1-D, finite, one length; or one list
+            entry per record.
         warmup : int, default 0
-            Samples at the start left out of the cost.
+            Samples at the start (of each record) left out of the cost.
 
         Returns
         -------
@@ -403,10 +416,14 @@ class Structure:
         >>> prob = s.problem(d.u, d.noisy)
         >>> prob.names == s.names, prob.bounds()[0][4:6]
         (True, [0.0, -inf])
+        >>> joint = s.problem([d.u[:100], d.u[100:]], [d.noisy[:100], d.noisy[100:]])
+        >>> joint.records, joint.lengths, joint.names == s.names
+        (2, [100, 100], True)
         """
-        return _core.Problem(
-            u,
-            y,
+        make = _core.Problem.from_records if isinstance(u, list) else _core.Problem
+        return make(
+            u,  # type: ignore[arg-type]
+            y,  # type: ignore[arg-type]
             self.na,
             self.nb,
             self.degree,

@@ -15,16 +15,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ModelError
+from . import _records
 from ._structure import Structure
 
 __all__ = ["ValidOnly", "why_not_acceptable"]
 
 
 def why_not_acceptable(
-    structure: Structure, prob: Any, theta: NDArray[np.float64], u: NDArray[np.float64], warmup: int, min_moving: float
+    structure: Structure,
+    prob: Any,
+    theta: NDArray[np.float64],
+    u: NDArray[np.float64] | list[NDArray[np.float64]],
+    warmup: int,
+    min_moving: float,
 ) -> str | None:
     """None for a stable, valid model that moves the backlash on at least ``min_moving`` of
-    the samples after ``warmup`` (from rest), else what is wrong."""
+    the samples after ``warmup`` (from rest; over every record of a list), else what is wrong."""
     if not prob.feasible(theta):
         return "is unstable"
     try:
@@ -32,7 +38,7 @@ def why_not_acceptable(
     except ModelError as exc:
         return f"is no valid backlash ({exc})"
     try:
-        moving = model.moving_fraction(u, warmup=warmup)
+        moving = _records.moving(model, u, warmup)
     except ModelError as exc:
         return f"does not simulate ({exc})"
     if moving < min_moving:
@@ -44,7 +50,7 @@ class ValidOnly:
     """A compiled problem whose ``feasible`` also requires a valid model that moves enough
     (:func:`why_not_acceptable`); everything else is the problem's."""
 
-    def __init__(self, prob: Any, structure: Structure, u: NDArray[np.float64], warmup: int, min_moving: float) -> None:
+    def __init__(self, prob: Any, structure: Structure, u: NDArray[np.float64] | list[NDArray[np.float64]], warmup: int, min_moving: float) -> None:
         self._prob, self._structure, self._u, self._warmup, self._min_moving = prob, structure, u, warmup, min_moving
 
     def __getattr__(self, name: str) -> Any:

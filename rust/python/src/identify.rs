@@ -94,6 +94,46 @@ fn arx<'py>(
     ls_out(py, ls)
 }
 
+/// ARX least squares over several records (u[i], y[i]), their rows stacked in one problem,
+/// each record's lags starting from zero at its own start: (theta, rss, cov, rcond).
+#[pyfunction]
+fn arx_records<'py>(
+    py: Python<'py>,
+    u: Vec<SignalIn<'py>>,
+    y: Vec<SignalIn<'py>>,
+    na: usize,
+    nb: usize,
+    delay: usize,
+    warmup: usize,
+) -> PyResult<LsOut<'py>> {
+    if u.len() != y.len() || u.is_empty() {
+        return Err(crate::errors::DataError::new_err(format!(
+            "u has {} records but y has {}: give one output per input record (at least one)",
+            u.len(),
+            y.len()
+        )));
+    }
+    let mut signals = Vec::with_capacity(u.len());
+    for (i, (ui, yi)) in u.iter().zip(&y).enumerate() {
+        signals.push((
+            signal(&format!("u[{i}]"), ui)?,
+            signal(&format!("y[{i}]"), yi)?,
+        ));
+    }
+    let names: Vec<String> = (1..=na)
+        .map(|i| format!("a{i}"))
+        .chain((1..=nb).map(|j| format!("b{j}")))
+        .collect();
+    let ls = run(py, || {
+        let mut joint = core::TriangularFactor::new(na + nb);
+        for (ui, yi) in &signals {
+            joint.merge(&core::ArxRegression::new(ui, yi, na, nb, delay)?.factor(warmup))?;
+        }
+        joint.solve(&names)
+    })?;
+    ls_out(py, ls)
+}
+
 /// Largest root modulus of z^n + den[0] z^(n-1) + ... (0 for none, inf if not finite).
 #[pyfunction]
 fn spectral_radius(den: Vec<f64>) -> f64 {
@@ -103,6 +143,7 @@ fn spectral_radius(den: Vec<f64>) -> f64 {
 /// Adds the identification functions to the module.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(lstsq, m)?)?;
+    m.add_function(wrap_pyfunction!(arx_records, m)?)?;
     m.add_function(wrap_pyfunction!(arx, m)?)?;
     m.add_function(wrap_pyfunction!(spectral_radius, m)?)?;
     Ok(())

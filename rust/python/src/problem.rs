@@ -110,6 +110,52 @@ impl PyProblem {
         Ok(Self { inner })
     }
 
+    /// Several records of one system: `u` and `y` lists of 1-D signals (record i is
+    /// (u[i], y[i])), the warm-up applied to each. Theta is the model's parameters, then
+    /// with `initial_state` one initial-state block per record (names suffixed @1, @2, ...);
+    /// the criteria sum over the records and `simulate` concatenates their outputs. One
+    /// record is the plain problem, bit for bit.
+    #[staticmethod]
+    #[pyo3(signature = (u, y, na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false, warmup=None, initial_state=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn from_records(
+        py: Python<'_>,
+        u: Vec<SignalIn<'_>>,
+        y: Vec<SignalIn<'_>>,
+        na: &Bound<'_, PyAny>,
+        nb: &Bound<'_, PyAny>,
+        degree: &Bound<'_, PyAny>,
+        nr: &Bound<'_, PyAny>,
+        ns: &Bound<'_, PyAny>,
+        feedthrough: bool,
+        output_feedthrough: bool,
+        warmup: Option<&Bound<'_, PyAny>>,
+        initial_state: bool,
+    ) -> PyResult<Self> {
+        let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?
+            .with_initial_state(initial_state);
+        if u.len() != y.len() {
+            return Err(DataError::new_err(format!(
+                "u has {} records but y has {}: give one output per input record",
+                u.len(),
+                y.len()
+            )));
+        }
+        let shortest = u.iter().map(|a| a.len().unwrap_or(0)).min().unwrap_or(0);
+        let warmup = match warmup {
+            Some(w) => warmup_of(w, shortest)?,
+            None => 0,
+        };
+        let mut records = Vec::with_capacity(u.len());
+        for (i, (ui, yi)) in u.iter().zip(&y).enumerate() {
+            let ui = signal(&format!("u[{i}]"), ui)?.into_owned();
+            let yi = signal(&format!("y[{i}]"), yi)?.into_owned();
+            records.push((ui, yi, warmup));
+        }
+        let inner = run(py, || core::Problem::several(s, records))?;
+        Ok(Self { inner })
+    }
+
     /// The parameter names of a structure, in the order of theta (no record needed); with
     /// `least_squares`, those of the least-squares vector of eq (19) / (31) (which has no
     /// initial state); with `initial_state`, theta's trailing x0_k, y_prev, w0_k.
@@ -154,19 +200,33 @@ impl PyProblem {
         self.inner.structure().ls_names()
     }
 
-    /// The number of samples of the record.
+    /// The number of samples of the record (of all records).
     #[getter]
     fn samples(&self) -> usize {
-        self.inner.u().len()
+        self.inner.samples()
     }
 
-    /// The samples at the start left out of every criterion.
+    /// The samples at the start left out of every criterion (several records: the
+    /// records' warm-ups summed, so that samples - warmup counts the residuals).
     #[getter]
     fn warmup(&self) -> usize {
-        self.inner.warmup()
+        self.inner.total_warmup()
     }
 
-    /// Free-run output of the estimate theta, from rest or from theta's initial state.
+    /// The number of records (1 for the plain constructor).
+    #[getter]
+    fn records(&self) -> usize {
+        self.inner.records().len()
+    }
+
+    /// The samples of each record, in order (how `simulate`'s output splits).
+    #[getter]
+    fn lengths(&self) -> Vec<usize> {
+        self.inner.records().iter().map(|r| r.u.len()).collect()
+    }
+
+    /// Free-run output of the estimate theta, from rest or from theta's initial state
+    /// (several records: their outputs concatenated, split by `lengths`).
     fn simulate<'py>(&self, py: Python<'py>, theta: Vec<f64>) -> PyResult<SignalOut<'py>> {
         let out = run(py, || self.inner.simulate(&theta))?;
         Ok(vec_f64(py, out))

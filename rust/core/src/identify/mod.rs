@@ -17,7 +17,7 @@ pub mod wiener_hammerstein;
 pub use augmented_problem::{AugmentedProblem, RecordStart};
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
 pub use initial::InitialState;
-pub use problem::{Iteration, Problem, Structure};
+pub use problem::{Iteration, Problem, Record, Structure};
 pub use regressor::{
     solve_factor, ArxRegression, CascadeRegression, Regression, RowRegression, SandwichRegression,
 };

@@ -12,6 +12,9 @@
 //! of the core's block), y_prev (the backlash memory y(0)) and for the sandwich w0_1..w0_m
 //! (the output block's); `identify::initial` documents the parametrisation.
 //!
+//! Several records of one system (`Problem::several`) share the model's parameters, each
+//! record with its own initial-state block (`Problem` documents the layout and the sums).
+//!
 //! Every method unpacks theta once into the blocks and calls the existing numerics
 //! (`CascadeRegression`, `SandwichRegression`, the output-error factors and gradients); the
 //! record is not checked again.
@@ -217,7 +220,7 @@ impl Structure {
     }
 
     /// The names of the model's parameters (no initial state).
-    fn model_names(&self) -> Vec<String> {
+    pub(crate) fn model_names(&self) -> Vec<String> {
         let first = usize::from(!self.feedthrough);
         let n = self.degree;
         let mut names: Vec<String> = (first..=self.na).map(|i| format!("a{i}")).collect();
@@ -314,61 +317,188 @@ pub struct Iteration {
     pub rmse: Option<f64>,
 }
 
-/// The structure and the record of an identification, checked once.
+/// One record of an identification: input, measured output and its warm-up.
+#[derive(Debug, Clone)]
+pub struct Record {
+    pub u: Vec<f64>,
+    pub y: Vec<f64>,
+    pub warmup: usize,
+}
+
+impl Record {
+    /// Checks u and y (non-empty, finite, one length) and 0 <= warmup < len(u); `at` names
+    /// the record in the messages of several (None: the one record, the plain messages).
+    fn new(u: Vec<f64>, y: Vec<f64>, warmup: usize, at: Option<usize>) -> Result<Self> {
+        let (u_name, y_name) = match at {
+            Some(i) => (format!("u[{i}]"), format!("y[{i}]")),
+            None => ("u".into(), "y".into()),
+        };
+        check_signal(&u_name, &u)?;
+        check_signal(&y_name, &y)?;
+        match at {
+            Some(i) if u.len() != y.len() => {
+                return Err(Error::Data(format!(
+                    "record {i}: {u_name} has {} samples but {y_name} has {}: give input and \
+                     output of the same record",
+                    u.len(),
+                    y.len()
+                )))
+            }
+            Some(_) => {}
+            None => check_same_length(&u, &y, &y_name)?,
+        }
+        if warmup >= u.len() {
+            let of = at.map_or(String::new(), |i| format!(" of record {i}"));
+            return Err(Error::Data(format!(
+                "warmup = {warmup}: give a whole number of samples, 0 <= warmup < {} (the record \
+                 length{of})",
+                u.len()
+            )));
+        }
+        Ok(Self { u, y, warmup })
+    }
+}
+
+/// The structure and the record(s) of an identification, checked once.
+///
+/// Several records (`Problem::several`) share the model's parameters: theta is the model's
+/// parameters followed, with an initial state, by one initial-state block per record (names
+/// suffixed `@i`, record i counted from 1: x0_1@1, y_prev@1, x0_1@2, ...). Every criterion
+/// sums over the records: the cost, the gradient, the output-error factor (each record's
+/// rows folded into the one factor of the joint problem) and the paper's iteration (each
+/// record's regression rows, its lags and backlash memory restarting at its own start).
+/// `simulate` returns the records' outputs concatenated. One record is the plain problem,
+/// bit for bit.
 #[derive(Debug, Clone)]
 pub struct Problem {
     structure: Structure,
-    u: Vec<f64>,
-    y: Vec<f64>,
-    warmup: usize,
+    records: Vec<Record>,
 }
 
 impl Problem {
     /// Checks u and y (non-empty, finite, one length) and 0 <= warmup < len(u).
     pub fn new(structure: Structure, u: Vec<f64>, y: Vec<f64>, warmup: usize) -> Result<Self> {
-        check_signal("u", &u)?;
-        check_signal("y", &y)?;
-        check_same_length(&u, &y, "y")?;
-        if warmup >= u.len() {
-            return Err(Error::Data(format!(
-                "warmup = {warmup}: give a whole number of samples, 0 <= warmup < {} (the record \
-                 length)",
-                u.len()
-            )));
-        }
         Ok(Self {
             structure,
-            u,
-            y,
-            warmup,
+            records: vec![Record::new(u, y, warmup, None)?],
         })
+    }
+
+    /// Several records (u_i, y_i, warmup_i) of one system, each checked as `new` checks
+    /// one (messages name the record, counted from 0); at least one.
+    pub fn several(
+        structure: Structure,
+        records: Vec<(Vec<f64>, Vec<f64>, usize)>,
+    ) -> Result<Self> {
+        if records.is_empty() {
+            return Err(Error::Data(
+                "no records: give at least one (u, y) pair".into(),
+            ));
+        }
+        let records = records
+            .into_iter()
+            .enumerate()
+            .map(|(i, (u, y, w))| Record::new(u, y, w, Some(i)))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self { structure, records })
     }
 
     pub fn structure(&self) -> &Structure {
         &self.structure
     }
 
+    /// The records (one for `new`).
+    pub fn records(&self) -> &[Record] {
+        &self.records
+    }
+
+    /// The first record's input (the record of a one-record problem).
     pub fn u(&self) -> &[f64] {
-        &self.u
+        &self.records[0].u
     }
 
+    /// The first record's output.
     pub fn y(&self) -> &[f64] {
-        &self.y
+        &self.records[0].y
     }
 
+    /// The first record's warm-up.
     pub fn warmup(&self) -> usize {
-        self.warmup
+        self.records[0].warmup
     }
 
-    /// The parameter names in the order of theta.
+    /// The samples of all records.
+    pub fn samples(&self) -> usize {
+        self.records.iter().map(|r| r.u.len()).sum()
+    }
+
+    /// The warm-up samples of all records (samples() - total_warmup() residuals).
+    pub fn total_warmup(&self) -> usize {
+        self.records.iter().map(|r| r.warmup).sum()
+    }
+
+    /// The number of parameters: the model's and one initial-state block per record.
+    pub fn size(&self) -> usize {
+        self.structure.model_size() + self.records.len() * self.structure.initial_size()
+    }
+
+    /// The parameter names in the order of theta (several records with an initial state:
+    /// its names suffixed `@i` per record i = 1..).
     pub fn names(&self) -> Vec<String> {
-        self.structure.names()
+        if self.records.len() == 1 {
+            return self.structure.names();
+        }
+        let mut names = self.structure.model_names();
+        let state = &self.structure.names()[names.len()..];
+        for i in 1..=self.records.len() {
+            names.extend(state.iter().map(|k| format!("{k}@{i}")));
+        }
+        names
     }
 
-    /// Free-run output of the estimate theta, from rest or from theta's initial state.
+    fn check_len(&self, theta: &[f64]) -> Result<()> {
+        if theta.len() != self.size() {
+            return Err(Error::Data(format!(
+                "theta has {} parameters but the problem has {}: give one value per name",
+                theta.len(),
+                self.size()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Record i's own parameter vector (the model's, then its initial state) and the
+    /// positions of its columns in theta.
+    fn own(&self, theta: &[f64], i: usize) -> (Vec<f64>, Vec<usize>) {
+        let (p0, k) = (self.structure.model_size(), self.structure.initial_size());
+        let at = p0 + i * k;
+        let cols: Vec<usize> = (0..p0).chain(at..at + k).collect();
+        (cols.iter().map(|&c| theta[c]).collect(), cols)
+    }
+
+    /// The blocks of every record (one record: theta itself).
+    fn unpack_all(&self, theta: &[f64]) -> Result<Vec<(Blocks, Vec<usize>)>> {
+        if self.records.len() == 1 {
+            let cols = (0..theta.len()).collect();
+            return Ok(vec![(self.structure.unpack(theta)?, cols)]);
+        }
+        self.check_len(theta)?;
+        (0..self.records.len())
+            .map(|i| {
+                let (own, cols) = self.own(theta, i);
+                Ok((self.structure.unpack(&own)?, cols))
+            })
+            .collect()
+    }
+
+    /// Free-run output of the estimate theta, from rest or from theta's initial state(s);
+    /// several records' outputs concatenated in order.
     pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
-        let blocks = self.structure.unpack(theta)?;
-        Self::simulate_blocks(blocks, &self.u)
+        let mut out = Vec::with_capacity(self.samples());
+        for ((blocks, _), rec) in self.unpack_all(theta)?.into_iter().zip(&self.records) {
+            out.extend(Self::simulate_blocks(blocks, &rec.u)?);
+        }
+        Ok(out)
     }
 
     fn simulate_blocks(blocks: Blocks, u: &[f64]) -> Result<Vec<f64>> {
@@ -393,23 +523,30 @@ impl Problem {
         }
     }
 
-    /// The output-error cost at theta: sum (y - y_sim)^2 over t >= warmup, one simulation; a
-    /// ModelError where the simulation diverges (a non-finite cost).
+    /// The output-error cost at theta: sum (y - y_sim)^2 over t >= warmup (summed over the
+    /// records), one simulation; a ModelError where the simulation diverges (a non-finite
+    /// cost).
     pub fn cost(&self, theta: &[f64]) -> Result<f64> {
-        output_error_cost(&self.y, &self.simulate(theta)?, self.warmup)
+        let mut cost = 0.0;
+        for ((blocks, _), rec) in self.unpack_all(theta)?.into_iter().zip(&self.records) {
+            let sim = Self::simulate_blocks(blocks, &rec.u)?;
+            cost += output_error_cost(&rec.y, &sim, rec.warmup)?;
+        }
+        Ok(cost)
     }
 
     /// The stability guard of the output-error search: every linear block of theta has its
     /// poles strictly inside the unit circle (eq 16, and eq 29 for the sandwich).
     pub fn feasible(&self, theta: &[f64]) -> Result<bool> {
-        let b = self.structure.unpack(theta)?;
+        let blocks = self.unpack_all(theta)?;
+        let b = &blocks[0].0;
         Ok(b.linear.is_stable() && b.output.as_ref().map_or(true, LinearBlock::is_stable))
     }
 
     /// The box of theta: the dead-band widths c_L and c_R at least 0 (eq 4-5: L meets zero at
     /// x = -c_L, R at x = c_R, so the band [-c_L, c_R] holds), every other parameter free.
     pub fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
-        let p = self.structure.size();
+        let p = self.size();
         let lay = self.structure.layout();
         let mut lower = vec![f64::NEG_INFINITY; p];
         lower[lay.c_l()] = 0.0;
@@ -421,83 +558,164 @@ impl Problem {
     /// streamed into a triangular factor. The cascade's switching signal is the measured y,
     /// or with `simulated_switching` the estimate's own simulated output. It is a from-rest
     /// method: theta's initial state, if the structure has one, is ignored (the least-squares
-    /// vector has the model's names), and theta may be given without it.
+    /// vector has the model's names), and theta may be given without it. Several records:
+    /// their rows in one least-squares problem (each record's regression from its own
+    /// start), the moving fraction and the RMSE over all their samples after the warm-ups.
     pub fn iteration(&self, theta: &[f64], simulated_switching: bool) -> Result<Iteration> {
         let names = self.structure.ls_names();
+        let model = &theta[..self.structure.model_size().min(theta.len())];
         let from_rest = theta.len() == self.structure.model_size();
-        let blocks = match from_rest {
-            true => self.structure.with_initial_state(false).unpack(theta)?,
+        if self.records.len() > 1 && !from_rest {
+            self.check_len(theta)?;
+        }
+        let blocks = match from_rest || self.records.len() > 1 {
+            true => self.structure.with_initial_state(false).unpack(model)?,
             false => self.structure.unpack(theta)?,
         };
+        if let [rec] = &self.records[..] {
+            let (factor, moving, rmse) = Self::record_iteration(&blocks, rec, simulated_switching)?;
+            return Ok(Iteration {
+                ls: solve_factor(&factor, &names, moving)?,
+                moving_fraction: moving,
+                rmse,
+            });
+        }
+        let mut joint = TriangularFactor::new(names.len());
+        let (mut moved, mut squares, mut count, mut cascade) = (0.0, 0.0, 0.0, false);
+        for rec in &self.records {
+            let (factor, moving, rmse) = Self::record_iteration(&blocks, rec, simulated_switching)?;
+            joint.merge(&factor)?;
+            let n = rec.u.len().saturating_sub(rec.warmup).max(1) as f64;
+            moved += moving * n;
+            count += n;
+            if let Some(r) = rmse {
+                (squares, cascade) = (squares + r * r * n, true);
+            }
+        }
+        let moving = moved / count;
+        let rmse = (squares / count).sqrt();
+        Ok(Iteration {
+            ls: solve_factor(&joint, &names, moving)?,
+            moving_fraction: moving,
+            rmse: cascade.then_some(if rmse.is_finite() {
+                rmse
+            } else {
+                f64::INFINITY
+            }),
+        })
+    }
+
+    /// One record's factor, moving fraction and (cascade) simulation RMSE of the paper's step.
+    fn record_iteration(
+        blocks: &Blocks,
+        rec: &Record,
+        simulated_switching: bool,
+    ) -> Result<(TriangularFactor, f64, Option<f64>)> {
         match &blocks.output {
             Some(out) => {
-                let regression = SandwichRegression::new(
-                    &blocks.linear,
-                    &blocks.backlash,
-                    out,
-                    &self.u,
-                    &self.y,
-                )?;
-                let (factor, moving) = regression.factor(self.warmup);
-                Ok(Iteration {
-                    ls: solve_factor(&factor, &names, moving)?,
-                    moving_fraction: moving,
-                    rmse: None,
-                })
+                let regression =
+                    SandwichRegression::new(&blocks.linear, &blocks.backlash, out, &rec.u, &rec.y)?;
+                let (factor, moving) = regression.factor(rec.warmup);
+                Ok((factor, moving, None))
             }
             None => {
                 let simulated;
                 let y_switch: &[f64] = if simulated_switching {
                     let m = CascadeModel::new(blocks.linear.clone(), blocks.backlash.clone());
-                    simulated = m.simulate(&self.u, &m.rest_state())?;
+                    simulated = m.simulate(&rec.u, &m.rest_state())?;
                     &simulated
                 } else {
-                    &self.y
+                    &rec.y
                 };
                 let regression = CascadeRegression::new(
                     &blocks.linear,
                     &blocks.backlash,
-                    &self.u,
-                    &self.y,
+                    &rec.u,
+                    &rec.y,
                     y_switch,
                 )?;
-                let (factor, moving, rmse) = regression.iteration(self.warmup);
-                Ok(Iteration {
-                    ls: solve_factor(&factor, &names, moving)?,
-                    moving_fraction: moving,
-                    rmse: Some(rmse),
-                })
+                let (factor, moving, rmse) = regression.iteration(rec.warmup);
+                Ok((factor, moving, Some(rmse)))
             }
         }
     }
 
     /// The output-error problem at theta in factored form: R_aug of [J | y - y_sim] over
     /// t >= warmup and the cost sum (y - y_sim)^2, streamed (no N x p Jacobian).
-    /// With an initial state, J has its columns too (theta's order).
+    /// With an initial state, J has its columns too (theta's order). Several records: each
+    /// record's rows (its Jacobian in the model's columns and its own initial state's) folded
+    /// into one factor, R_aug^T R_aug the sum of the records' [J_i | r_i]^T [J_i | r_i].
     pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
-        let b = self.structure.unpack(theta)?;
-        let (u, y, threads) = (&self.u[..], &self.y[..], oe_threads(self.u.len()));
-        let start = self.start(&b);
-        let (lin, bl, w) = (&b.linear, &b.backlash, self.warmup);
+        let all = self.unpack_all(theta)?;
+        let p0 = self.structure.model_size();
+        if self.records.len() == 1 {
+            return self.record_factor(&all[0].0, &self.records[0], p0);
+        }
+        let mut parts = Vec::with_capacity(all.len());
+        let (mut cost, mut rows) = (0.0, 0);
+        for ((blocks, cols), rec) in all.iter().zip(&self.records) {
+            let (factor, c) = self.record_factor(blocks, rec, p0)?;
+            cost += c;
+            rows += factor.rows();
+            parts.push((factor, cols));
+        }
+        let maps: Vec<(&TriangularFactor, &[usize])> =
+            parts.iter().map(|(f, c)| (f, c.as_slice())).collect();
+        Ok((
+            TriangularFactor::embed_sum(self.size(), &maps, rows, 0.0)?,
+            cost,
+        ))
+    }
+
+    /// One record's output-error factor over the model's columns and its initial state's.
+    fn record_factor(
+        &self,
+        b: &Blocks,
+        rec: &Record,
+        p0: usize,
+    ) -> Result<(TriangularFactor, f64)> {
+        let (u, y, threads) = (&rec.u[..], &rec.y[..], oe_threads(rec.u.len()));
+        let start = Self::start(b, p0);
+        let (lin, bl, w) = (&b.linear, &b.backlash, rec.warmup);
         match &b.output {
             None => cascade_oe_factor_from(lin, bl, start.as_ref(), u, y, w, threads),
             Some(out) => sandwich_oe_factor_from(lin, bl, out, start.as_ref(), u, y, w, threads),
         }
     }
 
-    /// The initial state's values and columns (after the model's parameters).
-    fn start<'b>(&self, blocks: &'b Blocks) -> Option<Start<'b>> {
-        blocks.initial.as_ref().map(|state| Start {
-            state,
-            col: self.structure.model_size(),
-        })
+    /// The initial state's values and columns (after the model's `p0` parameters).
+    fn start(blocks: &Blocks, p0: usize) -> Option<Start<'_>> {
+        blocks
+            .initial
+            .as_ref()
+            .map(|state| Start { state, col: p0 })
     }
 
-    /// g = J^T (y - y_sim) over t >= warmup and the cost, one pass without the factor.
+    /// g = J^T (y - y_sim) over t >= warmup and the cost, one pass without the factor;
+    /// several records: the records' gradients summed into theta's columns.
     pub fn gradient(&self, theta: &[f64]) -> Result<OeGradient> {
-        let b = self.structure.unpack(theta)?;
-        let start = self.start(&b);
-        let (lin, bl, u, y, w) = (&b.linear, &b.backlash, &self.u, &self.y, self.warmup);
+        let all = self.unpack_all(theta)?;
+        let p0 = self.structure.model_size();
+        if self.records.len() == 1 {
+            return Self::record_gradient(&all[0].0, &self.records[0], p0);
+        }
+        let mut total = OeGradient {
+            gradient: vec![0.0; self.size()],
+            cost: 0.0,
+        };
+        for ((blocks, cols), rec) in all.iter().zip(&self.records) {
+            let g = Self::record_gradient(blocks, rec, p0)?;
+            for (&c, v) in cols.iter().zip(&g.gradient) {
+                total.gradient[c] += v;
+            }
+            total.cost += g.cost;
+        }
+        Ok(total)
+    }
+
+    fn record_gradient(b: &Blocks, rec: &Record, p0: usize) -> Result<OeGradient> {
+        let start = Self::start(b, p0);
+        let (lin, bl, u, y, w) = (&b.linear, &b.backlash, &rec.u, &rec.y, rec.warmup);
         match &b.output {
             None => cascade_oe_gradient_from(lin, bl, start.as_ref(), u, y, w),
             Some(out) => sandwich_oe_gradient_from(lin, bl, out, start.as_ref(), u, y, w),
