@@ -13,6 +13,7 @@ from ._fit import FitResult, fit_cascade, fit_sandwich
 from ._metrics import Metrics, evaluate, fit_percent, nrmse, one_step_prediction, rmse
 from ._refine import OutputErrorFit, levenberg_marquardt
 from ._scaling import Scaling, evaluate_scaled, simulate_scaled
+from ._selection import StructureSelection, select_structure
 from ._structure import Estimate, Structure, normalise
 from ._wiener_hammerstein import LinearBaseline, WienerHammersteinFit, fit_wiener_hammerstein, wiener_hammerstein_model
 
@@ -24,6 +25,7 @@ __all__ = [
     "OutputErrorFit",
     "Scaling",
     "Structure",
+    "StructureSelection",
     "WienerHammersteinFit",
     "evaluate",
     "evaluate_scaled",
@@ -36,6 +38,7 @@ __all__ = [
     "normalise",
     "one_step_prediction",
     "rmse",
+    "select_structure",
     "simulate_scaled",
     "wiener_hammerstein_model",
 ]
