@@ -14,7 +14,9 @@ One system per seed (``numpy.random.default_rng(seed)``):
   angle U[0.3, 2.5] rad; real poles U[0.3, 0.85] with a random sign) and na - 1 zeros (a
   complex pair with probability 1/2 when na >= 3, radius U[0.3, 1.2]; real zeros U[0.2, 1.2]
   with a random sign); a = poly(zeros), b = poly(poles)[1:], a scaled so that std(x) = 1;
-- input: white, uniform on [-1, 1], N = 5000 samples;
+- input (``--input``): white, uniform on [-1, 1] (default), or a random-phase multisine with
+  equal amplitudes on every frequency k / N, k = 1..0.4 N (one period of N samples), scaled to
+  a peak of 1; N = 5000 samples;
 - branches L(x) = sum m_Li (x + c_L)^i, R(x) = sum m_Ri (x - c_R)^i (eq 4-5) with m_L1 = 1,
   m_R1 U[0.6, 1.5], c_L, c_R U[0.1, 0.5]; degree 2: m_L2, m_R2 = +-U[0.04, 0.1]; degree 3:
   m_2 U[-0.08, 0.08], m_3 U[0.02, 0.06];
@@ -132,10 +134,21 @@ def _rejected(sys: dict[str, Any], x: np.ndarray) -> str | None:
     return None
 
 
-def draw_system(seed: int, rejections: dict[str, int]) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
+def make_input(rng: np.random.Generator, kind: str) -> np.ndarray:
+    """The input signal: 'white' (uniform on [-1, 1]) or 'multisine' (module docstring)."""
+    if kind == "white":
+        return rng.uniform(-1.0, 1.0, N)
+    lines = np.arange(1, int(0.4 * N) + 1)
+    phases = rng.uniform(0.0, 2.0 * np.pi, lines.size)
+    t = np.arange(N)
+    u = np.cos(2.0 * np.pi * np.outer(t, lines) / N + phases).sum(axis=1)
+    return u / np.max(np.abs(u))
+
+
+def draw_system(seed: int, rejections: dict[str, int], input_kind: str = "white") -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
     """One accepted random cascade and its record (u, noisy y); rejected draws are counted."""
     rng = np.random.default_rng(seed)
-    u = rng.uniform(-1.0, 1.0, N)
+    u = make_input(rng, input_kind)
     while True:
         na, nb, n = (int(v) for v in rng.integers(1, 4, size=3))
         poles = _roots(rng, nb, 0.3, 0.85, pair_from=2)
@@ -163,10 +176,10 @@ def draw_system(seed: int, rejections: dict[str, int]) -> tuple[dict[str, Any], 
 # -- the benchmark ---------------------------------------------------------------------------------
 
 
-def run(seed: int, rejections: dict[str, int]) -> dict[str, Any]:
+def run(seed: int, rejections: dict[str, int], input_kind: str = "white") -> dict[str, Any]:
     import backlashid as bid
 
-    sys, u, y = draw_system(seed, rejections)
+    sys, u, y = draw_system(seed, rejections, input_kind)
     truth = (sys["na"], sys["nb"], sys["degree"])
     t0 = time.perf_counter()
     try:
@@ -226,6 +239,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--systems", type=int, default=50, help="number of random systems")
     ap.add_argument("--seed-base", type=int, default=0, help="system k uses seed seed-base + k (tuning: 0..999)")
+    ap.add_argument("--input", dest="input_kind", choices=["white", "multisine"], default="white", help="the input signal")
     ap.add_argument("--json", help="write every system's truth, choice and table here")
     ap.add_argument("--rescore", metavar="FILE", help="only print alternative rules' pick rates on a saved --json run")
     args = ap.parse_args()
@@ -237,14 +251,14 @@ def main() -> None:
     t_all = time.perf_counter()
     for k in range(args.systems):
         seed = args.seed_base + k
-        r = run(seed, rejections)
+        r = run(seed, rejections, args.input_kind)
         results.append(r)
         mark = "ok  " if r["chosen"] is not None and tuple(r["chosen"]) == tuple(r["truth"]) else "MISS"
         print(f"{mark} seed {seed}: true (na, nb, n) = {tuple(r['truth'])}, chosen {r['chosen'] if r['chosen'] else r['error']}"
               f"  ({r['seconds']:.1f} s)", flush=True)
     orders, degree, both = _rates(results)
     seconds = np.array([r["seconds"] for r in results])
-    print(f"\n{args.systems} systems, seeds {args.seed_base}..{args.seed_base + args.systems - 1}, N = {N} (white uniform input), SNR {SNR:g}")
+    print(f"\n{args.systems} systems, seeds {args.seed_base}..{args.seed_base + args.systems - 1}, N = {N} ({args.input_kind} input), SNR {SNR:g}")
     print(f"pick rate: orders {orders:.1%}, degree {degree:.1%}, both {both:.1%} (target >= {TARGET:.0%} both)")
     print(f"rejected draws: {sum(rejections.values())} ({', '.join(f'{k} {v}' for k, v in sorted(rejections.items())) or 'none'})")
     print(f"time per selection: mean {seconds.mean():.2f} s, median {np.median(seconds):.2f} s, max {seconds.max():.2f} s"
@@ -252,7 +266,7 @@ def main() -> None:
     print("PASS" if both >= TARGET else "FAIL")
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"seed_base": args.seed_base, "systems": args.systems, "rejections": rejections, "results": results}, f)
+            json.dump({"input": args.input_kind, "seed_base": args.seed_base, "systems": args.systems, "rejections": rejections, "results": results}, f)
         print(f"wrote {args.json}")
 
 
