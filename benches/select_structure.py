@@ -20,7 +20,7 @@ One system per seed (``numpy.random.default_rng(seed)``):
 - branches L(x) = sum m_Li (x + c_L)^i, R(x) = sum m_Ri (x - c_R)^i (eq 4-5) with m_L1 = 1,
   m_R1 U[0.6, 1.5], c_L, c_R U[0.1, 0.5]; degree 2: m_L2, m_R2 = +-U[0.04, 0.1]; degree 3:
   m_2 U[-0.08, 0.08], m_3 U[0.02, 0.06];
-- output noise: white Gaussian, std = std(clean y) / 50 (SNR 50 as an amplitude ratio).
+- output noise: white Gaussian, std = std(clean y) / SNR, SNR 50 (``--snr``; an amplitude ratio).
 
 A draw is rejected, and drawn again from the same generator, by these rules, fixed before any
 run (the counts are printed): the true structure must be the minimal one and every part of it
@@ -145,7 +145,7 @@ def make_input(rng: np.random.Generator, kind: str) -> np.ndarray:
     return u / np.max(np.abs(u))
 
 
-def draw_system(seed: int, rejections: dict[str, int], input_kind: str = "white") -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
+def draw_system(seed: int, rejections: dict[str, int], input_kind: str = "white", snr: float = SNR) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
     """One accepted random cascade and its record (u, noisy y); rejected draws are counted."""
     rng = np.random.default_rng(seed)
     u = make_input(rng, input_kind)
@@ -169,17 +169,17 @@ def draw_system(seed: int, rejections: dict[str, int], input_kind: str = "white"
             break
         rejections[reason] = rejections.get(reason, 0) + 1
     y = play(x, sys["m_L"], sys["c_L"], sys["m_R"], sys["c_R"])
-    noisy = y + rng.normal(0.0, np.std(y) / SNR, N)
+    noisy = y + rng.normal(0.0, np.std(y) / snr, N)
     return sys, u, noisy
 
 
 # -- the benchmark ---------------------------------------------------------------------------------
 
 
-def run(seed: int, rejections: dict[str, int], input_kind: str = "white") -> dict[str, Any]:
+def run(seed: int, rejections: dict[str, int], input_kind: str = "white", snr: float = SNR) -> dict[str, Any]:
     import backlashid as bid
 
-    sys, u, y = draw_system(seed, rejections, input_kind)
+    sys, u, y = draw_system(seed, rejections, input_kind, snr)
     truth = (sys["na"], sys["nb"], sys["degree"])
     t0 = time.perf_counter()
     try:
@@ -240,6 +240,7 @@ def main() -> None:
     ap.add_argument("--systems", type=int, default=50, help="number of random systems")
     ap.add_argument("--seed-base", type=int, default=0, help="system k uses seed seed-base + k (tuning: 0..999)")
     ap.add_argument("--input", dest="input_kind", choices=["white", "multisine"], default="white", help="the input signal")
+    ap.add_argument("--snr", type=float, default=SNR, help="std(clean y) / noise std")
     ap.add_argument("--json", help="write every system's truth, choice and table here")
     ap.add_argument("--rescore", metavar="FILE", help="only print alternative rules' pick rates on a saved --json run")
     args = ap.parse_args()
@@ -251,14 +252,14 @@ def main() -> None:
     t_all = time.perf_counter()
     for k in range(args.systems):
         seed = args.seed_base + k
-        r = run(seed, rejections, args.input_kind)
+        r = run(seed, rejections, args.input_kind, args.snr)
         results.append(r)
         mark = "ok  " if r["chosen"] is not None and tuple(r["chosen"]) == tuple(r["truth"]) else "MISS"
         print(f"{mark} seed {seed}: true (na, nb, n) = {tuple(r['truth'])}, chosen {r['chosen'] if r['chosen'] else r['error']}"
               f"  ({r['seconds']:.1f} s)", flush=True)
     orders, degree, both = _rates(results)
     seconds = np.array([r["seconds"] for r in results])
-    print(f"\n{args.systems} systems, seeds {args.seed_base}..{args.seed_base + args.systems - 1}, N = {N} ({args.input_kind} input), SNR {SNR:g}")
+    print(f"\n{args.systems} systems, seeds {args.seed_base}..{args.seed_base + args.systems - 1}, N = {N} ({args.input_kind} input), SNR {args.snr:g}")
     print(f"pick rate: orders {orders:.1%}, degree {degree:.1%}, both {both:.1%} (target >= {TARGET:.0%} both)")
     print(f"rejected draws: {sum(rejections.values())} ({', '.join(f'{k} {v}' for k, v in sorted(rejections.items())) or 'none'})")
     print(f"time per selection: mean {seconds.mean():.2f} s, median {np.median(seconds):.2f} s, max {seconds.max():.2f} s"
@@ -266,7 +267,7 @@ def main() -> None:
     print("PASS" if both >= TARGET else "FAIL")
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"input": args.input_kind, "seed_base": args.seed_base, "systems": args.systems, "rejections": rejections, "results": results}, f)
+            json.dump({"input": args.input_kind, "snr": args.snr, "seed_base": args.seed_base, "systems": args.systems, "rejections": rejections, "results": results}, f)
         print(f"wrote {args.json}")
 
 
