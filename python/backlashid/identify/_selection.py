@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 from .._docstrings import AXES, fill
 from .._json import jsonable
 from .._validation import check_finite, check_warmup, check_whole, one_record
-from ..errors import BacklashIdError, DataError, NotConvergedError
+from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ._fit import FitResult, fit_cascade, fit_sandwich
 from ._structure import Structure
 
@@ -387,7 +387,10 @@ def select_structure(
                     raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
             except BacklashIdError as exc:
                 error, result = exc, None
-        row["warnings"] = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+        row["warnings"] = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
+        for w in caught:  # anything else is shown as Python would have
+            if not issubclass(w.category, FitWarning):
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
         row["seconds"] = time.perf_counter() - t0
         if error is not None:
             row["raised"], row["error"] = True, _error_text(error)
