@@ -267,8 +267,10 @@ def select_structure(
     on the tail, is a row of the table with its error; only when every candidate raises does
     the selection raise.
 
-    Cost: one fit per candidate (the default cascade grid is 3 x 3 x 4 = 36 fits, about 1-2 s
-    on 5000 samples); give a smaller grid to save time.
+    Cost: one fit per candidate (the default cascade grid is 3 x 3 x 4 = 36 fits, a few seconds
+    on 5000 samples); give a smaller grid to save time. On random cascades of orders and degree
+    1-3 (N = 5000, SNR 50, white input; ``benches/select_structure.py``) it picked the true
+    orders and degree for 50 of 50 fresh systems.
 
     Parameters
     ----------
