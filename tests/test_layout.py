@@ -46,6 +46,7 @@ TOP_LEVEL_ALL = [
     "SandwichModel",
     "SandwichSimulation",
     "SandwichState",
+    "StructureSelection",
     "SwitchingSignals",
     "WienerHammersteinFit",
     "__version__",
@@ -62,6 +63,7 @@ TOP_LEVEL_ALL = [
     "fit_wiener_hammerstein",
     "model_from_dict",
     "model_from_json",
+    "select_structure",
     "shared_data_folder",
     "wiener_hammerstein_model",
 ]

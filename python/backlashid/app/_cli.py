@@ -139,6 +139,21 @@ def _fit_model(kind: str, u: Any, y: Any, na: int, nb: int, nr: int, ns: int, de
     return fit_wiener_hammerstein(u, y, nb=nb, ns=ns, degree=degree, warmup=warmup, feedthrough=feedthrough)
 
 
+def _select_model(kind: str, u: np.ndarray, y: np.ndarray, warmup: int, max_iter: int, feedthrough: bool,
+                  coarse: int | None = None, min_moving: float = 0.1) -> Any:
+    """``fit --orders auto``: select_structure over its default grid (cascade: na, nb 1..3,
+    degree 1..4; sandwich: na, nb, nr, ns 1..2, degree 1..3); prints the table of candidates."""
+    from ..identify import select_structure
+
+    if kind not in ("cascade", "sandwich"):
+        raise DataError(f"--orders auto: the structure selection is for --model cascade or sandwich, not {kind}")
+    extra: dict[str, Any] = dict(na=(1, 2), nb=(1, 2), degree=(1, 2, 3), output_feedthrough=feedthrough) if kind == "sandwich" else {}
+    selection = select_structure(u, y, kind=kind, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough, coarse=coarse,
+                                 min_moving=min_moving, **extra)
+    click.echo(selection.summary())
+    return selection
+
+
 def _metrics_dict(metrics: Any) -> dict[str, Any]:
     return asdict(metrics)
 
@@ -176,6 +191,7 @@ def _model_options(command: F) -> F:
 @_data_options
 @_model_options
 @click.option("--metrics-warmup", type=click.IntRange(min=0), help="Initial samples left out of the metrics of each record [default: --warmup].")
+@click.option("--orders", type=click.Choice(["given", "auto"]), default="given", show_default=True, help="auto: choose --na, --nb (--nr, --ns) and --degree by select_structure (held-out simulation RMSE and BIC) and print its table.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write model, parameters, standard errors and metrics here.")
 @click.option("--plots", "plots_dir", type=click.Path(file_okay=False, path_type=Path), help="Folder for the figures (PNG; needs matplotlib).")
 @_clean_errors
@@ -183,7 +199,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
         input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
         kind: str, feedthrough: bool, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
-        coarse: int | None, min_moving: float, metrics_warmup: int | None, json_path: Path | None, plots_dir: Path | None) -> None:
+        coarse: int | None, min_moving: float, metrics_warmup: int | None, orders: str, json_path: Path | None, plots_dir: Path | None) -> None:
     """Identify a cascade or sandwich model from logged input/output data.
 
     \b
@@ -202,7 +218,8 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         if len(sel.estimation_parts) > 1 and kind != "wiener-hammerstein":  # several records, one model
             u_m, y_m = [scaling.input_to_model(p.u) for p in sel.estimation_parts], [scaling.output_to_model(p.y) for p in sel.estimation_parts]
         stage(f"fitting the {kind}")
-        result = _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse, min_moving)
+        selection = _select_model(kind, u_m, y_m, warmup, max_iter, feedthrough, coarse, min_moving) if orders == "auto" else None
+        result = selection.fit if selection is not None else _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse, min_moving)
         if kind == "wiener-hammerstein":  # the fit's output offset joins the scaling's (the sandwich has none)
             scaling = replace(scaling, output_offset=scaling.output_offset + scaling.output_scale * result.offset)
         stage("computing metrics")
@@ -234,6 +251,7 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
             "metric_labels": METRIC_LABELS,
             "data": {**sel.description, "metrics_warmup": metrics_warmup},
             "fit": result.to_dict(),
+            **({"structure_selection": {k: v for k, v in selection.to_dict().items() if k != "fit"}} if selection is not None else {}),
         }
         _write_json(json_path, payload)
         click.echo(f"wrote {json_path}")

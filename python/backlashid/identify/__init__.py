@@ -14,6 +14,7 @@ from ._hammerstein import as_hammerstein, fit_hammerstein_backlash, hammerstein_
 from ._metrics import Metrics, evaluate, fit_percent, nrmse, one_step_prediction, rmse
 from ._refine import OutputErrorFit, levenberg_marquardt
 from ._scaling import Scaling, evaluate_scaled, simulate_scaled
+from ._selection import StructureSelection, select_structure
 from ._state import estimate_state, model_state, simulate_from_samples
 from ._structure import Estimate, Structure, normalise
 from ._wiener_hammerstein import LinearBaseline, WienerHammersteinFit, fit_wiener_hammerstein, wiener_hammerstein_model
@@ -26,6 +27,7 @@ __all__ = [
     "OutputErrorFit",
     "Scaling",
     "Structure",
+    "StructureSelection",
     "WienerHammersteinFit",
     "as_hammerstein",
     "evaluate",
@@ -43,6 +45,7 @@ __all__ = [
     "normalise",
     "one_step_prediction",
     "rmse",
+    "select_structure",
     "simulate_from_samples",
     "simulate_scaled",
     "wiener_hammerstein_model",

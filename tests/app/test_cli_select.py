@@ -1,0 +1,39 @@
+"""``backlashid fit --orders auto``: the table of candidates printed, the chosen model written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from click.testing import CliRunner
+
+import backlashid as bx
+from backlashid.app._cli import main
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_fit_orders_auto_prints_the_table_and_writes_the_chosen_model(tmp_path):
+    data = bx.example_data(bx.example1(), 1500, snr=50, seed=2)
+    path = tmp_path / "log.csv"
+    np.savetxt(path, np.column_stack([data.u, data.noisy]), delimiter=",", header="u,y", comments="", fmt="%.17g")
+    out = tmp_path / "model.json"
+    r = run("fit", path, "-i", "u", "-o", "y", "--orders", "auto", "--json", out)
+    assert r.exit_code == 0, r.output
+    assert "Structure selection: 36 candidates" in r.output and "chosen (*): cascade na=2, nb=2, degree=3" in r.output
+    assert r.output.count("\n* cascade    2  2   3") == 1
+    payload = json.loads(out.read_text())
+    model = bx.model_from_dict(payload["model"])
+    assert (model.linear.na, model.linear.nb, model.backlash.degree) == (2, 2, 3)
+    selection = payload["structure_selection"]
+    assert selection["structure"]["degree"] == 3 and len(selection["rows"]) == 36
+
+
+def test_fit_orders_auto_refuses_the_wiener_hammerstein_fit(tmp_path):
+    data = bx.example_data(bx.example1(), 300, snr=50, seed=2)
+    path = tmp_path / "log.csv"
+    np.savetxt(path, np.column_stack([data.u, data.noisy]), delimiter=",", header="u,y", comments="", fmt="%.17g")
+    r = run("fit", path, "-i", "u", "-o", "y", "--orders", "auto", "--model", "wiener-hammerstein")
+    assert r.exit_code == 1 and "Error: --orders auto" in r.output

@@ -1,0 +1,118 @@
+"""select_structure: the right structure on small synthetic systems, one table row per candidate
+(raising candidates included), the errors for bad settings, and the result object's outputs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import backlashid as bx
+from backlashid.errors import DataError, NotConvergedError, NotIdentifiableError
+from backlashid.identify import StructureSelection, _selection, select_structure
+
+
+@pytest.fixture(scope="module")
+def example1_data():
+    return bx.example_data(bx.example1(), 2000, snr=50, seed=3)
+
+
+def _chosen(sel: StructureSelection) -> tuple[int, int, int]:
+    return sel.structure.na, sel.structure.nb, sel.structure.degree
+
+
+def test_picks_example1_orders_and_degree(example1_data):
+    sel = select_structure(example1_data.u, example1_data.noisy, na=(1, 2, 3), nb=(1, 2), degree=(2, 3, 4))
+    assert _chosen(sel) == (2, 2, 3)
+    assert sel.kind == "cascade" and sel.refitted and sel.fit.structure == sel.structure
+    assert sel.estimation_samples == 1400 and sel.validation_samples == 600
+    # the under-modelled candidates validate clearly worse than the chosen one
+    chosen = sel.rows[sel.chosen]
+    assert chosen["chosen"] and chosen["in_band"]
+    for r in sel.rows:
+        if r["degree"] < 3 or r["na"] < 2 or r["nb"] < 2:
+            assert r["validation_rmse"] > 1.5 * chosen["validation_rmse"], r
+
+
+def test_picks_a_first_order_quadratic_cascade():
+    truth = bx.CascadeModel(bx.LinearBlock([0.8], [-0.5]), bx.GeneralBacklash(0.2, 0.3, [1.0, 0.15], [1.2, -0.1]))
+    data = bx.example_data(truth, 2000, snr=50, seed=1)
+    sel = select_structure(data.u, data.noisy, na=(1, 2), nb=(1, 2), degree=(1, 2, 3))
+    assert _chosen(sel) == (1, 1, 2)
+
+
+def test_table_has_a_row_per_candidate_and_its_outputs(example1_data):
+    sel = select_structure(example1_data.u, example1_data.noisy, na=(2, 1), nb=2, degree=[3, 2], refit=False)
+    assert [(r["na"], r["nb"], r["degree"]) for r in sel.rows] == [(1, 2, 2), (1, 2, 3), (2, 2, 2), (2, 2, 3)]
+    assert set(sel.rows[0]) == set(_selection.COLUMNS)
+    for r in sel.rows:
+        assert r["kind"] == "cascade" and r["parameters"] == r["na"] + r["nb"] + 2 * r["degree"] + 1
+        assert not r["raised"] and r["error"] is None and r["estimation_rmse"] > 0 and r["validation_rmse"] > 0
+    assert sum(r["chosen"] for r in sel.rows) == 1 and not sel.refitted
+    text = sel.summary()
+    assert text.count("\n  cascade") + text.count("\n* cascade") + text.count("\n+ cascade") == 4
+    assert "validation" in text and "BIC" in text and "chosen (*)" in text
+    d = json.loads(json.dumps(sel.to_dict()))
+    assert d["structure"] == {"na": 2, "nb": 2, "nr": 0, "ns": 0, "degree": 3} and len(d["rows"]) == 4
+    ax = sel.plot()
+    assert ax.get_xlabel() == "number of parameters p"
+    import matplotlib.pyplot as plt
+
+    plt.close(ax.figure)
+
+
+def test_a_raising_candidate_is_a_row(example1_data, monkeypatch):
+    real = _selection.fit_cascade
+
+    def flaky(u, y, na, nb, degree, **kw):
+        if degree == 4:
+            raise NotConvergedError("a dead-band width went below 0 during the search")
+        return real(u, y, na, nb, degree, **kw)
+
+    monkeypatch.setattr(_selection, "fit_cascade", flaky)
+    sel = select_structure(example1_data.u, example1_data.noisy, na=2, nb=2, degree=(3, 4))
+    assert len(sel.rows) == 2 and _chosen(sel) == (2, 2, 3)
+    raised = sel.rows[1]
+    assert raised["raised"] and raised["error"].startswith("NotConvergedError: a dead-band width")
+    assert np.isnan(raised["validation_rmse"]) and not raised["in_band"] and not raised["chosen"]
+    assert "raised NotConvergedError" in sel.summary()
+    assert json.loads(json.dumps(sel.to_dict()))["rows"][1]["validation_rmse"] is None
+
+
+def test_every_candidate_raising_raises_the_simplest_ones_error():
+    u = np.ones(600)
+    y = np.sin(np.arange(600) / 7.0)
+    with pytest.raises(NotIdentifiableError, match=r"all 4 candidates raised \(4 NotIdentifiableError\).*na=1, nb=1.*degree=1.*constant"):
+        select_structure(u, y, na=(1, 2), nb=1, degree=(1, 2))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        (dict(na=[]), "na"),
+        (dict(nb=()), "nb"),
+        (dict(degree=[]), "degree"),
+        (dict(degree=0), "degree"),
+        (dict(degree=(1, 0)), "degree"),
+        (dict(na=(0, 1)), "na"),
+        (dict(degree=2.5), "degree"),
+        (dict(kind="wiener"), "kind"),
+        (dict(kind=[]), "kind"),
+        (dict(kind="sandwich", nr=[]), "nr"),
+        (dict(validation=1.0), "validation"),
+        (dict(validation=0.0), "validation"),
+        (dict(tolerance=-0.1), "tolerance"),
+        (dict(warmup=5000), "warmup"),
+    ],
+)
+def test_bad_settings_name_the_argument(example1_data, kwargs, name):
+    with pytest.raises(DataError, match=rf"^{name} ="):
+        select_structure(example1_data.u, example1_data.noisy, **kwargs)
+
+
+def test_bad_records_are_data_errors():
+    with pytest.raises(DataError, match="u"):
+        select_structure([0.0, np.nan, 1.0] * 100, np.zeros(300))
+    with pytest.raises(DataError):
+        select_structure(np.zeros(300), np.zeros(200))
