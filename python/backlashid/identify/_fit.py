@@ -490,7 +490,10 @@ def _search(
 ) -> tuple[_Run, int, OutputErrorFit | None]:
     """The iterations from every start on the record of ``prob`` (u_arr, y_arr), the chosen iterate (index k of the run's history),
     and unless ``refine`` is off its output-error refinement: LM from the best iterate and
-    from the ARX start of every run, the cheapest valid result, then the seeded restarts."""
+    from the ARX start of every run and (default algorithm) from the dead bands of the data's
+    x-scale on a linear output-error fit (``_starts.py``), the cheapest valid result, then the
+    pole restarts and the seeded restarts. A start whose first iteration is rank deficient is
+    skipped while another remains."""
     runs = [_run(structure, prob, u_arr, y_arr, start, **iterations) for start in starts]
     usable = [r for r in runs if r.last_ls is not None]
     # starts that do not depend on white excitation (_starts.py): a linear output-error fit
