@@ -50,6 +50,7 @@ COARSE_RECORDS = 10
 # Levenberg-Marquardt steps from each start of the data's x-scale (_starts.scale_starts) before
 # the candidates are compared; the cheapest is then searched to the end.
 SCALE_ITER = 20
+# Rounds of pole restarts and seeded restarts, while the seeded restarts move the estimate.
 POLE_ROUNDS = 3
 Start = tuple[float, float, float]  # (m_R1, c_L, c_R)
 
@@ -497,7 +498,6 @@ def _search(
     runs = [_run(structure, prob, u_arr, y_arr, start, **iterations) for start in starts]
     usable = [r for r in runs if r.last_ls is not None]
     # starts that do not depend on white excitation (_starts.py): a linear output-error fit
-    # and dead bands from its x-scale; they stand in for runs whose first iteration failed
     # and dead bands from its x-scale. Like the paper's starts, a start whose first iteration's
     # regressor is rank deficient is skipped; they stand in for runs that all failed so.
     scaled: list[NDArray[np.float64]] = []
@@ -548,7 +548,7 @@ def _search(
     # Smooth inputs leave local minima in the linear block's poles (a zero cancelling a pole):
     # the input block from fixed pole sets, the rest held, then whole; kept only if cheaper.
     # They run again from wherever the seeded restarts moved the estimate (at most POLE_ROUNDS).
-    for _ in range(POLE_ROUNDS):
+    for _round in range(POLE_ROUNDS):
         for trial in pole_restarts(structure, prob, u_arr, refined.theta, iterations["warmup"]):
             if rank(trial) < rank(refined):
                 refined = trial
