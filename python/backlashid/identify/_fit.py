@@ -654,7 +654,8 @@ def _fit(
             if refined is not None and _moving(structure, refined.theta, u_arr[:end], user_warmup) >= min_moving:
                 refined = levenberg_marquardt(whole, refined.theta)
                 # a segment's optimum far from the whole record's (LM does not converge from it) is no start
-                found = (run, k, refined) if refined.converged else None
+                if refined.converged:
+                    found = run, k, refined
         except BacklashIdError:  # the segment is not enough: search the whole record
             pass
     if found is None:

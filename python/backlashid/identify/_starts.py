@@ -23,6 +23,8 @@ the compiled problem's.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
@@ -50,7 +52,7 @@ LINEAR_START_ITER = 30
 POLE_ITER = 5
 
 
-def _denominators(nb: int, keep: NDArray[np.complex128] | None = None) -> list[NDArray[np.float64]]:
+def _denominators(nb: int, keep: NDArray[Any] | None = None) -> list[NDArray[np.float64]]:
     """Denominators 1 + b_1 q^-1 + ... + b_nb q^-nb of the fixed pole sets: for nb = 1 the real
     poles of ``_SINGLE``; for nb >= 2 each pair of ``_PAIRS`` with the other nb - 2 poles from
     ``keep`` (those of smallest modulus of an estimate) or at 0."""
