@@ -180,10 +180,21 @@ def test_too_little_motion_off_the_dead_band_is_not_identifiable(amplitude):
 
 
 def test_initial_widths_that_leave_no_sample_on_a_branch_are_reported():
+    # the paper's algorithm has no other start: the failed first iteration is reported
     truth = bid.example1()
     d = bid.example_data(truth, 1500, snr=25, seed=0)
     with pytest.raises(NotIdentifiableError, match="initial"):
-        fit_cascade(d.u, d.noisy, initial=(1.0, 5.0, 5.0))
+        fit_cascade(d.u, d.noisy, initial=(1.0, 5.0, 5.0), paper=True)
+
+
+def test_initial_widths_that_leave_no_sample_on_a_branch_are_skipped_while_other_starts_remain():
+    # the default search skips the failed start (issue 17): the linear output-error start and
+    # the dead bands from the data's x-scale remain, and end in the basin
+    truth = bid.example1()
+    d = bid.example_data(truth, 1500, snr=25, seed=0)
+    result = fit_cascade(d.u, d.noisy, initial=(1.0, 5.0, 5.0))
+    assert result.reason == "diverged" and result.iterations == 1
+    assert max(abs(e) for e in result.errors(truth).values()) < 0.1
 
 
 def test_constant_input_is_not_identifiable():

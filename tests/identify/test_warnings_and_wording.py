@@ -22,7 +22,8 @@ def test_fit_warning_is_a_user_warning_exported_with_the_errors():
 
 def test_a_fit_whose_branches_cross_warns():
     # degree 5 on a short, very noisy record overfits: R turns down and crosses L where x goes
-    data = bid.example_data(bid.example1(), 300, snr=3, seed=0)
+    # (seed 37: with the start search of issue 17 seed 0's fit no longer crosses)
+    data = bid.example_data(bid.example1(), 300, snr=3, seed=37)
     with pytest.warns(FitWarning) as caught:
         result = bid.fit_cascade(data.u, data.noisy, degree=5)
     texts = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]

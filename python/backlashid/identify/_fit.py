@@ -28,6 +28,7 @@ from ..models import Model
 from . import _records
 from ._checks import warn_if_suspicious
 from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
+from ._starts import linear_start, pole_restarts, scale_starts
 from ._state import lm_holding_vanishing
 from ._structure import Structure
 from ._valid import ValidOnly, why_not_acceptable
@@ -50,6 +51,11 @@ RESTARTS_UP_TO = 20_000
 COARSE_MIN = 5_000
 COARSE_PER_PARAMETER = 200
 COARSE_RECORDS = 10
+# Levenberg-Marquardt steps from each start of the data's x-scale (_starts.scale_starts) before
+# the candidates are compared; the cheapest is then searched to the end.
+SCALE_ITER = 20
+# Rounds of pole restarts and seeded restarts, while the seeded restarts move the estimate.
+POLE_ROUNDS = 3
 Start = tuple[float, float, float]  # (m_R1, c_L, c_R)
 
 
@@ -419,6 +425,15 @@ def _run(structure: Structure, prob: _core.Problem, u: NDArray[np.float64], y: N
     return run
 
 
+def _regressor_ok(prob: _core.Problem, theta: NDArray[np.float64], switching: Switching) -> bool:
+    """Whether the paper's iteration can be computed at theta (its regressor has full rank)."""
+    try:
+        _iteration(prob, theta, switching)
+    except BacklashIdError:
+        return False
+    return True
+
+
 def _is_valid(structure: Structure, prob: _core.Problem, theta: NDArray[np.float64]) -> bool:
     """Stable blocks and branches that increase across the dead band (a model can be built)."""
     if not prob.feasible(theta):
@@ -483,11 +498,23 @@ def _search(
 ) -> tuple[_Run, int, OutputErrorFit | None]:
     """The iterations from every start on the record of ``prob`` (u_arr, y_arr), the chosen iterate (index k of the run's history),
     and unless ``refine`` is off its output-error refinement: LM from the best iterate and
-    from the ARX start of every run, the cheapest valid result, then the seeded restarts."""
+    from the ARX start of every run and (default algorithm) from the dead bands of the data's
+    x-scale on a linear output-error fit (``_starts.py``), the cheapest valid result, then the
+    pole restarts and the seeded restarts. A start whose first iteration is rank deficient is
+    skipped while another remains."""
     runs = [_run(structure, prob, u_arr, y_arr, start, **iterations) for start in starts]
     usable = [r for r in runs if r.last_ls is not None]
+    # starts that do not depend on white excitation (_starts.py): a linear output-error fit
+    # and dead bands from its x-scale. Like the paper's starts, a start whose first iteration's
+    # regressor is rank deficient is skipped; they stand in for runs that all failed so.
+    scaled: list[NDArray[np.float64]] = []
+    if refine and not paper:
+        linear = linear_start(structure, prob, u_arr, y_arr, iterations["warmup"])
+        scaled = [th for th in (scale_starts(structure, prob, linear) if linear else []) if _regressor_ok(prob, th, iterations["switching"])]
     if not usable:
-        raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
+        if not scaled:
+            raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
+        usable = [_Run(history=[runs[0].history[0]], rmse=runs[0].rmse[:1], reason="diverged", last_ls=None, moving=0.0, error=runs[0].error)]
     if paper:
         run = usable[0]
         k = len(run.history) - 1
@@ -498,29 +525,54 @@ def _search(
         k = run.best()
     if not refine:
         return run, k, None
-    candidates = []
-    for r in usable:
-        for th in {id(x): x for x in (r.history[r.best()], r.history[0])}.values():
-            try:
-                candidates.append(levenberg_marquardt(prob, th))
-            except BacklashIdError:
-                continue
-    if not candidates:
-        return run, k, None
-    # The cheapest candidate that is a valid model (increasing branches, stable blocks); an
-    # invalid one only when no candidate is valid (it is then reported as such).
-    refined = min(candidates, key=lambda c: (not _is_valid(structure, prob, c.theta), c.cost))
-    # The simulation error is piecewise smooth: LM can stop at a kink or in a shallow local
-    # minimum. Restarts from seeded perturbations keep a result only if cheaper.
-    rng = np.random.default_rng(seed)
-    for _ in range(restarts):
-        start = refined.theta + perturbation * rng.standard_normal(structure.size)
+    starts_lm = [th for r in usable for th in {id(x): x for x in (r.history[r.best()], r.history[0])}.values()]
+    candidates, truncated = [], set()
+    for th in starts_lm + scaled:
+        # the scale starts begin far away: a short search each, the chosen one then finished
+        short = any(th is x for x in scaled)
         try:
-            trial = levenberg_marquardt(prob, start)
+            candidates.append(levenberg_marquardt(prob, th, max_iter=SCALE_ITER) if short else levenberg_marquardt(prob, th))
         except BacklashIdError:
             continue
-        if (not _is_valid(structure, prob, trial.theta), trial.cost) < (not _is_valid(structure, prob, refined.theta), refined.cost):
-            refined = trial
+        if short and not candidates[-1].converged:
+            truncated.add(id(candidates[-1]))
+    if not candidates:
+        if run.last_ls is None:  # no iteration and no search could be computed
+            raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
+        return run, k, None
+
+    def rank(c: OutputErrorFit) -> tuple[bool, float]:
+        return (not _is_valid(structure, prob, c.theta), c.cost)
+
+    # The cheapest candidate that is a valid model (increasing branches, stable blocks); an
+    # invalid one only when no candidate is valid (it is then reported as such).
+    refined = min(candidates, key=rank)
+    if id(refined) in truncated:
+        try:
+            refined = levenberg_marquardt(prob, refined.theta)
+        except BacklashIdError:
+            pass
+    # Smooth inputs leave local minima in the linear block's poles (a zero cancelling a pole):
+    # the input block from fixed pole sets, the rest held, then whole; kept only if cheaper.
+    # They run again from wherever the seeded restarts moved the estimate (at most POLE_ROUNDS).
+    for _round in range(POLE_ROUNDS):
+        for trial in pole_restarts(structure, prob, u_arr, refined.theta, iterations["warmup"]):
+            if rank(trial) < rank(refined):
+                refined = trial
+        # The simulation error is piecewise smooth: LM can stop at a kink or in a shallow local
+        # minimum. Restarts from seeded perturbations keep a result only if cheaper.
+        rng = np.random.default_rng(seed)
+        moved = refined
+        for _ in range(restarts):
+            start = refined.theta + perturbation * rng.standard_normal(structure.size)
+            try:
+                trial = levenberg_marquardt(prob, start)
+            except BacklashIdError:
+                continue
+            if rank(trial) < rank(refined):
+                refined = trial
+        if refined is moved:  # the restarts kept the pole restarts' result: done
+            break
     return run, k, refined
 
 
@@ -615,7 +667,9 @@ def _fit(
             # a segment that hardly moves the backlash says nothing about its branches
             if refined is not None and _moving(structure, refined.theta, u_arr[:end], user_warmup) >= min_moving:
                 refined = levenberg_marquardt(whole, refined.theta)
-                found = run, k, refined
+                # a segment's optimum far from the whole record's (LM does not converge from it) is no start
+                if refined.converged:
+                    found = run, k, refined
         except BacklashIdError:  # the segment is not enough: search the whole record
             pass
     if found is None:
