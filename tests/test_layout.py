@@ -52,12 +52,14 @@ TOP_LEVEL_ALL = [
     "__version__",
     "diagnose",
     "diagnose_many",
+    "estimate_state",
     "evaluate",
     "example1",
     "example2",
     "example_data",
     "fit_cascade",
     "fit_effect",
+    "fit_hammerstein_backlash",
     "fit_many",
     "fit_sandwich",
     "fit_wiener_hammerstein",
@@ -65,6 +67,7 @@ TOP_LEVEL_ALL = [
     "model_from_json",
     "select_structure",
     "shared_data_folder",
+    "simulate_from_samples",
     "wiener_hammerstein_model",
 ]
 
