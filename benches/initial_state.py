@@ -16,7 +16,7 @@ per-sample loop over eq (1)-(13). backlashid only fits and packs the true model 
 comparison.
 
     python benches/initial_state.py                      # 20 seeds each, from seed 300000
-    python benches/initial_state.py --seeds 5 --seed-base 0
+    python benches/initial_state.py --seeds 150 --seed-base 500000   # also checks the standard errors
 """
 
 from __future__ import annotations
@@ -88,7 +88,7 @@ def main() -> None:
         ("Example 1 (cascade)", EXAMPLE1, bid.example1(), bid.fit_cascade),
         ("Example 2 (sandwich)", EXAMPLE2, bid.example2(), bid.fit_sandwich),
     ):
-        worst, worst_rest, seconds, raised = [], [], [], []
+        worst, worst_rest, seconds, raised, errors, ses = [], [], [], [], [], []
         for seed in range(args.seed_base, args.seed_base + args.seeds):
             u, y, _cut = cut_record(sysm, seed)
             start = time.perf_counter()
@@ -100,6 +100,8 @@ def main() -> None:
             seconds.append(time.perf_counter() - start)
             err, se = est.errors(truth), est.standard_errors
             worst.append(max(abs(err[k]) / se[k] for k in err))
+            errors.append([err[k] for k in est.names])
+            ses.append([se[k] for k in est.names])
             try:
                 worst_rest.append(max(abs(v) for v in fit(u, y).errors(truth).values()))
             except bid.BacklashIdError:
@@ -112,6 +114,10 @@ def main() -> None:
               f"expected {args.seeds * 0.9973 ** p:.1f} seeds)")
         print(f"  largest |error| / se per seed: {' '.join(f'{w:.1f}' for w in worst)}")
         print(f"  raised: {len(raised)}" + "".join(f"\n    seed {s}: {m}" for s, m in raised))
+        if len(errors) >= 50:  # enough seeds to check the standard errors themselves
+            ratio = np.std(errors, axis=0) / np.median(ses, axis=0)
+            print(f"  spread of the estimates over the seeds / median reported standard error: "
+                  f"{' '.join(f'{k} {r:.2f}' for k, r in zip(est.names, ratio))}")
         print(f"  median fit time {np.median(seconds):.2f} s; the fit assuming rest: median of the largest |error| "
               f"{np.median(worst_rest):.3f}")
 
