@@ -26,7 +26,10 @@ def _intervals(found: list[tuple[float, float]]) -> str:
 def branch_problems(model: Any, u: NDArray[np.float64], warmup: int) -> str | None:
     """What is wrong with the fitted branches on the x range the record visits (after the
     warm-up), in words, or None when both increase and do not cross there."""
-    x = np.asarray(model.simulate(u, internals=True).x)[warmup:]
+    # x is the first linear block's output alone (a cascade's ``linear``, a sandwich's
+    # ``input_linear``): no need to simulate the backlash and the blocks after it
+    first = model.linear if hasattr(model, "linear") else model.input_linear
+    x = np.asarray(first.simulate(u))[warmup:]
     x = x[np.isfinite(x)]
     if x.size == 0:
         return None

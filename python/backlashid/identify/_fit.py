@@ -25,6 +25,7 @@ from .._validation import identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
 from ._checks import warn_if_suspicious
+from ._coarse import refine_whole
 from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
 from ._structure import Structure
 
@@ -600,7 +601,7 @@ def _fit(
             run, k, refined = search(end)
             # a segment that hardly moves the backlash says nothing about its branches
             if refined is not None and _moving(structure, refined.theta, u_arr[:end], user_warmup) >= min_moving:
-                refined = levenberg_marquardt(whole, refined.theta)
+                refined = refine_whole(structure, whole, refined.theta, u_arr, y_arr, warmup, segment)
                 found = run, k, refined
         except BacklashIdError:  # the segment is not enough: search the whole record
             pass
