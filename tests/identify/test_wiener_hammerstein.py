@@ -210,6 +210,14 @@ def test_f_continues_along_its_tangent_beyond_the_estimation_range_of_x():
     np.testing.assert_allclose(fit.simulate(big), lfilter([0.0, *g2.a], [1.0, *g2.b], fit.nonlinearity(xb)) + fit.offset, atol=1e-12)
     assert not np.allclose(fit.simulate(big), fit.model.simulate(big) + fit.offset)  # the polynomial alone differs
     assert fit.to_dict()["x_range"] == [lo, hi]
+    # the fit's JSON simulates as the fit, continuation included
+    import json
+
+    from backlashid.identify import WienerHammersteinFit
+
+    again = WienerHammersteinFit.from_dict(json.loads(json.dumps(fit.to_dict())))
+    np.testing.assert_array_equal(again.simulate(big), fit.simulate(big))
+    assert again.x_range == fit.x_range and again.to_dict() == fit.to_dict()
     # without a range: the polynomial everywhere
     import dataclasses
 
