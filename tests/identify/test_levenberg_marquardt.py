@@ -143,3 +143,62 @@ def test_variable_projection_returns_the_exact_linear_optimum_and_its_factor(wh)
 def test_linear_indices_must_be_distinct_unbounded_parameters(prob, linear):
     with pytest.raises(DataError, match="linear: give distinct indices"):
         levenberg_marquardt(prob, TRUTH, linear=linear)
+
+
+# -- the fine stage of coarse to fine: LM from a sub-record's factor (identify._coarse) ----------
+
+
+@pytest.fixture(scope="module")
+def long_record():
+    d = bid.example_data(bid.example1(), 60_000, snr=25, seed=5)
+    seg = S.problem(d.u[:3000], d.noisy[:3000])
+    start = levenberg_marquardt(seg, TRUTH).theta  # a segment's optimum, far from the record's
+    return d, start
+
+
+def _distance_in_se(fit, theta):
+    r = fit.r_aug[: S.size, : S.size]
+    return float(np.linalg.norm(r @ (theta - fit.theta)) / np.sqrt(fit.cost / (fit.n_residuals - S.size)))
+
+
+def test_lm_from_a_sub_records_factor_ends_at_the_plain_searchs_optimum_with_its_covariance(long_record):
+    from backlashid.identify._refine import refine_from_factor
+
+    d, start = long_record
+    whole = S.problem(d.u, d.noisy)
+    plain = levenberg_marquardt(whole, start)
+    sub = 6000
+    factor = S.problem(d.u[:sub], d.noisy[:sub]).oe_factor(start)[0] * np.sqrt(len(d.u) / sub)
+    fit = refine_from_factor(whole, start, factor, near_se=3.0)
+    assert fit.converged and _distance_in_se(plain, start) > 5.0
+    assert _distance_in_se(plain, fit.theta) < 0.02
+    assert abs(fit.cost / plain.cost - 1) < 1e-8
+    se_plain = np.sqrt(np.diag(plain.unscaled_covariance(S.names)))
+    se_fit = np.sqrt(np.diag(fit.unscaled_covariance(S.names)))
+    np.testing.assert_allclose(se_fit, se_plain, rtol=0.01)
+
+
+def test_lm_from_a_useless_factor_falls_back_to_the_plain_search(long_record):
+    from backlashid.identify._refine import refine_from_factor
+
+    d, start = long_record
+    whole = S.problem(d.u, d.noisy)
+    plain = levenberg_marquardt(whole, start)
+    singular = refine_from_factor(whole, start, np.zeros((S.size + 1, S.size + 1)))
+    np.testing.assert_array_equal(singular.theta, plain.theta)
+    # a factor far too large gives a step that changes nothing: still the plain optimum
+    tiny_step = refine_from_factor(whole, start, 1e8 * np.eye(S.size + 1))
+    assert _distance_in_se(plain, tiny_step.theta) < 0.02
+
+
+def test_the_fine_stage_uses_the_sub_record_only_on_long_records(long_record, monkeypatch):
+    from backlashid.identify import _coarse
+
+    d, start = long_record
+    whole = S.problem(d.u, d.noisy)
+    calls = []
+    monkeypatch.setattr(_coarse, "refine_from_factor", lambda *a, **k: calls.append(a) or levenberg_marquardt(whole, start))
+    _coarse.refine_whole(S, whole, start, d.u, d.noisy, 0, 3000)  # 20 segments: the plain search
+    assert not calls
+    _coarse.refine_whole(S, whole, start, d.u, d.noisy, 0, 1000)  # 60 segments
+    assert len(calls) == 1 and calls[0][2].shape == (S.size + 1, S.size + 1)

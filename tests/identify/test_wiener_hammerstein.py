@@ -182,3 +182,44 @@ def test_the_package_does_not_import_scipy_optimize():
 
     source = pathlib.Path(bid.__file__).parent / "identify" / "_wiener_hammerstein.py"
     assert "scipy" not in source.read_text()
+
+
+def test_f_continues_along_its_tangent_beyond_the_estimation_range_of_x():
+    """Within x_range the fit's output is the core's problem / the sandwich's simulation
+    exactly; beyond it f is the tangent line at the nearer end, and the output is G2 of that."""
+    rng = np.random.default_rng(7)
+    u = rng.normal(0.0, 0.5, 3000)
+    w = planted().simulate(u) + 0.01
+    fit = fit_wiener_hammerstein(u, w, nb=2, ns=2, degree=3, warmup=50)
+    x = fit.model.input_linear.simulate(u)
+    assert fit.x_range == (float(x.min()), float(x.max()))
+    # on the estimation record: the sandwich plus the offset, bit for bit
+    np.testing.assert_array_equal(fit.simulate(u), fit.model.simulate(u) + fit.offset)
+    lo, hi = fit.x_range
+    m = fit.m
+    poly = lambda v: sum(mi * v ** (i + 1) for i, mi in enumerate(m))  # noqa: E731
+    slope = lambda v: sum((i + 1) * mi * v**i for i, mi in enumerate(m))  # noqa: E731
+    z = np.array([lo - 1.0, lo - 0.1, lo, 0.5 * (lo + hi), hi, hi + 0.1, hi + 2.0])
+    want = np.where(z < lo, poly(lo) + slope(lo) * (z - lo), np.where(z > hi, poly(hi) + slope(hi) * (z - hi), poly(z)))
+    np.testing.assert_allclose(fit.nonlinearity(z), want, rtol=1e-12, atol=1e-12)
+    # a larger input drives x beyond the range: G1, the continued f, G2, then the offset
+    big = 3.0 * rng.normal(0.0, 0.5, 2000)
+    xb = fit.model.input_linear.simulate(big)
+    assert xb.min() < lo and xb.max() > hi
+    g2 = fit.model.output_linear
+    np.testing.assert_allclose(fit.simulate(big), lfilter([0.0, *g2.a], [1.0, *g2.b], fit.nonlinearity(xb)) + fit.offset, atol=1e-12)
+    assert not np.allclose(fit.simulate(big), fit.model.simulate(big) + fit.offset)  # the polynomial alone differs
+    assert fit.to_dict()["x_range"] == [lo, hi]
+    # the fit's JSON simulates as the fit, continuation included
+    import json
+
+    from backlashid.identify import WienerHammersteinFit
+
+    again = WienerHammersteinFit.from_dict(json.loads(json.dumps(fit.to_dict())))
+    np.testing.assert_array_equal(again.simulate(big), fit.simulate(big))
+    assert again.x_range == fit.x_range and again.to_dict() == fit.to_dict()
+    # without a range: the polynomial everywhere
+    import dataclasses
+
+    raw = dataclasses.replace(fit, x_range=None)
+    np.testing.assert_array_equal(raw.simulate(big), fit.model.simulate(big) + fit.offset)

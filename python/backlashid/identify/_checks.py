@@ -26,8 +26,12 @@ def _intervals(found: list[tuple[float, float]]) -> str:
 def branch_problems(model: Any, u: NDArray[np.float64], warmup: int) -> str | None:
     """What is wrong with the fitted branches on the x range the record visits (after the
     warm-up), in words, or None when both increase and do not cross there."""
-    records = u if isinstance(u, list) else [u]  # several records: the x range of them all
-    x = np.concatenate([np.asarray(model.simulate(r, internals=True).x)[warmup:] for r in records])
+    # x is the first linear block's output alone (a cascade's ``linear``, a sandwich's
+    # ``input_linear``): no need to simulate the backlash and the blocks after it; several
+    # records: the x range of them all
+    first = model.linear if hasattr(model, "linear") else model.input_linear
+    records = u if isinstance(u, list) else [u]
+    x = np.concatenate([np.asarray(first.simulate(r))[warmup:] for r in records])
     x = x[np.isfinite(x)]
     if x.size == 0:
         return None

@@ -27,6 +27,7 @@ from ..errors import BacklashIdError, DataError, FitWarning, ModelError, NotConv
 from ..models import Model
 from . import _records
 from ._checks import warn_if_suspicious
+from ._coarse import refine_whole
 from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
 from ._starts import linear_start, pole_restarts, scale_starts
 from ._state import lm_holding_vanishing
@@ -666,7 +667,7 @@ def _fit(
             run, k, refined = search(end)
             # a segment that hardly moves the backlash says nothing about its branches
             if refined is not None and _moving(structure, refined.theta, u_arr[:end], user_warmup) >= min_moving:
-                refined = levenberg_marquardt(whole, refined.theta)
+                refined = refine_whole(structure, whole, refined.theta, u_arr, y_arr, warmup, segment)
                 # a segment's optimum far from the whole record's (LM does not converge from it) is no start
                 if refined.converged:
                     found = run, k, refined

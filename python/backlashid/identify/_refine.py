@@ -231,19 +231,6 @@ def levenberg_marquardt(
     if lo.shape != (n_par,) or hi.shape != (n_par,) or np.any(lo > hi) or np.any(np.isnan(lo) | np.isnan(hi)):
         raise DataError(f"lower and upper: give one bound per parameter ({n_par} of them) with lower <= upper and no NaN")
 
-    def cost_at(theta: NDArray[np.float64], gradient: bool) -> tuple[float, NDArray[np.float64] | None]:
-        """The cost at theta (inf if unusable), and g = J^T r there if ``gradient``."""
-        try:
-            if not problem.feasible(theta):
-                return np.inf, None
-            if gradient:
-                g, c = problem.gradient(theta)
-            else:
-                g, c = None, problem.cost(theta)
-        except BacklashIdError:
-            return np.inf, None
-        return (c, g) if np.isfinite(c) else (np.inf, None)
-
     theta = np.clip(np.array(theta0, dtype=np.float64), lo, hi)
     unusable = BacklashIdError("output-error refinement: the start is unstable or diverges")
     if linear is not None:
@@ -264,8 +251,36 @@ def levenberg_marquardt(
         r_aug, cost = problem.oe_factor(theta)
     except BacklashIdError:
         raise unusable from None
+    return _descend(problem, theta, r_aug, cost, lo, hi, max_iter, se_tol, xtol, names, dof)
+
+
+def _descend(
+    problem: CompiledProblem,
+    theta: NDArray[np.float64],
+    r_aug: NDArray[np.float64],
+    cost: float,
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+    max_iter: int,
+    se_tol: float,
+    xtol: float,
+    names: list[str],
+    dof: int,
+    near_se: float = 1.0,
+    stale: bool = False,
+) -> OutputErrorFit:
+    """The damped steps of :func:`levenberg_marquardt` (its docstring) from theta, where the
+    factor ``r_aug`` of [J | r] was folded and the cost is ``cost``. A trial within ``near_se``
+    standard errors of where the factor was folded is evaluated by a gradient pass and the
+    stopping rule tested there with that factor (one standard error in the public search);
+    with ``stale``, a further step from there is also taken with that factor (Q^T r from the
+    gradient) instead of folding again (:func:`refine_from_factor`)."""
+    n_par = len(names)
+    n_res = problem.samples - problem.warmup
+
     scale = np.zeros(n_par)
     lam = 1e-3
+    anchor = theta  # where r_aug's R was folded
     steps, converged = 0, False
     for _ in range(max_iter):
         r_mat, qtr = r_aug[:n_par, :n_par], r_aug[:n_par, n_par]
@@ -283,18 +298,18 @@ def levenberg_marquardt(
             delta = np.zeros(n_par)
             delta[free] = _core.lstsq(a, np.concatenate([qtr, np.zeros(d.size)]), free_names)[0]
             delta = np.clip(theta + delta, lo, hi) - theta  # projected onto the box
-            r_delta = r_mat @ delta
-            near = float(r_delta @ r_delta) <= cost / dof  # within one standard error
+            r_delta = r_mat @ (theta + delta - anchor)
+            near = float(r_delta @ r_delta) <= near_se**2 * cost / dof  # within near_se standard errors
             # a near trial is evaluated with its gradient, as it is usually accepted; after a
             # rejection (at a kink they come in runs while the damping climbs) by a simulation
             # only (about 1/5 of a gradient pass), the gradient then following acceptance
-            new_cost, g = cost_at(theta + delta, near and not rejected)
+            new_cost, g = _cost_at(problem, theta + delta, near and not rejected)
             if new_cost < cost:
                 small = cost - new_cost <= negligible or np.linalg.norm(delta) <= xtol * (
                     np.linalg.norm(theta) + xtol
                 )
                 if near and not small and g is None:
-                    new_cost, g = cost_at(theta + delta, True)
+                    new_cost, g = _cost_at(problem, theta + delta, True)
                 theta, accepted, steps = theta + delta, True, steps + 1
                 q_near = _kept_factor_qtr(r_mat, g) if near and not small else None
                 if small:  # done: keep this point's factor rather than fold another Jacobian
@@ -304,16 +319,42 @@ def levenberg_marquardt(
                     cost, small = new_cost, True
                     r_aug = np.vstack([np.column_stack([r_mat, q_near]), np.zeros(n_par + 1)])
                     r_aug[n_par, n_par] = np.sqrt(max(cost - float(q_near @ q_near), 0.0))
+                elif stale and q_near is not None:
+                    # the next step from the factor folded within near_se standard errors
+                    cost = new_cost
+                    r_aug = np.vstack([np.column_stack([r_mat, q_near]), np.zeros(n_par + 1)])
+                    r_aug[n_par, n_par] = np.sqrt(max(cost - float(q_near @ q_near), 0.0))
                 else:
                     r_aug, cost = problem.oe_factor(theta)
+                    anchor = theta
                 lam = max(lam / 3.0, 1e-12)
                 break
             rejected = True
             lam *= 4.0
+        if not accepted and anchor is not theta:
+            # no damped step from a factor folded elsewhere: fold here and try again
+            r_aug, cost = problem.oe_factor(theta)
+            anchor, lam = theta, 1e-3
+            continue
         if not accepted or small:
             converged = True
             break
     return OutputErrorFit(theta=theta, cost=cost, r_aug=r_aug, n_residuals=n_res, iterations=steps, converged=converged)
+
+
+def _cost_at(problem: CompiledProblem, theta: NDArray[np.float64], gradient: bool) -> tuple[float, NDArray[np.float64] | None]:
+    """The cost at theta (inf if unusable: unstable or diverging), and g = J^T r there if
+    ``gradient``."""
+    try:
+        if not problem.feasible(theta):
+            return np.inf, None
+        if gradient:
+            g, c = problem.gradient(theta)
+        else:
+            g, c = None, problem.cost(theta)
+    except BacklashIdError:
+        return np.inf, None
+    return (c, g) if np.isfinite(c) else (np.inf, None)
 
 
 @dataclass(frozen=True)
@@ -456,3 +497,59 @@ def _kept_factor_qtr(r_mat: NDArray[np.float64], g: NDArray[np.float64] | None) 
         return None
     q = linalg.solve_triangular(r_mat, g, trans="T", check_finite=False)
     return q if np.all(np.isfinite(q)) else None
+
+
+
+def refine_from_factor(
+    problem: CompiledProblem,
+    theta0: ArrayLike,
+    factor: NDArray[np.float64],
+    *,
+    max_iter: int = 200,
+    se_tol: float = 1e-2,
+    xtol: float = 1e-12,
+    near_se: float = 1.0,
+) -> OutputErrorFit:
+    """:func:`levenberg_marquardt` from theta0 with ``factor``, an approximation of the R of
+    [J | r] there (e.g. a sub-record's, scaled), in place of the first fold.
+
+    The first step is the Gauss-Newton step of R from the gradient pass at theta0
+    (Q^T r = R^-T g), over the parameters not held at a bound and projected onto the box; its
+    end is folded. If that step does not lower the cost (or the factor is singular), the
+    plain :func:`levenberg_marquardt` runs from theta0 instead. The search then goes on as
+    :func:`levenberg_marquardt` does, except that a step ending within ``near_se`` standard
+    errors of where the factor was folded is evaluated by a gradient pass only and, if
+    another step is worth taking, taken from that factor again (its Q^T r from the gradient)
+    rather than from a new fold: over a few standard errors the Jacobian changes by
+    O(1/sqrt(N)), and a step costs one gradient pass instead of a fold and a gradient pass.
+    The problem's own bounds apply; the returned ``r_aug`` is the factor folded within
+    ``near_se`` standard errors of ``theta``, with Q^T r at ``theta``.
+    """
+    names = list(problem.names)
+    n_par = len(names)
+    dof = max(problem.samples - problem.warmup - n_par, 1)
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in problem.bounds())
+    theta = np.clip(np.array(theta0, dtype=np.float64), lo, hi)
+    plain = lambda: levenberg_marquardt(problem, theta, max_iter=max_iter, se_tol=se_tol, xtol=xtol)  # noqa: E731
+    cost, g = _cost_at(problem, theta, True)
+    r_mat = np.asarray(factor, dtype=np.float64)[:n_par, :n_par]
+    q = _kept_factor_qtr(r_mat, g)
+    if q is None:
+        return plain()
+    free = _free(theta, g, lo, hi)
+    delta = np.zeros(n_par)
+    if free.any():  # damped as the first step of levenberg_marquardt
+        d = np.linalg.norm(r_mat, axis=0)[free]
+        a = np.vstack([r_mat[:, free], np.sqrt(1e-3) * np.diag(np.where(d > 0, d, 1.0))])
+        delta[free] = _core.lstsq(a, np.concatenate([q, np.zeros(d.size)]), [k for k, f in zip(names, free) if f])[0]
+    trial = np.clip(theta + delta, lo, hi)
+    try:
+        if not problem.feasible(trial):
+            return plain()
+        r_aug, new_cost = problem.oe_factor(trial)
+    except BacklashIdError:
+        return plain()
+    if not new_cost < cost:
+        return plain()
+    fit = _descend(problem, trial, r_aug, new_cost, lo, hi, max_iter - 1, se_tol, xtol, names, dof, near_se, stale=True)
+    return dataclasses.replace(fit, iterations=fit.iterations + 1)
