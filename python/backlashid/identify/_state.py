@@ -215,7 +215,7 @@ def _estimate(
 ) -> tuple[Structure, NDArray[np.float64]]:
     """The parameter vector of the normalised model with the state estimated on the first
     ``samples`` samples: the model's parameters held (lower == upper), the state free; the
-    data-only estimate, then the maximum a posteriori one (:func:`_map`)."""
+    data-only estimate, then with few samples the maximum a posteriori one (:class:`_Posterior`)."""
     structure = _structure(model)
     p0 = structure.model_size
     prob = _record(model, structure, u[:samples], y[:samples])
@@ -421,7 +421,7 @@ class _Posterior:
         rows = np.zeros((r.size, p + 1))
         rows[:, self.p0 : p] = self.root
         rows[:, p] = r
-        factor = np.linalg.qr(np.vstack([np.asarray(r_aug, dtype=np.float64)[: p + 1] / self.sigma, rows]), mode="r")
+        factor = np.asarray(np.linalg.qr(np.vstack([np.asarray(r_aug, dtype=np.float64)[: p + 1] / self.sigma, rows]), mode="r"))
         return factor, float(c) / self.sigma**2 + float(r @ r)
 
 
