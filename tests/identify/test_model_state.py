@@ -12,7 +12,7 @@ import pytest
 import backlashid as bid
 from backlashid import CascadeModel, DataError, GeneralBacklash, LinearBlock, ModelError, SandwichModel
 from backlashid.identify import estimate_state, model_state, simulate_from_samples
-from backlashid.identify._state import _estimate, _record, _structure
+from backlashid.identify._state import _data_only, _estimate, _Posterior, _prior, _record, _structure, _visited
 
 CASCADE_FT = CascadeModel(LinearBlock([0.3, 0.5, -0.2], [-0.4], feedthrough=True), bid.example1().backlash)
 SANDWICH_FT = SandwichModel(
@@ -100,14 +100,70 @@ def test_a_model_in_other_units_gets_its_state_in_its_units():
     assert np.max(np.abs(scaled.simulate(u, initial_state=state) - y)[40:]) < 1e-8
 
 
-def test_what_few_samples_do_not_determine_stays_at_rest():
-    # one sample of example 1 (state dimension 2 + 1): x0_2 acts from the second sample on
+def test_what_one_sample_does_not_determine_comes_from_the_prior():
+    # one sample of example 1 (state dimension 2 + 1): the estimate is the posterior's minimum,
+    # below the prior's mean, the data-only estimate (undetermined values at rest) and the
+    # prior's Gaussian conditional mean given x0_1 = x(1) of a first move; it matches the sample
     model = bid.example1()
     u, y = _cut(model, seed=1)
-    structure, theta = _estimate(model, u, y, 1)
-    assert theta[structure.names.index("x0_2")] == 0.0
-    # the first sample itself is matched
-    assert simulate_from_samples(model, u, y, 1)[0] == pytest.approx(y[0], abs=1e-9)
+    structure, theta = _estimate(model, u, y, 1, noise_std=1e-3)
+    p0 = structure.model_size
+    prob = _record(model, structure, u[:1], y[:1])
+    mu, root = _prior(model, u)
+    posterior = _Posterior(prob, p0, mu, root, 1e-3)
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in prob.bounds())
+    lo[:p0] = hi[:p0] = theta[:p0]
+    data_only = _data_only(model, structure, prob, u, y, 1, lo, hi)[0]
+    states = _visited(model, u)
+    cov = np.cov(states, rowvar=False)
+    moved = theta.copy()
+    moved[p0:] = mu + cov[:, 0] / cov[0, 0] * (data_only[p0] - mu[0])
+    at_mean = theta.copy()
+    at_mean[p0:] = mu
+    best = posterior.cost(theta)
+    for other in (data_only, moved, at_mean):
+        assert best <= posterior.cost(other) + 1e-9, other
+    assert not np.allclose(theta[p0:], data_only[p0:])
+    assert simulate_from_samples(model, u, y, 1, noise_std=1e-3)[0] == pytest.approx(y[0], abs=1e-2)
+
+
+def test_the_posteriors_factor_is_the_data_factor_and_the_prior_rows():
+    model = bid.example2()
+    u, y = _cut(model, seed=3)
+    structure = _structure(model)
+    p0, p = structure.model_size, structure.size
+    prob = _record(model, structure, u[:4], y[:4])
+    mu, root = _prior(model, u)
+    sigma = 0.05
+    posterior = _Posterior(prob, p0, mu, root, sigma)
+    theta = structure.pack(model)
+    theta[p0:] = mu + np.random.default_rng(0).normal(0.0, 0.1, p - p0)
+    r_core = np.asarray(prob.oe_factor(theta)[0])[:p, :]
+    r_post, cost = posterior.oe_factor(theta)
+    prior = root @ (mu - theta[p0:])
+    assert cost == pytest.approx(prob.cost(theta) / sigma**2 + prior @ prior, rel=1e-12)
+    assert cost == pytest.approx(posterior.cost(theta), rel=1e-12)
+    rows = np.zeros((prior.size, p + 1))
+    rows[:, p0:p], rows[:, p] = root, prior
+    gram = r_core.T @ r_core / sigma**2 + rows.T @ rows  # [J | r]^T [J | r] of data and prior
+    np.testing.assert_allclose(r_post[:p].T @ r_post[:p], gram, rtol=1e-9, atol=1e-9 * np.max(np.abs(gram)))
+    g, c = posterior.gradient(theta)
+    np.testing.assert_allclose(g, gram[:p, p], rtol=1e-8, atol=1e-8 * np.max(np.abs(g)))
+
+
+def test_the_prior_is_the_states_the_model_visits():
+    # each row of _visited is the core's state of a record cut there: the core simulates the
+    # rest of the model's simulation from it
+    for name, model in MODELS.items():
+        structure = _structure(model)
+        u = np.random.default_rng(5).uniform(-2.0, 2.0, 300)
+        y = model.simulate(u)
+        states = _visited(model, u)
+        assert states.shape == (299, structure.size - structure.model_size), name
+        for cut in (7, 150, 281):
+            theta = np.concatenate([structure.pack(model)[: structure.model_size], states[cut - 1]])
+            core = np.asarray(_record(model, structure, u[cut:], y[cut:]).simulate(theta))[structure.shift :]
+            assert np.max(np.abs(core - y[cut:])) < 1e-10 * np.max(np.abs(y)), (name, cut)
 
 
 def test_evaluate_with_init_samples_scores_after_them():

@@ -10,6 +10,11 @@ which over-parametrises that free response: many pasts give the same one. :func:
 picks the one of minimum norm that reproduces the free response exactly, so that
 ``model.simulate(u, initial_state=model_state(model, state))`` is the core's simulation.
 
+:func:`estimate_state` fits those values to a record's first samples; with few samples it
+takes the maximum a posteriori estimate under a Gaussian prior of the states the model visits
+on the record's input (its docstring says how), so that a state fitted exactly to a handful of
+noisy samples does not carry a slow mode's error through the record.
+
 A block with a direct feedthrough is fitted as the same block one sample later (the core's
 record starts one sample earlier per feedthrough); the conversion undoes that shift.
 """
@@ -39,6 +44,15 @@ _GRID = 21
 _RANDOM = 200
 _SEARCHED = 20
 _SCREEN = 200
+# the maximum a posteriori search runs from the _MAP_SEARCHED cheapest starts
+_MAP_SEARCHED = 6
+# the prior acts up to this many samples per state value (beyond, the data's estimate)
+_PRIOR_SAMPLES = 2
+# the prior's covariance: eigenvalues floored at this fraction of the largest
+_FLOOR = 1e-6
+# the default noise level with no residual degrees of freedom: this fraction of the spread
+# of the model's output (a signal-to-noise ratio of 20 dB)
+_NOISE = 0.1
 
 
 def _check_model(model: Any) -> None:
@@ -196,16 +210,69 @@ def _record(model: Model, structure: Structure, u: NDArray[np.float64], y: NDArr
     return structure.problem(np.concatenate([u, z]), np.concatenate([z, y]), shift)
 
 
-def _estimate(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samples: int) -> tuple[Structure, NDArray[np.float64]]:
+def _estimate(
+    model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samples: int, noise_std: float | None = None
+) -> tuple[Structure, NDArray[np.float64]]:
     """The parameter vector of the normalised model with the state estimated on the first
-    ``samples`` samples: the model's parameters held (lower == upper), the state free."""
+    ``samples`` samples: the model's parameters held (lower == upper), the state free; the
+    data-only estimate, then with few samples the maximum a posteriori one (:class:`_Posterior`)."""
     structure = _structure(model)
+    p0 = structure.model_size
+    prob = _record(model, structure, u[:samples], y[:samples])
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in prob.bounds())
+    lo[:p0] = hi[:p0] = structure.pack(model)[:p0]  # the model's parameters held
+    theta, candidates = _data_only(model, structure, prob, u, y, samples, lo, hi)
+    size = structure.size - p0
+    if samples > _PRIOR_SAMPLES * size:  # the data determine the state (see _ESTIMATE_DOC)
+        return structure, theta
+    mu, root = _prior(model, u)
+    sigma = _noise(model, u, prob, theta, samples, size, noise_std)
+    if sigma == 0.0:  # an exact fit of more samples than state values: nothing to add
+        return structure, theta
+    posterior = _Posterior(prob, p0, mu, root, sigma)
+    i_y = structure.names.index("y_prev")
+    rest = theta.copy()
+    rest[p0:] = 0.0
+    prior_mean = theta.copy()
+    prior_mean[p0:] = mu
+    # with more samples than state values the data decide the basin: the posterior is searched
+    # from the data's estimate only, what they leave undetermined there (e.g. y_prev when the
+    # first sample moves: it acts on nothing) keeping the data's value; with fewer also from
+    # the prior's mean, rest and the data's cheapest starts (the data alone leave a valley of
+    # exact fits)
+    if samples > size:
+        starts = [theta]
+        lo, hi = lo.copy(), hi.copy()
+        for i in _dependent(prob, theta, p0):
+            lo[i] = hi[i] = theta[i]
+    else:
+        starts = [theta, prior_mean, rest, *candidates]
+    costs = np.array([_cost(posterior, t) for t in starts])
+    best = None
+    for k in np.argsort(costs)[:_MAP_SEARCHED]:
+        if not np.isfinite(costs[k]):
+            break
+        fit = _held_lm(posterior, starts[k], lo, hi, p0, i_y, hold=False)
+        if best is None or fit[1] < best[1]:
+            best = fit
+    return structure, theta if best is None else best[0]
+
+
+def _data_only(
+    model: Model,
+    structure: Structure,
+    prob: Any,
+    u: NDArray[np.float64],
+    y: NDArray[np.float64],
+    samples: int,
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], list[NDArray[np.float64]]]:
+    """The state that fits the ``samples`` samples best (the output error alone), and the
+    cheapest starts of its search."""
     p0, size = structure.model_size, structure.size
     theta = np.concatenate([structure.pack(model)[:p0], np.zeros(size - p0)])
-    prob = _record(model, structure, u[:samples], y[:samples])
     names = structure.names
-    lo, hi = (np.asarray(b, dtype=np.float64) for b in prob.bounds())
-    lo[:p0] = hi[:p0] = theta[:p0]
     # starts: rest, and a grid over x(1) (x0_1) and the memory y_prev over the ranges the
     # model's simulation from rest visits; the backlash makes the cost piecewise, with
     # local minima where it holds
@@ -236,7 +303,8 @@ def _estimate(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samp
     screen = prob if samples <= _SCREEN else _record(model, structure, u[:_SCREEN], y[:_SCREEN])
     costs = np.array([_cost(screen, t) for t in candidates])
     best = None
-    for k in np.argsort(costs)[:_SEARCHED]:
+    order = np.argsort(costs)[:_SEARCHED]
+    for k in order:
         if not np.isfinite(costs[k]):
             break
         fit = _held_lm(prob, candidates[k], lo, hi, p0, i_y)
@@ -244,7 +312,117 @@ def _estimate(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samp
             best = fit
     if best is None:
         raise ModelError("the model's simulation from every start of the state diverges on these samples")
-    return structure, best[0]
+    return best[0], [candidates[k] for k in order[:_MAP_SEARCHED] if np.isfinite(costs[k])]
+
+
+def _free_terms(block: LinearBlock, u: NDArray[np.float64], x: NDArray[np.float64], cuts: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Rows: the block's observer-canonical values x0_k = sum_(i>=k) a_i u(k-i) - sum_(j>=k)
+    b_j x(k-j) (rust/core/src/identify/initial.rs) of a record starting at each index of
+    ``cuts`` of the signals u -> x (lags 1.., the core's form; before index 0 at rest)."""
+    a, b = np.asarray(block.a), np.asarray(block.b)
+    n = max(a.size, b.size)
+    up, xp = np.concatenate([np.zeros(n + 1), u]), np.concatenate([np.zeros(n + 1), x])
+    at = cuts + n  # index into the padded signals of sample cut - 1
+    out = np.zeros((cuts.size, n))
+    for k in range(1, n + 1):
+        for i in range(k, a.size + 1):
+            out[:, k - 1] += a[i - 1] * up[at + k - i]
+        for j in range(k, b.size + 1):
+            out[:, k - 1] -= b[j - 1] * xp[at + k - j]
+    return out
+
+
+def _visited(model: Model, u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rows: the core's initial-state values (x0, y_prev, w0 in the units of the normalised
+    model) of a record starting at each sample 1..N-1 of the model's simulation from rest on
+    ``u``: the states the model visits on this input."""
+    norm = normalise(model)
+    lin = norm.input_linear if isinstance(norm, SandwichModel) else norm.linear
+    core_in = LinearBlock(lin.a, lin.b)  # the core's form: a feedthrough's a_0 at lag 1
+    x = np.asarray(core_in.simulate(u))
+    inner = np.asarray(norm.backlash.simulate(x))
+    cuts = np.arange(1, u.size)
+    parts = [_free_terms(core_in, u, x, cuts), inner[cuts - 1, None]]
+    if isinstance(norm, SandwichModel):
+        out = norm.output_linear
+        core_out = LinearBlock(out.a, out.b)
+        parts.append(_free_terms(core_out, inner, np.asarray(core_out.simulate(inner)), cuts))
+    return np.hstack(parts)
+
+
+def _prior(model: Model, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(mu, L): the mean and a root of the inverse covariance (Sigma^-1 = L^T L) of the states
+    the model visits on ``u``; Sigma's eigenvalues floored at _FLOOR of the largest (a state
+    value the input never moves, or two that move together, gets a finite weight)."""
+    states = _visited(model, u)
+    mu = states.mean(axis=0)
+    if states.shape[0] < 2:
+        return mu, np.eye(mu.size)
+    values, vectors = np.linalg.eigh(np.atleast_2d(np.cov(states, rowvar=False)))
+    top = float(np.max(values, initial=0.0))
+    floor = _FLOOR * top if top > 0.0 else 1.0
+    return mu, (vectors / np.sqrt(np.maximum(values, floor))).T
+
+
+def _noise(
+    model: Model, u: NDArray[np.float64], prob: Any, theta: NDArray[np.float64], samples: int, size: int, noise_std: float | None
+) -> float:
+    """The output error's standard deviation sigma of the posterior: ``noise_std`` if given;
+    else the data-only fit's residual sqrt(cost / (samples - size)) when the samples outnumber
+    the state's values (zero for an exact fit); else _NOISE of the spread of the model's output
+    on ``u`` from rest."""
+    if noise_std is not None:
+        return float(noise_std)
+    if samples > size:
+        return float(np.sqrt(max(_cost(prob, theta), 0.0) / (samples - size)))
+    return _NOISE * float(np.std(normalise(model).simulate(u)))
+
+
+class _Posterior:
+    """The core's state problem divided by sigma with the prior as extra residual rows: cost =
+    sum (y - y_sim)^2 / sigma^2 + ||L (mu - s)||^2 over the state s = theta[p0:] (twice the
+    negative log posterior); the factor [R | Q^T r] / sigma of the core re-triangularised with
+    the rows [L | L (mu - s)] below it. Otherwise the core's problem (the protocol of
+    :func:`levenberg_marquardt`)."""
+
+    def __init__(self, core: Any, p0: int, mu: NDArray[np.float64], root: NDArray[np.float64], sigma: float) -> None:
+        self.core, self.p0, self.mu, self.root, self.sigma = core, p0, mu, root, sigma
+        self.names = list(core.names)
+        self.samples = int(core.samples) + root.shape[0]
+        self.warmup = int(core.warmup)
+
+    def _rows(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(self.root @ (self.mu - np.asarray(theta)[self.p0 :]))
+
+    def simulate(self, theta: NDArray[np.float64]) -> Any:
+        return self.core.simulate(theta)
+
+    def feasible(self, theta: NDArray[np.float64]) -> bool:
+        return bool(self.core.feasible(theta))
+
+    def bounds(self) -> tuple[list[float], list[float]]:
+        return self.core.bounds()  # type: ignore[no-any-return]
+
+    def cost(self, theta: NDArray[np.float64]) -> float:
+        r = self._rows(theta)
+        return float(self.core.cost(theta)) / self.sigma**2 + float(r @ r)
+
+    def gradient(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+        g, c = self.core.gradient(theta)
+        r = self._rows(theta)
+        g = np.array(g, dtype=np.float64) / self.sigma**2
+        g[self.p0 :] += self.root.T @ r
+        return g, float(c) / self.sigma**2 + float(r @ r)
+
+    def oe_factor(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+        r_aug, c = self.core.oe_factor(theta)
+        p = len(self.names)
+        r = self._rows(theta)
+        rows = np.zeros((r.size, p + 1))
+        rows[:, self.p0 : p] = self.root
+        rows[:, p] = r
+        factor = np.asarray(np.linalg.qr(np.vstack([np.asarray(r_aug, dtype=np.float64)[: p + 1] / self.sigma, rows]), mode="r"))
+        return factor, float(c) / self.sigma**2 + float(r @ r)
 
 
 def _widened(values: NDArray[np.float64]) -> tuple[float, float]:
@@ -261,15 +439,16 @@ def _cost(prob: Any, theta: NDArray[np.float64]) -> float:
 
 
 def _held_lm(
-    prob: Any, theta: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64], p0: int, y_prev: int
+    prob: Any, theta: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64], p0: int, y_prev: int, hold: bool = True
 ) -> tuple[NDArray[np.float64], float]:
     """The one LM over the state's determined part. State values whose columns of the factor
     are zero or a combination of earlier ones at the start are held (x0 and w0 at rest where
     that costs nothing); a column that vanishes on the way (the backlash starts holding, or
     stops) ends the search with the core's NotIdentifiableError naming it, and the search is
-    repeated from the start with that value held too."""
+    repeated from the start with that value held too. ``hold=False`` holds none at the start
+    (a posterior's prior determines them all)."""
     names = list(prob.names)
-    held = set(_dependent(prob, theta, p0))
+    held = set(_dependent(prob, theta, p0)) if hold else set()
     for _ in range(len(theta) - p0 + 1):
         start = theta.copy()
         lo_k, hi_k = lo.copy(), hi.copy()
@@ -338,6 +517,18 @@ def _dependent(prob: Any, theta: NDArray[np.float64], p0: int) -> list[int]:
     return out
 
 
+def _noise_std(noise_std: Any) -> float | None:
+    if noise_std is None:
+        return None
+    try:
+        value = float(noise_std)
+    except (TypeError, ValueError):
+        raise DataError(f"noise_std must be a positive number, got {noise_std!r}") from None
+    if not (np.isfinite(value) and value > 0.0):
+        raise DataError(f"noise_std must be a positive finite number, got {noise_std!r}")
+    return value
+
+
 def _samples(init_samples: Any, n: int, name: str) -> int:
     k = check_whole(init_samples, name, 1)
     if k > n:
@@ -349,15 +540,31 @@ _ESTIMATE_DOC = """The state is estimated by the package's one Levenberg-Marquar
 (:func:`levenberg_marquardt`) on the core's problem with the initial state as parameters
 (``Structure(..., initial_state=True)``), the model's parameters held (lower == upper), from
 rest and from a grid of starts over the first internal value x(1) (and the backlash memory),
-the backlash making the output error piecewise with local minima. What ``samples`` samples
-do not determine keeps its rest value: a state value whose column is zero or a combination of
-earlier ones is held at zero (x0_k of k > samples; with fewer samples than the state's
-dimension max(na, nb) the later values), and the backlash memory y_prev keeps its start when
-the first sample moves the backlash (it then acts on nothing)."""
+the backlash making the output error piecewise with local minima. What the samples do not
+determine keeps its start (a state value whose column is zero or a combination of earlier
+ones is held; the backlash memory y_prev acts on nothing once the first sample moves the
+backlash).
+
+With few samples (at most twice the state's dimension d, the number of the core's values:
+max(na, nb) + 1, plus max(nr, ns) for a sandwich) the samples alone fit a whole valley of
+states, and a state that fits n <= d noisy samples exactly can carry a slow mode's error
+through the record. The estimate is then the maximum a posteriori one: it minimises
+sum (y - y_sim)^2 / sigma^2 over the samples plus (s - mu)^T Sigma^-1 (s - mu), where mu and
+Sigma are the mean and covariance of the states s the model itself visits on the given input
+(its simulation from rest over the whole record, the state of a record starting at each of
+its samples; Sigma's eigenvalues floored at 1e-6 of the largest). sigma is ``noise_std``;
+by default the data's own residual sqrt(cost / (n - d)) of the data-only estimate when
+n > d (zero, and the prior without effect, on a record the model fits exactly), else 0.1 of
+the standard deviation of the model's output on the input (a 20 dB signal-to-noise ratio:
+with no residual degrees of freedom the samples cannot tell their noise). The prior enters
+the same search as extra residual rows (its square root L, Sigma^-1 = L^T L). With more
+than 2 d samples the data determine the state and the data-only estimate is returned."""
 
 
 @fill(estimate=_ESTIMATE_DOC)
-def estimate_state(model: Model, u: ArrayLike, y: ArrayLike, *, samples: int | None = None) -> CascadeState | SandwichState:
+def estimate_state(
+    model: Model, u: ArrayLike, y: ArrayLike, *, samples: int | None = None, noise_std: float | None = None
+) -> CascadeState | SandwichState:
     """The model's state before the first sample, estimated from the first measured samples
     (the benchmark protocols' "n samples to initialise the state").
 
@@ -373,6 +580,9 @@ def estimate_state(model: Model, u: ArrayLike, y: ArrayLike, *, samples: int | N
         Measured output (w for a sandwich), as long as ``u``.
     samples : int, optional
         Estimate from the first ``samples`` samples only (default: the whole record).
+    noise_std : float, optional
+        The standard deviation sigma of the output error (noise and model error) weighing the
+        samples against the prior of the state; default as described above.
 
     Returns
     -------
@@ -383,7 +593,8 @@ def estimate_state(model: Model, u: ArrayLike, y: ArrayLike, *, samples: int | N
     Raises
     ------
     DataError
-        If the record is not finite, u and y differ in length, or ``samples`` is not in 1..N.
+        If the record is not finite, u and y differ in length, ``samples`` is not in 1..N, or
+        ``noise_std`` is not a positive number.
     ModelError
         As :func:`model_state`, or if the model's simulation diverges from every start.
 
@@ -401,13 +612,15 @@ def estimate_state(model: Model, u: ArrayLike, y: ArrayLike, *, samples: int | N
     _check_model(model)
     u_arr, y_arr = one_record(u, y, flatten=True)
     n = _samples(len(u_arr) if samples is None else samples, len(u_arr), "samples")
-    structure, theta = _estimate(model, u_arr, y_arr, n)
+    structure, theta = _estimate(model, u_arr, y_arr, n, _noise_std(noise_std))
     x0, y_prev, w0 = structure.initial(theta)
     return _scaled(model, _normalised_state(normalise(model), np.asarray(x0), y_prev, np.asarray(w0)))
 
 
 @fill(estimate=_ESTIMATE_DOC)
-def simulate_from_samples(model: Model, u: ArrayLike, y: ArrayLike, init_samples: int) -> NDArray[np.float64]:
+def simulate_from_samples(
+    model: Model, u: ArrayLike, y: ArrayLike, init_samples: int, *, noise_std: float | None = None
+) -> NDArray[np.float64]:
     """The free-run simulation of the whole record from the state estimated on its first
     ``init_samples`` measured samples.
 
@@ -427,6 +640,9 @@ def simulate_from_samples(model: Model, u: ArrayLike, y: ArrayLike, init_samples
         ``init_samples`` samples are used.
     init_samples : int
         Samples that initialise the state, 1..N.
+    noise_std : float, optional
+        The standard deviation sigma of the output error (noise and model error) weighing the
+        samples against the prior of the state; default as described above.
 
     Returns
     -------
@@ -453,7 +669,7 @@ def simulate_from_samples(model: Model, u: ArrayLike, y: ArrayLike, init_samples
     _check_model(model)
     u_arr, y_arr = one_record(u, y, flatten=True)
     n = _samples(init_samples, len(u_arr), "init_samples")
-    structure, theta = _estimate(model, u_arr, y_arr, n)
+    structure, theta = _estimate(model, u_arr, y_arr, n, _noise_std(noise_std))
     whole = _record(model, structure, u_arr, y_arr)
     # normalisation leaves the output unchanged: the core's output is the model's
     return np.asarray(whole.simulate(theta))[structure.shift :]
