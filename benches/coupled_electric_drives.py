@@ -9,12 +9,14 @@ held) and the RMSE is over test[4:]. Published simulation RMSEs (MDCHAMP/nonline
 polynomial NARX 0.100 / 0.141, ARX 0.291 / 0.331.
 
 For every setting (model, orders, branch degree 1-3, initial state 'rest' or 'estimate') it
-prints either the exception a fit raised (class and message) or the test RMSE, the fit's own
-simulation RMSE on the training record and the seconds taken.
+prints either the exception a fit raised (class and message) or the test RMSE, the test RMSE
+from rest, the fit's own simulation RMSE on the training record, the fraction of samples that
+move the backlash, the dead-band widths, the seconds taken and how many FitWarnings the fit gave
+(crossing or turning branches, uncertain parameters).
 
 The output is the pulley's speed measured without its sign (``abs(speed)``): a backlash
 between linear blocks can produce an output that stays on one side of zero only through its
-branches' offsets; it cannot fold the sign of the speed. See the report of issue 17.
+branches' offsets; it cannot fold the sign of the speed (docs/real_records.md).
 
     python benches/coupled_electric_drives.py
     python benches/coupled_electric_drives.py --data /path/to/coupled_electric_drives --records CED1
@@ -25,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -55,11 +58,9 @@ def run_one(kind: str, orders: tuple[int, ...], degree: int, state: str, u: np.n
     u_tr, y_tr, u_te, y_te = u[:400], y[:400], u[400:], y[400:]
     start = time.perf_counter()
     try:
-        if kind == "cascade":
-            result = bid.fit_cascade(u_tr, y_tr, *orders, degree=degree, initial_state=state)
-        else:
-            na, nb, nr, ns = orders
-            result = bid.fit_sandwich(u_tr, y_tr, na, nb, nr, ns, degree=degree, initial_state=state)
+        with warnings.catch_warnings(record=True) as caught:  # counted in the table, not printed
+            warnings.simplefilter("always", bid.FitWarning)
+            result = _fit(kind, orders, degree, state, u_tr, y_tr)
         metrics = bid.evaluate(result.model, u_te, y_te, init_samples=4)
         # the test RMSE from rest over the same samples, for comparison
         rest = bid.evaluate(result.model, u_te, y_te, warmup=4)
@@ -72,7 +73,15 @@ def run_one(kind: str, orders: tuple[int, ...], degree: int, state: str, u: np.n
         "moving": result.moving_fraction,
         "c": (result.model.backlash.c_left, result.model.backlash.c_right),
         "seconds": time.perf_counter() - start,
+        "warnings": sum(issubclass(w.category, bid.FitWarning) for w in caught),
     }
+
+
+def _fit(kind: str, orders: tuple[int, ...], degree: int, state: str, u_tr: np.ndarray, y_tr: np.ndarray) -> bid.FitResult:
+    if kind == "cascade":
+        return bid.fit_cascade(u_tr, y_tr, *orders, degree=degree, initial_state=state)
+    na, nb, nr, ns = orders
+    return bid.fit_sandwich(u_tr, y_tr, na, nb, nr, ns, degree=degree, initial_state=state)
 
 
 def main() -> None:
@@ -87,7 +96,7 @@ def main() -> None:
         u, y = records[name]
         pub = PUBLISHED[name]
         print(f"\n{name}: published polynomial NARX {pub['NARX']:.3f}, ARX {pub['ARX']:.3f} (test RMSE, 4 samples initialise)")
-        print(f"{'model':9} {'orders':10} {'deg':>3} {'state':8} {'test':>7} {'rest':>7} {'train':>7} {'moving':>6} {'c_L, c_R':>16} {'s':>5}")
+        print(f"{'model':9} {'orders':10} {'deg':>3} {'state':8} {'test':>7} {'rest':>7} {'train':>7} {'moving':>6} {'c_L, c_R':>16} {'s':>5} {'warned':>6}")
         for kind, orders in SETTINGS:
             for degree in args.degrees:
                 for state in ("rest", "estimate"):
@@ -100,7 +109,7 @@ def main() -> None:
                         c = r["c"]
                         print(
                             f"{head} {r['test_rmse']:7.3f} {r['test_rmse_rest']:7.3f} {r['train_rmse']:7.3f} "
-                            f"{r['moving']:6.2f} {c[0]:7.3f}, {c[1]:7.3f} {r['seconds']:5.1f}"
+                            f"{r['moving']:6.2f} {c[0]:7.3f}, {c[1]:7.3f} {r['seconds']:5.1f} {r['warnings']:6d}"
                         )
     print(f"\nsettings that raised: {raised}")
 
