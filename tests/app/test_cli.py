@@ -306,23 +306,23 @@ def test_one_name_for_the_samples_left_out_at_the_start():
 
 
 def test_fit_min_moving_option_for_a_record_mostly_at_rest(tmp_path):
-    # four bursts of full-amplitude input in 4000 samples: 6.7 % moving, refused at the
-    # default min_moving with a message naming the option, fitted with --min-moving 0.06
+    # four 25-sample bursts of full-amplitude input in 4000 samples: 1.3 % moving, refused at
+    # the default min_moving with a message naming the option, fitted with --min-moving 0.012
     truth = bx.example1()
     burst = bx.example_data(truth, 600, snr=None, seed=0).u
     u = np.zeros(4000)
     for k in range(4):
-        u[1000 * k : 1000 * k + 150] = burst[150 * k : 150 * (k + 1)]
+        u[1000 * k : 1000 * k + 25] = burst[25 * k : 25 * (k + 1)]
     y = truth.simulate(u) + 0.001 * np.random.default_rng(0).standard_normal(u.size)
     data = tmp_path / "rest.npz"
     np.savez(data, u=u, y=y)
     r = run("fit", data, "-i", "u", "-o", "y")
-    assert r.exit_code == 1 and "min_moving = 0.1" in r.output and "--min-moving" in r.output
+    assert r.exit_code == 1 and "min_moving = 0.02" in r.output and "--min-moving" in r.output
     out = tmp_path / "m.json"
-    r = run("fit", data, "-i", "u", "-o", "y", "--min-moving", "0.06", "--json", out)
+    r = run("fit", data, "-i", "u", "-o", "y", "--min-moving", "0.012", "--json", out)
     assert r.exit_code == 0, r.output
     fit = json.loads(out.read_text())["fit"]
-    assert fit["moving_fraction"] == pytest.approx(0.067, abs=1e-3)
+    assert fit["moving_fraction"] == pytest.approx(0.013, abs=1e-3)
     assert "--min-moving" in run("fit", "--help").output
     r = run("fit", data, "-i", "u", "-o", "y", "--min-moving", "2")
     assert r.exit_code != 0 and "--min-moving" in r.output

@@ -149,17 +149,17 @@ def test_unstable_block_advice_on_the_default_algorithm_is_not_the_default_algor
 
 
 def test_not_enough_motion_names_min_moving():
-    # a record mostly at rest: four bursts of full-amplitude input, 6.7 % of samples moving
+    # a record mostly at rest: four 25-sample bursts of full-amplitude input, 1.3 % of samples moving
     truth = bid.example1()
     burst = bid.example_data(truth, 600, snr=None, seed=0).u
     u = np.zeros(4000)
     for k in range(4):
-        u[1000 * k : 1000 * k + 150] = burst[150 * k : 150 * (k + 1)]
+        u[1000 * k : 1000 * k + 25] = burst[25 * k : 25 * (k + 1)]
     y = truth.simulate(u) + 0.001 * np.random.default_rng(0).standard_normal(u.size)
     with pytest.raises(bid.NotIdentifiableError) as info:
         bid.fit_cascade(u, y)
     text = str(info.value)
-    assert "only 6.7 % of samples" in text and "min_moving = 0.1" in text
-    assert "lower min_moving (e.g. min_moving=0.06; --min-moving on the command line)" in text
-    result = bid.fit_cascade(u, y, min_moving=0.06)
+    assert "only 1.3 % of samples" in text and "(need 2 %, min_moving = 0.02)" in text
+    assert "lower min_moving (e.g. min_moving=0.012; --min-moving on the command line)" in text
+    result = bid.fit_cascade(u, y, min_moving=0.012)
     assert max(abs(e) for e in result.errors(truth).values()) < 0.01

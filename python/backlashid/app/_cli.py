@@ -127,7 +127,7 @@ def _select(data: Path | None, input_: str, output: str, split: float | None, es
 
 
 def _fit_model(kind: str, u: Any, y: Any, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int,
-               max_iter: int, feedthrough: bool, coarse: int | None = None, min_moving: float = 0.1) -> Any:
+               max_iter: int, feedthrough: bool, coarse: int | None = None, min_moving: float = 0.02) -> Any:
     from ..identify import fit_cascade, fit_sandwich, fit_wiener_hammerstein
 
     if kind == "cascade":
@@ -140,7 +140,7 @@ def _fit_model(kind: str, u: Any, y: Any, na: int, nb: int, nr: int, ns: int, de
 
 
 def _select_model(kind: str, u: np.ndarray, y: np.ndarray, warmup: int, max_iter: int, feedthrough: bool,
-                  coarse: int | None = None, min_moving: float = 0.1) -> Any:
+                  coarse: int | None = None, min_moving: float = 0.02) -> Any:
     """``fit --orders auto``: select_structure over its default grid (cascade: na, nb 1..3,
     degree 1..4; sandwich: na, nb, nr, ns 1..2, degree 1..3); prints the table of candidates."""
     from ..identify import select_structure
@@ -178,7 +178,7 @@ def _model_options(command: F) -> F:
         click.option("--max-iter", default=50, show_default=True, type=click.IntRange(min=2), help="Iterations of the paper's algorithm before the refinement (cascade, sandwich)."),
         click.option("--coarse", type=click.IntRange(min=0), help="Samples of the coarse stage: iterations on the first ones, "
                      "refinement on the whole record (cascade, sandwich) [default: max(5000, 200 p) on records 10 times as long; 0: none]."),
-        click.option("--min-moving", default=0.1, show_default=True, type=click.FloatRange(min=0.0, max=1.0),
+        click.option("--min-moving", default=0.02, show_default=True, type=click.FloatRange(min=0.0, max=1.0),
                      help="Smallest fraction of samples on which the fitted backlash must move (cascade, sandwich); "
                           "lower it for records mostly at rest."),
     ]
