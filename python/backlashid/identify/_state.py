@@ -210,6 +210,20 @@ def _record(model: Model, structure: Structure, u: NDArray[np.float64], y: NDArr
     return structure.problem(np.concatenate([u, z]), np.concatenate([z, y]), shift)
 
 
+def _estimate_checked(
+    model: Any, u: ArrayLike, y: ArrayLike, samples: Any, name: str, noise_std: Any, *, none_is_whole: bool = False
+) -> tuple[NDArray[np.float64], NDArray[np.float64], Structure, NDArray[np.float64]]:
+    """The public entries' checks (the model, the record, ``samples`` under the argument's
+    ``name``, with ``none_is_whole`` None for the whole record, and ``noise_std``), then
+    :func:`_estimate`: the record as arrays, the structure and the vector with the estimated
+    state."""
+    _check_model(model)
+    u_arr, y_arr = one_record(u, y, flatten=True)
+    n = _samples(len(u_arr) if samples is None and none_is_whole else samples, len(u_arr), name)
+    structure, theta = _estimate(model, u_arr, y_arr, n, _noise_std(noise_std))
+    return u_arr, y_arr, structure, theta
+
+
 def _estimate(
     model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samples: int, noise_std: float | None = None
 ) -> tuple[Structure, NDArray[np.float64]]:
@@ -609,10 +623,7 @@ def estimate_state(
     >>> bool(np.max(np.abs(model.simulate(u, initial_state=state) - y)) < 1e-8)
     True
     """
-    _check_model(model)
-    u_arr, y_arr = one_record(u, y, flatten=True)
-    n = _samples(len(u_arr) if samples is None else samples, len(u_arr), "samples")
-    structure, theta = _estimate(model, u_arr, y_arr, n, _noise_std(noise_std))
+    _u, _y, structure, theta = _estimate_checked(model, u, y, samples, "samples", noise_std, none_is_whole=True)
     x0, y_prev, w0 = structure.initial(theta)
     return _scaled(model, _normalised_state(normalise(model), np.asarray(x0), y_prev, np.asarray(w0)))
 
@@ -666,10 +677,7 @@ def simulate_from_samples(
     >>> bool(np.max(np.abs(sim - d.noisy[150:])) < 1e-8)
     True
     """
-    _check_model(model)
-    u_arr, y_arr = one_record(u, y, flatten=True)
-    n = _samples(init_samples, len(u_arr), "init_samples")
-    structure, theta = _estimate(model, u_arr, y_arr, n, _noise_std(noise_std))
+    u_arr, y_arr, structure, theta = _estimate_checked(model, u, y, init_samples, "init_samples", noise_std)
     whole = _record(model, structure, u_arr, y_arr)
     # normalisation leaves the output unchanged: the core's output is the model's
     return np.asarray(whole.simulate(theta))[structure.shift :]
