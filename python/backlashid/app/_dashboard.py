@@ -222,7 +222,7 @@ def _plot_tests(report: Any, ax: Any) -> None:
     ax.axhspan(-bound, bound, color="0.85", zorder=0, label=f"95 % bounds +-{bound:.3f}")
     ax.axhline(0.0, color="k", lw=0.5)
     failed = ", ".join(report.tests.failed) or "none"
-    ax.set_title(f"Residual correlations (failed tests: {failed})", fontsize=10)
+    ax.set_title(textwrap.fill(f"Residual correlations (failed tests: {failed})", width=60), fontsize=10)
     ax.set_xlabel("lag k")
     ax.set_ylabel("normalised correlation")
     ax.legend(fontsize="x-small")
@@ -322,5 +322,5 @@ def _plot_before_after(report: Any, ax: Any, window: int, view: _View) -> None:
     ax.set_title("Before/after where the nominal error is largest (RMSE on this window)", fontsize=10)
     ax.set_xlabel(view.time_label)
     ax.set_ylabel(view.output)
-    ax.legend(fontsize="x-small")
+    ax.legend(fontsize="x-small", framealpha=0.85)
     ax.grid(alpha=0.3)
