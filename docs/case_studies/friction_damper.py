@@ -7,7 +7,7 @@ Regenerates the figures of docs/case_study_friction_damper.md and prints its tab
 
     python docs/case_studies/friction_damper.py     # writes docs/figures/friction_damper_*.png
 
-Run time about 60 s on the project's 2-core machine (the eight structure fits take most of it).
+Run time about 30 s on the project's 2-core machine (the eight structure fits take most of it).
 Deterministic: no random starts, the same numbers on every run of the same code.
 
 Data: shared/data/friction_damper_backlash (read in place; $BACKLASHID_DATA overrides), CC BY-SA

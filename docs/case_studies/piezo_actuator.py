@@ -8,7 +8,7 @@ Regenerates the figures of docs/case_study_piezo_actuator.md and prints its tabl
 
     python docs/case_studies/piezo_actuator.py      # writes docs/figures/piezo_*.png
 
-Run time about 40 s on the project's 2-core machine. Deterministic (no random starts).
+Run time about 25 s on the project's 2-core machine (the twelve fits take most of it). Deterministic (no random starts).
 
 Data: shared/data/piezo_actuator_hysteresis/piezo.npz (read in place; $BACKLASHID_DATA
 overrides), MIT licence, Y. N. Aye and W. T. Ang 2018 (GitHub yan9a/DiscreteBacklashOperator).

@@ -146,8 +146,15 @@ def _plot_signals(report: Any, ax: Any, view: _View) -> None:
     ax.set_title(f"Validation record: measured vs nominal free-run simulation (RMSE {rmse:.4g})", fontsize=10)
     ax.set_xlabel(view.time_label)
     ax.set_ylabel(view.output)
+    _headroom(ax)
     ax.legend(loc="upper right", fontsize="small", ncol=3)
     ax.grid(alpha=0.3)
+
+
+def _headroom(ax: Any, share: float = 0.2) -> None:
+    """Room above the data for the legend row (it must not hide the signal)."""
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(lo, hi + share * (hi - lo))
 
 
 def _plot_error(report: Any, ax: Any, view: _View) -> None:
@@ -170,6 +177,7 @@ def _plot_error(report: Any, ax: Any, view: _View) -> None:
     if after.size and np.ptp(after) > 0:  # scale to the evaluated samples, not the transient
         pad = 0.08 * float(np.ptp(after))
         ax.set_ylim(min(float(after.min()), -2 * noise) - pad, max(float(after.max()), 2 * noise) + pad)
+    _headroom(ax)
     ax.set_title("Nominal model's error (measured - simulated) by backlash state; dashed: +-2 noise std", fontsize=10)
     ax.set_xlabel(view.time_label)
     ax.set_ylabel(f"error, {view.output}" if view.output != "y" else "error")
@@ -322,5 +330,6 @@ def _plot_before_after(report: Any, ax: Any, window: int, view: _View) -> None:
     ax.set_title("Before/after where the nominal error is largest (RMSE on this window)", fontsize=10)
     ax.set_xlabel(view.time_label)
     ax.set_ylabel(view.output)
-    ax.legend(fontsize="x-small", framealpha=0.85)
+    _headroom(ax, 0.3)
+    ax.legend(fontsize="x-small", framealpha=0.85, loc="upper center", ncol=2 if best is None else 1)
     ax.grid(alpha=0.3)
