@@ -300,7 +300,13 @@ def _shown_candidate(report: Any) -> tuple[Any, Any, str]:
     out = np.asarray(out, dtype=float)
     if out.size != n or not np.all(np.isfinite(out)):
         return None, None, ""
-    return top, out, f"best candidate, not named: {top.effect}"
+    label = f"best candidate, not named: {top.effect}"
+    # the report does not keep where the estimation record ended (t0 of a time-dependent effect):
+    # say so if this run is not the one the ranking scored
+    again = float(np.sqrt(np.mean((y - out)[report.warmup :] ** 2)))
+    if math.isfinite(top.validation_rmse) and abs(again - top.validation_rmse) > 0.02 * top.validation_rmse:
+        label += " (simulated again from t = 0, not the ranking's run)"
+    return top, out, label
 
 
 def _plot_before_after(report: Any, ax: Any, window: int, view: _View) -> None:
