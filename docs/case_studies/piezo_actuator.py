@@ -8,7 +8,7 @@ Regenerates the figures of docs/case_study_piezo_actuator.md and prints its tabl
 
     python docs/case_studies/piezo_actuator.py      # writes docs/figures/piezo_*.png
 
-Run time about 25 s on the project's 2-core machine (the twelve fits take most of it). Deterministic (no random starts).
+Run time 25 to 40 s on the project's 2-core machine (the twelve fits take most of it). Deterministic (no random starts).
 
 Data: shared/data/piezo_actuator_hysteresis/piezo.npz (read in place; $BACKLASHID_DATA
 overrides), MIT licence, Y. N. Aye and W. T. Ang 2018 (GitHub yan9a/DiscreteBacklashOperator).
@@ -174,6 +174,8 @@ def main() -> None:
     for name, (a, b) in RUNS.items():
         e = um * (list(sims.values())[0] - TY)[a:b]
         print(f"{name}: simulation error of {best_cascade[0]} with the run's mean error removed {float(np.std(e)):.3f} µm (mean of simulated - measured {float(np.mean(e)):+.3f} µm)")
+    for name, rep in (("identification record", report), ("run 1", report1)):
+        print(f"estimation on the {name}: regime sample shares add up to {100 * sum(r.sample_share for r in rep.regimes.regimes):.0f} %")
     e_id = um * (free_run(cascade, U, Y) - Y)[WARMUP:]
     print(f"\nsimulation error of {best_cascade[0]} on the identification record after the warm-up: {rmse(e_id):.3f} µm")
 
