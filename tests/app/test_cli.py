@@ -199,7 +199,7 @@ def test_diagnose_passes_model_units_to_diagnose(monkeypatch, tmp_path, example)
         def summary(self):
             return "best effect: none"
 
-        def plot(self, path=None):
+        def plot(self, path=None, **kw):
             Path(path).write_bytes(PNG + b"stand-in")
 
         def to_dict(self):

@@ -174,3 +174,95 @@ def test_plot_without_candidates_or_path(report):
         plt.close(fig)
     with pytest.raises(TypeError, match="unexpected"):
         bare.plot(colour="red")
+
+
+# ---------------------------------------------------------------- the dashboard readable
+
+
+def _texts(fig):
+    import matplotlib.text
+
+    return [t for t in fig.findobj(matplotlib.text.Text) if t.get_text() and t.get_visible()]
+
+
+@pytest.fixture
+def unexplained(report):
+    # the longest verdict the report writes: unexplained, with reasons for the candidates held back
+    details = DiagnosisDetails(
+        closing_not_named={
+            "branch_degree": "its residual is still modulated by the output (p 4.3e-48)",
+            "dead_time": "its residual is still modulated by the output (p 1.3e-81)",
+        },
+        colored_noise_ruled_out=("the residual is modulated by the output (p 1.6e-44)", "branch_degree closes over a quarter of the gap"),
+    )
+    noise = Candidate("colored_noise", 1.0, 1e-12, None, {"phi_1": 0.9}, 4, 0.12, 0.05, -20000.0, False)
+    ranking = [noise, *report.ranking]
+    return dataclasses.replace(report, best_effect="unexplained", ranking=ranking, y_best=report.y_nominal, details=details)
+
+
+def test_dashboard_verdict_covers_no_panel_title(unexplained, tmp_path):
+    fig = unexplained.plot(tmp_path / "d.png")
+    renderer = fig.canvas.get_renderer()
+    verdicts = [t for t in _texts(fig) if t.get_text().startswith("Diagnosis:")]
+    assert len(verdicts) == 1 and "unexplained" in verdicts[0].get_text()
+    assert len(unexplained.verdict()) > 400  # three lines or more on the figure
+    box = verdicts[0].get_window_extent(renderer)
+    for ax in fig.axes:
+        title = ax.title.get_window_extent(renderer)
+        assert not box.overlaps(title), f"the verdict covers the title {ax.get_title()!r}"
+        assert not box.overlaps(ax.get_window_extent(renderer)), "the verdict covers a panel"
+    assert box.y1 <= fig.bbox.y1 + 1  # and stays on the figure
+
+
+def test_dashboard_axes_in_the_records_units(report, tmp_path):
+    from backlashid.identify import Scaling
+
+    scaling = Scaling(output_offset=10.0, output_scale=2.0)
+    fig = report.plot(tmp_path / "d.png", scaling=scaling, output="force [N]", sample_time=0.01)
+    signals, error, _, _, _, before_after = fig.axes
+    for ax in (signals, before_after):
+        assert ax.get_ylabel() == "force [N]" and ax.get_xlabel() == "time [s]"
+    assert error.get_xlabel() == "time [s]" and "force [N]" in error.get_ylabel()
+    measured = next(line for line in signals.get_lines() if line.get_label() == "measured")
+    np.testing.assert_allclose(measured.get_ydata(), 2.0 * report.y_val + 10.0)
+    np.testing.assert_allclose(measured.get_xdata()[-1], 0.01 * (report.n_validation - 1))
+    # the RMSE in the title is in the record's units too
+    assert f"{2.0 * report.nominal_validation_rmse:.4g}" in signals.get_title()
+    # without units: samples and model units, as before
+    fig = report.plot(tmp_path / "e.png")
+    assert fig.axes[0].get_xlabel() == "sample" and fig.axes[0].get_ylabel() == "y"
+
+
+def _model_lines(ax):
+    return [line for line in ax.get_lines() if len(line.get_xdata()) and line.get_label() != "measured"]
+
+
+def test_dashboard_before_after_shows_nominal_and_augmented(report, unexplained, tmp_path):
+    named = report.plot(tmp_path / "a.png").axes[5]
+    assert [line.get_label().split(" (")[0] for line in _model_lines(named)] == ["nominal", "augmented: branch_degree"]
+    # no effect named: the best candidate that changes the simulation is drawn all the same
+    ax = unexplained.plot(tmp_path / "b.png").axes[5]
+    lines = _model_lines(ax)
+    assert len(lines) == 2 and "not named: branch_degree" in lines[1].get_label()
+    best = report.ranking[0].model.simulate(report.u_val)
+    start = int(round(lines[1].get_xdata()[0]))
+    np.testing.assert_allclose(lines[1].get_ydata(), best[start : start + lines[1].get_ydata().size])
+
+
+def test_dashboard_empty_candidates_say_why(report, tmp_path):
+    bare = dataclasses.replace(report, best_effect="none", ranking=[], y_best=report.y_nominal, gap=0.0)
+    fig = bare.plot(tmp_path / "c.png")
+    panel = fig.axes[4]
+    text = " ".join(t.get_text() for t in _texts(fig) if t.axes is panel)
+    assert "No candidate" in text and "noise floor" in text
+    other = dataclasses.replace(report, best_effect="unexplained", ranking=[], y_best=report.y_nominal)
+    fig = other.plot(tmp_path / "d.png")
+    text = " ".join(t.get_text() for t in _texts(fig) if t.axes is fig.axes[4])
+    assert "No candidate" in text and "holds none" in text
+
+
+def test_dashboard_says_the_regimes_overlap(report, tmp_path):
+    assert sum(r.sample_share for r in report.regimes.regimes) > 1.01  # they do overlap here
+    fig = report.plot(tmp_path / "r.png")
+    texts = [t.get_text() for t in _texts(fig) if t.axes is fig.axes[2]]
+    assert any("overlap" in t for t in texts)

@@ -415,7 +415,7 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
     click.echo(report.summary())
     if png:
         png.parent.mkdir(parents=True, exist_ok=True)
-        report.plot(png)
+        report.plot(png, scaling=scaling, output=str(output))  # the record's units and signal name
         click.echo(f"wrote {png}")
     if json_path:
         _write_json(json_path, {"backlashid_version": __version__, "scaling": scaling.to_dict(), "data": sel.description, "report": report.to_dict()})

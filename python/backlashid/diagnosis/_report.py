@@ -441,7 +441,10 @@ class DiagnosisReport:
             Where to save it (PNG by the file's extension), through the Agg backend.
         **kw
             ``figsize`` (default (13, 15)), ``window`` (samples in the before/after panel,
-            default 300), ``dpi`` (default 110).
+            default 300), ``dpi`` (default 110), and the record's units: ``scaling`` (the
+            :class:`~backlashid.identify.Scaling` of the records, so outputs and errors are
+            drawn in measured units), ``output`` (axis label, e.g. ``"force [kip]"``),
+            ``sample_time`` (seconds per sample, so time is in seconds).
 
         Returns
         -------
