@@ -101,3 +101,31 @@ def test_a_failed_fit_is_diagnosed_from_its_best_iterate_saying_so() -> None:
     assert "nominal fit did not converge; diagnosed from its best iterate" in report.verdict()
     assert report.to_dict()["details"]["nominal_fit"] == "nominal fit did not converge; diagnosed from its best iterate"
     assert "did not converge" not in bx.diagnose(exc.best_stable.model, (u[:1500], y[:1500]), (u[1500:], y[1500:])).verdict()
+
+
+
+# -- dead time against a higher linear order -----------------------------------------------------
+
+
+def test_dead_time_is_named_over_a_higher_order_on_the_same_footing() -> None:
+    """A dead time of 2 samples on a plant with a slow pole: an extra lag imitates the delay,
+    and both refits close most of the gap; the dead-time refit reaches the optimum a refit from
+    the truth reaches, and the rule prefers the lower BIC with honest counting (d one integer
+    parameter, the order increase its two coefficients)."""
+    from backlashid.diagnosis.effects import REGISTRY, _base
+    from backlashid.identify import Structure
+
+    truth = bx.CascadeModel(bx.LinearBlock([0.12], [-0.9]), bx.example1().backlash)
+    rng = np.random.default_rng(5)
+    u = np.convolve(rng.standard_normal(2 * N), [1.0, 0.6, 0.3])[: 2 * N]
+    y = truth.simulate(np.r_[0.0, 0.0, u[:-2]]) + 0.02 * rng.standard_normal(2 * N)
+    model = bx.fit_cascade(u[:N], y[:N], 1, 1, 3, warmup=50).model
+    s = Structure(1, 1, 3)
+    prob = _base.Problem(s, u[:N], y[:N], 50, 0.0)
+    theta, params, cost = REGISTRY["dead_time"].refit(prob, s.pack(model))
+    _, _, from_truth = REGISTRY["dead_time"]._refit(prob, s.pack(truth), np.zeros(0), np.zeros(0), np.zeros(0), {"d": 2})
+    assert params == {"d": 2} and cost <= from_truth * (1 + 1e-6)
+    report = bx.diagnose(model, (u[:N], y[:N]), (u[N:], y[N:]), candidates=["dead_time", "linear_order", "friction"])
+    assert report.best_effect == "dead_time" and report.best.params["d"] == 2
+    order = next(c for c in report.ranking if c.effect == "linear_order")
+    assert report.best.criterion < order.criterion and report.best.n_extra == 1 and order.n_extra == 2
