@@ -332,6 +332,26 @@ mod tests {
     }
 
     #[test]
+    fn stick_slip_by_hand_on_a_first_order_block() {
+        // x(t+1) = 0.5 u_eff(t) + 0.5 x(t), F_c = 0.3, static 0.3 + 0.1, straight backlash.
+        let m = CascadeModel::new(
+            LinearBlock::new(vec![0.5], vec![-0.5]).unwrap(),
+            GeneralBacklash::new(0.0, 0.0, vec![1.0], vec![1.0]).unwrap(),
+        );
+        let y = sim(
+            &m,
+            &[("stick_slip", &[0.3, 0.0, 0.1, 0.05])],
+            &[0.35, 1.0, 1.0],
+            0.0,
+            TIME_SCALE,
+        );
+        // t=0: x=0, free 0, u_stay = 0, hold 0.35 <= 0.4: stuck, u_eff = 0;
+        // t=1: x=0, hold 1 > 0.4: slides, v = 0 so the dip is whole: u_eff = 1 - 0.4 = 0.6;
+        // t=2: x = 0.3.
+        assert!(max_diff(&y, &[0.0, 0.0, 0.3]) < 1e-15);
+    }
+
+    #[test]
     fn width_drift_equals_the_backlash_with_the_widths_of_that_time() {
         let m = model(false);
         let u = input(50);
