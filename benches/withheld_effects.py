@@ -57,11 +57,16 @@ def run_case(spec: CaseSpec, warmup: int, fit_only: bool, known_noise: bool) -> 
     case = make_case(spec.effect, spec.level, spec.seed)
     out: dict[str, Any] = {"case": case.to_dict(), "effect": case.effect, "level": case.level, "seed": case.seed}
     t0 = time.perf_counter()
+    fallback = {}
     try:
         fit = bid.fit_cascade(case.u_est, case.y_est, case.na, case.nb, case.degree, warmup=warmup)
     except bid.BacklashIdError as exc:
-        out.update(reported="fit_error", error=f"{type(exc).__name__}: {exc}", fit_seconds=time.perf_counter() - t0)
-        return out
+        # a failed fit is diagnosed from its best stable iterate where the package gives one
+        fit = getattr(exc, "best_stable", None)
+        if fit is None:
+            out.update(reported="fit_error", error=f"{type(exc).__name__}: {exc}", fit_seconds=time.perf_counter() - t0)
+            return out
+        out["fit_error"], fallback = f"{type(exc).__name__}: {exc}", {"nominal_converged": False}
     out["fit_seconds"] = time.perf_counter() - t0
     out["fit_simulation_rmse"] = fit.simulation_rmse
     if fit_only:
@@ -74,6 +79,7 @@ def run_case(spec: CaseSpec, warmup: int, fit_only: bool, known_noise: bool) -> 
             estimation=(case.u_est, case.y_est),
             validation=(case.u_val, case.y_val),
             noise_std=case.noise_std if known_noise else None,
+            **fallback,
         )
     except Exception as exc:
         out.update(reported="diagnose_error", error=f"{type(exc).__name__}: {exc}", diagnose_seconds=time.perf_counter() - t1)

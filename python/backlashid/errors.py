@@ -94,11 +94,20 @@ class NotConvergedError(BacklashIdError):
     best : FitResult, optional
         The estimate the fit ended with (``converged`` False; its ``model`` is None when the
         estimate is no valid model), or None when no usable estimate exists.
+    best_stable : FitResult, optional
+        The best iterate that is a usable model (``fit_cascade`` and ``fit_sandwich``): the
+        final estimate and the iterates of the paper's algorithm with unstable poles reflected,
+        kept where the model is valid and its linear blocks stable, the one of lowest output
+        error refined by the output-error Levenberg-Marquardt (``converged`` False, covariance
+        NaN). Diagnose or simulate from it when the fit failed (``backlashid diagnose
+        --fit-cascade`` does, and says so); None when no iterate qualifies.
 
     Attributes
     ----------
     best : FitResult or None
         As given; it survives pickling (e.g. from a Dask worker).
+    best_stable : FitResult or None
+        As given; it survives pickling too.
 
     Examples
     --------
@@ -111,13 +120,14 @@ class NotConvergedError(BacklashIdError):
     FitResult False
     """
 
-    def __init__(self, message: str, best: FitResult | None = None) -> None:
+    def __init__(self, message: str, best: FitResult | None = None, best_stable: FitResult | None = None) -> None:
         super().__init__(message)
         self.best = best
+        self.best_stable = best_stable
 
     def __reduce__(self) -> tuple[object, ...]:
-        # exceptions pickle by their args only; keep the best iterate across processes
-        return (type(self), (self.args[0], self.best))
+        # exceptions pickle by their args only; keep the best iterates across processes
+        return (type(self), (self.args[0], self.best, self.best_stable))
 
 
 class FitWarning(UserWarning):

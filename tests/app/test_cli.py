@@ -234,6 +234,29 @@ def test_diagnose_runs_end_to_end(tmp_path, csv_file):
     assert "best_effect" in json.loads((tmp_path / "d.json").read_text())["report"]
 
 
+def test_diagnose_falls_back_to_the_best_iterate_of_a_failed_fit(monkeypatch, tmp_path, csv_file, example):
+    """--fit-cascade whose fit raises NotConvergedError: the diagnosis runs from the error's
+    best stable iterate and the report says so."""
+    from backlashid.app import _cli
+
+    best = bx.fit_cascade(example.u, example.noisy)
+
+    def failing(*args, **kwargs):
+        raise bx.NotConvergedError("the estimated input linear block is unstable (spectral radius 1.2)", None, best)
+
+    monkeypatch.setattr(_cli, "_fit_model", failing)
+    r = run("diagnose", csv_file, "-i", "u", "-o", "y", "--fit-cascade", "--split", "0.5", "--json", tmp_path / "d.json")
+    assert r.exit_code == 0, r.output
+    assert "diagnosing from its best stable iterate" in r.output
+    assert "nominal fit did not converge; diagnosed from its best iterate" in r.output
+    details = json.loads((tmp_path / "d.json").read_text())["report"]["details"]
+    assert details["nominal_fit"] == "nominal fit did not converge; diagnosed from its best iterate"
+    # without a usable iterate the error stands
+    monkeypatch.setattr(_cli, "_fit_model", lambda *a, **k: (_ for _ in ()).throw(bx.NotConvergedError("diverged")))
+    r = run("diagnose", csv_file, "-i", "u", "-o", "y", "--fit-cascade", "--split", "0.5")
+    assert r.exit_code == 1 and "diverged" in r.output
+
+
 FRICTION = SHARED / "friction_damper_backlash"
 
 

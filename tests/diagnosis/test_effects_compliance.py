@@ -271,3 +271,19 @@ def test_effects_two_at_a_time_equal_the_reference(pair: tuple[str, str]) -> Non
         for effect in pair:
             PUT[effect](case)
         _check(case, f"{'+'.join(pair)} case {i} (N={case.u.size}, start={case.start})")
+
+
+def test_stick_slip_friction_equals_the_reference() -> None:
+    """The stick-slip form of friction (``rust/core/src/effects/stick_slip.rs``, no catalogue
+    entry of its own: the friction effect refits it), alone and after a dead time and a
+    saturation, at random sizes inside the refit's bounds, from every start."""
+    rng = np.random.default_rng([16, 99])
+    for i in range(CASES_ALONE):
+        case = Case(rng)
+        if rng.random() < 0.3:
+            PUT["dead_time"](case)
+            PUT["saturation"](case)
+        s = float(np.std(case.u)) + 0.05
+        f_c, f_v, f_s = rng.uniform(0.0, 2.0 * s), rng.uniform(0.0, 2.0), rng.uniform(0.0, 2.0 * s) * (rng.random() < 0.7)
+        case.core.append(("stick_slip", (float(f_c), float(f_v), float(f_s), float(rng.uniform(0.01, 1.0) * s))))
+        _check(case, f"stick_slip case {i} (na={case.na}, nb={case.nb}, N={case.u.size}, start={case.start})")

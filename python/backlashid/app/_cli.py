@@ -21,7 +21,7 @@ import click
 import numpy as np
 
 from .. import __version__
-from ..errors import BacklashIdError, DataError, FitWarning
+from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ..models import SandwichModel
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -402,14 +402,22 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
             scaling = _scaling(sel.estimation, scale, dict(input_offset=input_offset, input_scale=input_scale, output_offset=output_offset, output_scale=output_scale))
         est = (scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y))
         val = (scaling.input_to_model(sel.validation.u), scaling.output_to_model(sel.validation.y))
+        converged = True
         if fit_cascade:
             stage("fitting the cascade")
-            model = _fit_model("cascade", est[0], est[1], na, nb, 0, 0, degree, warmup, 50, False).model
+            try:
+                model = _fit_model("cascade", est[0], est[1], na, nb, 0, 0, degree, warmup, 50, False).model
+            except NotConvergedError as exc:
+                if exc.best_stable is None:  # no iterate is a usable model: nothing to diagnose
+                    raise
+                model, converged = exc.best_stable.model, False
+                click.echo(f"the nominal fit did not converge ({exc}); diagnosing from its best stable iterate")
         stage("diagnosing")
         from ..diagnosis import diagnose as run_diagnosis
 
         noise = None if noise_std is None else noise_std / abs(scaling.output_scale)
-        report = run_diagnosis(model, estimation=est, validation=val, noise_std=noise, initial_state=initial_state)
+        report = run_diagnosis(model, estimation=est, validation=val, noise_std=noise, initial_state=initial_state,
+                               **({} if converged else {"nominal_converged": False}))
     if not scaling.is_identity:
         click.echo("(the diagnosis works in model units: " + ", ".join(f"{k} {v:.6g}" for k, v in scaling.to_dict().items()) + ")")
     click.echo(report.summary())

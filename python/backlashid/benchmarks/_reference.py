@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "ar_prediction", "augmented_cascade", "backlash", "branch", "compliance", "dead_time", "difference_equation",
-    "linear_with_friction", "output_offset", "play", "plays", "quantiser", "saturation", "width_drift",
+    "linear_with_friction", "linear_with_stick_slip", "output_offset", "play", "plays", "quantiser", "saturation", "width_drift",
 ]  # fmt: skip
 
 Array = NDArray[np.float64]
@@ -75,6 +75,59 @@ def linear_with_friction(
         sign = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
         ue.append(ut - f_c * sign - f_v * v)
         xx.append(x)
+        out[t] = x
+    return out
+
+
+def linear_with_stick_slip(
+    a: Sequence[float],
+    b: Sequence[float],
+    u: Array,
+    f_c: float,
+    f_v: float,
+    f_s: float,
+    v_s: float,
+    u_past: Sequence[float] = (),
+    x_past: Sequence[float] = (),
+) -> Array:
+    """Eq (16) with stick-slip friction in its force balance (Karnopp's rule, a Stribeck dip):
+    x(t+1) = a_1 u_eff(t) + x_free; w = u(t) - F_v v, v = x(t) - x(t-1); u_stay = (x(t) -
+    x_free) / a_1 holds x(t+1) = x(t), F_hold = w - u_stay; stuck (u_eff = u_stay) while
+    abs(F_hold) <= F_c + F_s, else u_eff = w - (F_c + F_s exp(-(v / v_s)^2)) sign(F_hold). At
+    F_c = F_v = F_s = 0 (or a_1 = 0: no sticking) u_eff = w. From rest or from the past, as
+    :func:`linear_with_friction`."""
+    a, b = [float(v) for v in a], [float(v) for v in b]
+    na, nb = len(a), len(b)
+    ue = [float(v) for v in reversed(u_past)] if len(u_past) else [0.0] * na  # oldest first
+    xx = [float(v) for v in reversed(x_past)] if len(x_past) else [0.0] * max(nb, 1)
+    active = f_c != 0.0 or f_v != 0.0 or f_s != 0.0
+    out = np.empty(len(u))
+    for t, ut in enumerate(u.tolist()):
+        x = 0.0
+        for i in range(1, na + 1):
+            x += a[i - 1] * ue[-i]
+        for j in range(1, nb + 1):
+            x -= b[j - 1] * xx[-j]
+        v = x - xx[-1]
+        xx.append(x)
+        w = ut - f_v * v
+        if not active:
+            ue.append(ut)
+        elif a[0] == 0.0:
+            ue.append(w)
+        else:
+            # x(t+1) without u_eff(t): a_2 u_eff(t-1) + ... - b_1 x(t) - ..., summed in that order
+            free = 0.0
+            for i in range(2, na + 1):
+                free += a[i - 1] * ue[-(i - 1)]
+            for j in range(1, nb + 1):
+                free -= b[j - 1] * xx[-j]
+            stay = (x - free) / a[0]
+            hold = w - stay
+            if abs(hold) <= f_c + f_s:
+                ue.append(stay)
+            else:
+                ue.append(w - (f_c + f_s * math.exp(-((v / v_s) ** 2))) * math.copysign(1.0, hold))
         out[t] = x
     return out
 
@@ -182,11 +235,11 @@ def augmented_cascade(
 ) -> Array:
     """The nominal cascade (eq 16 -> eq 1) with the catalogue's effects, each given as
     (name, parameters) in the Python catalogue's order: u(t - d), clipped to [lo, hi], through
-    friction into eq (16) from its past; the backlash (eq 1) on x(t) with the widths
+    friction (or stick-slip friction) into eq (16) from its past; the backlash (eq 1) on x(t) with the widths
     c + dc tau(t), tau(t) = (t0 + t) / time_scale, from y(0) = y_prev; then compliance, the
     extra plays (at rest on x_past[0]), the output offset and drift, and the quantiser."""
     p = {name: [float(v) for v in params] for name, params in effects}
-    known = {"dead_time", "saturation", "friction", "width_drift", "compliance", "hysteresis_memory", "output_offset", "quantization"}
+    known = {"dead_time", "saturation", "friction", "stick_slip", "width_drift", "compliance", "hysteresis_memory", "output_offset", "quantization"}
     if set(p) - known:
         raise ValueError(
             f"no reference for {sorted(set(p) - known)}: add each effect's function here, from its definition, and its place below"
@@ -194,8 +247,11 @@ def augmented_cascade(
     tau = (t0 + np.arange(len(u), dtype=np.float64)) / time_scale
     v = dead_time(u, int(p["dead_time"][0])) if "dead_time" in p else u
     v = saturation(v, *p["saturation"]) if "saturation" in p else v
-    f_c, f_v = p.get("friction", (0.0, 0.0))
-    x = linear_with_friction(a, b, v, f_c, f_v, u_past, x_past)
+    if "stick_slip" in p:
+        x = linear_with_stick_slip(a, b, v, *p["stick_slip"], u_past, x_past)
+    else:
+        f_c, f_v = p.get("friction", (0.0, 0.0))
+        x = linear_with_friction(a, b, v, f_c, f_v, u_past, x_past)
     dc_l, dc_r = p.get("width_drift", (0.0, 0.0))
     left = branch(m_left, x + width_drift(c_left, dc_l, tau))
     right = branch(m_right, x - width_drift(c_right, dc_r, tau))

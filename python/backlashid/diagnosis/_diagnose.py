@@ -22,6 +22,12 @@
      and the residual is neither explained by the input (a cross-validated black box of input
      features) nor modulated by the model's output (a drifting gain: prewhitened F-test);
    - else "unexplained".
+   Where none of these names a deterministic candidate ("none", colored_noise, "unexplained"),
+   quantization is named if the measured outputs of both records lie on one lattice
+   {o + k q} (a quantiser after the noise, e.g. the A/D converter; ``effects._quantization.
+   lattice``), q read off the data, and its rounding error is material (q^2 / 12 at least
+   ``LATTICE_MATERIAL`` of the nominal validation MSE). Such rounding is white-like noise that
+   no model of the noise-free output can remove, so it shows in the values, not in the gap.
 
 Caveat: with the floor estimated, the winner's gap closed is 1 by construction whenever it
 is the best model of all (the floor is then its own validation MSE); give ``noise_std`` for a
@@ -57,6 +63,7 @@ from .analyses import frequency_analysis, regime_shares, residual_tests, time_an
 from .effects import EFFECTS, AugmentedModel, fit_effect, screen
 from .effects._base import held_x
 from .effects._dead_time import MAX_DELAY
+from .effects._quantization import lattice
 
 __all__ = ["diagnose", "ALPHA", "CLOSE_ENOUGH", "default_warmup", "estimated_start", "held_state"]
 
@@ -66,6 +73,8 @@ MATERIAL = 0.25  # a significant deterministic candidate closing this much rules
 MATERIAL_GAP = 0.01  # a gap under this fraction of the noise variance is "none", however significant
 HAC_LAGS = 20  # Newey-West lags of the paired test
 SIGNATURE_Z = 3.0  # |z| of the residual against the effect's change after augmentation
+LATTICE_MATERIAL = 0.1  # a lattice's rounding variance q^2 / 12 over this share of the nominal MSE is named
+NOT_CONVERGED = "nominal fit did not converge; diagnosed from its best iterate"
 
 
 Array = NDArray[np.float64]
@@ -350,6 +359,7 @@ def diagnose(
     warmup: int | None = None,
     initial_state: str = "estimate",
     seed: int = 0,
+    nominal_converged: bool = True,
 ) -> DiagnosisReport:
     """Which effect beyond the nominal cascade explains its validation error?
 
@@ -382,6 +392,10 @@ def diagnose(
         assumes.
     seed : int, default 0
         Passed to :func:`fit_effect` (no random starts are used).
+    nominal_converged : bool, default True
+        False when ``model`` is the best stable iterate of a nominal fit that raised
+        ``NotConvergedError`` (its ``best_stable``): the diagnosis runs the same and the
+        report says so (``details.nominal_fit`` and the verdict).
 
     Returns
     -------
@@ -504,6 +518,10 @@ def diagnose(
     gap = max(mse0 - floor, 0.0)
     gap_closed = {e: (mse0 - s.mse) / gap if gap > 0 else 0.0 for e, s in scored.items()}
 
+    # the measured values' lattice (a quantiser after the noise)
+    grid = lattice(np.concatenate([y_e, y_v])) if "quantization" in scored else None
+    lattice_share = grid.q**2 / 12.0 / mse0 if grid is not None and mse0 > 0 else 0.0
+
     # decide
     level = ALPHA / (len(scored) + 1)
     significant = {e for e, s in scored.items() if s.p_value < level}
@@ -541,6 +559,10 @@ def diagnose(
             # noise (its innovations are as unpredictable as white noise), so against a known
             # white-noise floor it can close well under half of a genuine colored-noise gap
             best = "colored_noise"
+
+    lattice_named = grid is not None and lattice_share >= LATTICE_MATERIAL and best in ("none", "colored_noise", "unexplained")
+    if lattice_named:
+        best = "quantization"
 
     if best == "unexplained":
         for e, sc in scored.items():
@@ -601,6 +623,15 @@ def diagnose(
         ),
         colored_noise_ruled_out=tuple(ruled_out),
         closing_not_named=not_named,
+        lattice=(
+            ""
+            if grid is None
+            else f"the measured output lies on a lattice of step q = {grid.q:.6g} ({grid.occupied} of {grid.levels} levels "
+            f"occupied); its rounding variance q^2/12 is {100 * lattice_share:.3g} % of the nominal validation MSE"
+            + ("" if lattice_named else " (not named: " + (
+                "immaterial)" if lattice_share < LATTICE_MATERIAL else f"{best} explains the gap)"))
+        ),
+        nominal_fit="converged" if nominal_converged else NOT_CONVERGED,
     )
     x_v = model.linear.simulate(u_v)
     tests = residual_tests(residual_full[warmup:], u_v[warmup:], x_v[warmup:])

@@ -157,6 +157,12 @@ class DiagnosisDetails:
         Why colored_noise was not named.
     closing_not_named : dict of str to str
         Candidates that close half the gap yet were not named, and why.
+    lattice : str
+        The lattice the measured output lies on (a quantiser after the noise) and whether it
+        was named; empty when there is none.
+    nominal_fit : str
+        "converged", or that the nominal model is the best iterate of a fit that did not
+        converge; empty when not stated.
 
     Examples
     --------
@@ -176,6 +182,8 @@ class DiagnosisDetails:
     initial_state: str = ""
     colored_noise_ruled_out: tuple[str, ...] = ()
     closing_not_named: dict[str, str] = field(default_factory=dict)
+    lattice: str = ""
+    nominal_fit: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict of the fields (the screenings as dicts).
@@ -289,7 +297,15 @@ class DiagnosisReport:
         str
             The verdict.
         """
+        text = self._verdict()
+        fit = self.details.nominal_fit if self.details is not None else ""
+        return text if fit in ("", "converged") else f"{text} ({fit})"
+
+    def _verdict(self) -> str:
         best = self.best
+        lattice = self.details.lattice if self.details is not None else ""
+        if self.best_effect == "quantization" and lattice and "(not named" not in lattice:
+            return f"quantization: {lattice}"
         if self.best_effect == "none":
             return (
                 f"none: no gap beyond the noise (nominal RMSE {self.nominal_validation_rmse:.4g}, "

@@ -352,6 +352,59 @@ def _reflect(den: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.real(np.poly(roots))[1:]
 
 
+def _stable(structure: Structure, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """theta with the unstable poles of its linear blocks reflected into the unit circle."""
+    s, out = structure, np.array(theta, dtype=np.float64)
+    sl_b = slice(s.n_a, s.n_a + s.nb)
+    out[sl_b] = _reflect(out[sl_b])
+    if s.is_sandwich and s.ns:
+        out[-s.ns :] = _reflect(out[-s.ns :])
+    return out
+
+
+def _best_stable(structure: Structure, whole: Any, failed: FitResult, thetas: Sequence[NDArray[np.float64]]) -> FitResult | None:
+    """The best iterate of a failed fit that is a usable model, for ``NotConvergedError.
+    best_stable``: among the final estimate and every iterate of the paper's algorithm, each
+    with its unstable poles reflected (same magnitude response), those that are valid models
+    with stable linear blocks and a finite simulation; the one of lowest output error on the
+    whole record, refined by output-error Levenberg-Marquardt (whose step keeps the blocks
+    stable) where that stays a valid model. None if no iterate qualifies."""
+    best: tuple[float, NDArray[np.float64]] | None = None
+    for raw in thetas:
+        theta = _stable(structure, np.asarray(raw, dtype=np.float64))
+        if not np.all(np.isfinite(theta)):
+            continue
+        est = structure.unpack(theta)
+        if not all(spectral_radius(np.asarray(den)) < 1.0 for den in (est.b, est.s)):
+            continue
+        try:
+            structure.model(theta)
+            cost = float(whole.cost(theta))
+        except BacklashIdError:
+            continue
+        if np.isfinite(cost) and (best is None or cost < best[0]):
+            best = (cost, theta)
+    if best is None:
+        return None
+    cost, theta = best
+    try:
+        refined = levenberg_marquardt(whole, theta, max_iter=50)
+        if np.isfinite(refined.cost) and refined.cost < cost:
+            structure.model(refined.theta)
+            cost, theta = float(refined.cost), refined.theta
+    except BacklashIdError:  # the refinement left the valid models: keep the iterate
+        pass
+    n = whole.samples - whole.warmup
+    return dataclasses.replace(
+        failed,
+        model=structure.model(theta),
+        theta=np.asarray(theta, dtype=np.float64),
+        covariance=np.full((structure.size, structure.size), np.nan),
+        simulation_rmse=float(np.sqrt(cost / max(n, 1))),
+        converged=False,
+    )
+
+
 def _initial_theta(structure: Structure, u: NDArray[np.float64], y: NDArray[np.float64], start: Start, warmup: int, literal: bool) -> NDArray[np.float64]:
     """Iteration 1 (the paper: "only the parameters of the linear system are estimated"): an
     ARX fit with the measured output standing in for x, and the initial m_R1, c_L, c_R. For the
@@ -790,7 +843,8 @@ def _fit(
         refinement_converged=refined.converged if refined is not None else None,
     )
     if failure is not None:
-        raise NotConvergedError(failure, result)
+        stable = _best_stable(structure, whole, result, [theta, theta_iter, *run.history])
+        raise NotConvergedError(failure, result, stable)
     if why is not None:
         warnings.warn(
             f"{'fit_sandwich' if structure.is_sandwich else 'fit_cascade'}: the best fit of degree {structure.degree} {why}; "

@@ -15,6 +15,7 @@ use crate::effects::{AnyEffect, Sample, Stage};
 use crate::error::{Error, Result};
 use crate::model::backlash::{check_memory, GeneralBacklash};
 use crate::model::cascade::{CascadeModel, CascadeState};
+use crate::model::linear::{LinearBlock, LinearState};
 use crate::model::signal::check_signal;
 
 /// Default samples per time unit of the drifts.
@@ -94,6 +95,8 @@ pub fn simulate_augmented(
     let mut y = vec![0.0; n];
     let mut y_prev = state.y_prev;
     let mut x_prev = x0;
+    let free = drive.iter().any(|e| e.needs_free());
+    let gain = free_gain(lin);
     for t in 0..n {
         let xt = lin.output_at(&u_eff, &x, t, &state.linear);
         x[t] = xt;
@@ -104,6 +107,12 @@ pub fn simulate_augmented(
             x_prev,
             f: 0.0,
             tau: (t0 + t as f64) / time_scale,
+            x_free: if free {
+                free_response(lin, &u_eff, &x, t, &state.linear)
+            } else {
+                0.0
+            },
+            gain,
         };
         // the drive input of the linear block at t
         let mut v = u[t];
@@ -134,6 +143,49 @@ pub fn simulate_augmented(
         y[t] = out;
     }
     Ok(y)
+}
+
+/// a_1, the weight of u_eff(t) in x(t+1) (0 for a block with feedthrough, whose x(t+1) also
+/// takes u(t+1): the stick rule is then off).
+pub(crate) fn free_gain(lin: &LinearBlock) -> f64 {
+    if lin.feedthrough().is_some() {
+        0.0
+    } else {
+        lin.a().first().copied().unwrap_or(0.0)
+    }
+}
+
+/// x(t+1) without the term a_1 u_eff(t): sum_{i >= 2} a_i u_eff(t+1-i) - sum_j b_j x(t+1-j),
+/// with x(0..=t) and u_eff(0..t) of the record and the state's past before it.
+pub(crate) fn free_response(
+    lin: &LinearBlock,
+    u_eff: &[f64],
+    x: &[f64],
+    t: usize,
+    state: &LinearState,
+) -> f64 {
+    let past = |k: usize, now: &[f64], before: &[f64]| {
+        if k <= t {
+            now[t - k]
+        } else {
+            before[k - t - 1]
+        }
+    };
+    let mut acc = 0.0;
+    for (i, ai) in lin.a().iter().enumerate().skip(1) {
+        // u_eff(t + 1 - (i + 1)) = lag i from t
+        acc += ai * past(i, u_eff, &state.u_past);
+    }
+    for (j, bj) in lin.b().iter().enumerate() {
+        // x(t + 1 - (j + 1)) = lag j from t (lag 0: x(t))
+        acc -= bj
+            * if j == 0 {
+                x[t]
+            } else {
+                past(j, x, &state.x_past)
+            };
+    }
+    acc
 }
 
 /// The simulation's refusal where x(t) or y(t) is not finite.
@@ -277,6 +329,26 @@ mod tests {
         // t=0: x=0, v=0 -> u_eff = 1; t=1: x=0.5, v=0.5 -> u_eff = 1 - 0.1 - 0.1 = 0.8;
         // t=2: x=0.4, v=-0.1 -> identity backlash y = x.
         assert!(max_diff(&y, &[0.0, 0.5, 0.4]) < 1e-15);
+    }
+
+    #[test]
+    fn stick_slip_by_hand_on_a_first_order_block() {
+        // x(t+1) = 0.5 u_eff(t) + 0.5 x(t), F_c = 0.3, static 0.3 + 0.1, straight backlash.
+        let m = CascadeModel::new(
+            LinearBlock::new(vec![0.5], vec![-0.5]).unwrap(),
+            GeneralBacklash::new(0.0, 0.0, vec![1.0], vec![1.0]).unwrap(),
+        );
+        let y = sim(
+            &m,
+            &[("stick_slip", &[0.3, 0.0, 0.1, 0.05])],
+            &[0.35, 1.0, 1.0],
+            0.0,
+            TIME_SCALE,
+        );
+        // t=0: x=0, free 0, u_stay = 0, hold 0.35 <= 0.4: stuck, u_eff = 0;
+        // t=1: x=0, hold 1 > 0.4: slides, v = 0 so the dip is whole: u_eff = 1 - 0.4 = 0.6;
+        // t=2: x = 0.3.
+        assert!(max_diff(&y, &[0.0, 0.0, 0.3]) < 1e-15);
     }
 
     #[test]

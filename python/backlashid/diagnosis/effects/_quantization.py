@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
@@ -9,6 +11,68 @@ from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
 AUGMENTATION = Augmentation("quantization", ("q",), (0.0,), "y quantised to steps of q")
 
 SCORE_ROWS = 64  # steps scored at once (a SCORE_ROWS x N block of phases)
+LATTICE_RTOL = 1e-6  # a gap between measured levels is a multiple of q within this fraction of q
+LATTICE_MAX_LEVELS = 0.5  # the lattice spans at most this fraction of the samples' count in levels
+LATTICE_MIN_OCCUPIED = 0.3  # and its measured values occupy at least this fraction of its levels
+
+
+@dataclass(frozen=True)
+class Lattice:
+    """The lattice {offset + k q} the measured values lie on (a quantiser after the noise).
+
+    Attributes
+    ----------
+    q : float
+        The step.
+    offset : float
+        A point of the lattice (the smallest measured value).
+    levels : int
+        Levels spanned between the smallest and the largest value.
+    occupied : int
+        Levels that hold a measured value.
+    """
+
+    q: float
+    offset: float
+    levels: int
+    occupied: int
+
+
+def lattice(y: Array) -> Lattice | None:
+    """The lattice {o + k q} on which every value of y lies, or None.
+
+    The step is the smallest gap between the sorted distinct values (refined as the median of
+    the gaps within 1 % of it); every gap must be a whole multiple of it within
+    ``LATTICE_RTOL`` q (plus the values' rounding). Continuous data fail that at once (each
+    gap's fraction is uniform, so all of N gaps pass with probability (2e-6)^N). A lattice finer
+    than the data can show is not reported: data stored in single precision or rounded to a
+    few decimals lie on one too (of their last digit), but it spans far more levels than there
+    are samples (over ``LATTICE_MAX_LEVELS`` N) and the values occupy few of them (under
+    ``LATTICE_MIN_OCCUPIED``), while an A/D converter's quantisation that matters is coarse:
+    the samples fill most of its levels.
+    """
+    values = np.unique(y[np.isfinite(y)])
+    if values.size < 3:
+        return None
+    gaps = np.diff(values)
+    q = float(gaps.min())
+    if not q > 0.0:
+        return None
+    q = float(np.median(gaps[gaps <= 1.01 * q]))
+    span = float(values[-1] - values[0])
+    levels = int(round(span / q)) + 1
+    if levels > LATTICE_MAX_LEVELS * y.size or values.size < LATTICE_MIN_OCCUPIED * levels:
+        return None
+    k = np.rint((values - values[0]) / q)
+    if np.any(np.diff(k) < 1):
+        return None
+    # the step of least squares through the levels (the offset held at the smallest value)
+    kk = float(k @ k)
+    q = float(k @ (values - values[0]) / kk) if kk > 0 else q
+    tol = LATTICE_RTOL * q + 8.0 * np.finfo(np.float64).eps * float(np.max(np.abs(values)))
+    if np.any(np.abs(values - values[0] - k * q) > tol):
+        return None
+    return Lattice(q=q, offset=float(values[0]), levels=levels, occupied=int(values.size))
 
 
 def quantise(y: Array, q: float) -> Array:
@@ -38,7 +102,10 @@ class Quantization(Effect, rank=8, augmentation=AUGMENTATION):
     """Output quantised to steps of q."""
 
     def refit(self, prob: Problem, theta0: Array) -> Fitted:
-        """A search of q at the nominal parameters.
+        """The step of the measured values' lattice, else a search of q at the nominal parameters.
+
+        A quantiser after the noise (an A/D converter) leaves every measured value on a
+        lattice {o + k q}: q is then read off the data (:func:`lattice`).
 
         The error is piecewise constant in q with a minimum far narrower than any practical grid
         of q (q off by 1 % moves level k by k %). The measured output itself shows the steps: its
@@ -51,6 +118,11 @@ class Quantization(Effect, rank=8, augmentation=AUGMENTATION):
         serves the whole search.
         """
         y_sim = prob.simulate(theta0)
+        found = lattice(prob.y)
+        if found is not None:
+            # the measured values lie on a lattice (a quantiser after the noise): its step is
+            # read off the data, not searched
+            return theta0, {"q": found.q}, prob.output_cost(quantise(y_sim, found.q))
         spread = float(np.std(y_sim)) + 1e-12
         grid = spread * np.geomspace(0.005, 1.0, 3000)
         score = cos_scores(prob.y[prob.warmup :], grid)

@@ -44,6 +44,11 @@ pub struct Sample<'a> {
     pub f: f64,
     /// (t0 + t) / time_scale, the time of the drifts.
     pub tau: f64,
+    /// x(t+1) without the term of u_eff(t): the linear block's free response one step ahead
+    /// (Drive stage of a pass with an effect that [`Effect::needs_free`]; 0 otherwise).
+    pub x_free: f64,
+    /// a_1, the weight of u_eff(t) in x(t+1) = a_1 u_eff(t) + x_free.
+    pub gain: f64,
 }
 
 /// What a tangent hook sees of the derivatives at sample t, each d/dtheta over the refit's
@@ -56,6 +61,9 @@ pub struct Tangent<'a> {
     pub dx_prev: &'a [f64],
     /// d f(t) / d theta (Output stage only; empty before).
     pub df: &'a [f64],
+    /// d x_free / d theta (Drive stage of a pass with an effect that [`Effect::needs_free`];
+    /// empty otherwise). The gain a_1 is column 0 of theta.
+    pub dx_free: &'a [f64],
 }
 
 /// The columns in theta of an effect's parameters (in the catalogue's order); None for a
@@ -97,6 +105,11 @@ pub trait Effect: Clone + Debug + Send + Sync {
         out
     }
 
+    /// Whether its drive hook reads the free response `Sample::x_free` and gain (computed
+    /// only for a pass with such an effect).
+    fn needs_free(&self) -> bool {
+        false
+    }
     /// Its parameters, in the catalogue's order (what `from_parameters` takes).
     fn parameters(&self) -> Vec<f64>;
     /// Their names, as in the Python catalogue.
@@ -246,6 +259,10 @@ macro_rules! registry {
             pub fn output(&mut self, out: f64, s: &Sample) -> f64 {
                 match self { $(AnyEffect::$t(e) => e.output(out, s)),* }
             }
+            /// [`Effect::needs_free`].
+            pub fn needs_free(&self) -> bool {
+                match self { $(AnyEffect::$t(e) => e.needs_free()),* }
+            }
             /// [`Effect::parameters`].
             pub fn parameters(&self) -> Vec<f64> {
                 match self { $(AnyEffect::$t(e) => e.parameters()),* }
@@ -316,6 +333,7 @@ registry!(
     dead_time::DeadTime,
     saturation::Saturation,
     friction::Friction,
+    stick_slip::StickSlip,
     width_drift::WidthDrift,
     compliance::Compliance,
     hysteresis_memory::HysteresisMemory,

@@ -21,7 +21,7 @@
 //! needs an input free of theta, which a drive effect breaks, so the linear block's tangent
 //! here is the plain recursion on dx (p (na + nb) multiply-adds a sample).
 
-use crate::augmented::{branch, diverged};
+use crate::augmented::{branch, diverged, free_gain, free_response};
 use crate::effects::{AnyEffect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
 use crate::identify::gradient::OeGradient;
@@ -237,6 +237,10 @@ pub(crate) fn walk_augmented(
     }
     let (mut dxt, mut dv, mut dy, mut dout) =
         (vec![0.0; p], vec![0.0; p], vec![0.0; p], vec![0.0; p]);
+    // the free response x_free(t+1) and its tangent, for a drive effect that reads them
+    let free = drive.iter().any(|(e, _)| e.needs_free());
+    let gain = free_gain(lin);
+    let mut dfree = if free { vec![0.0; p] } else { Vec::new() };
     let (mut dcl, mut dcr) = (vec![0.0; p], vec![0.0; p]);
     let mut prev_out = vec![0.0; p];
     let mut y_prev = state.y_prev;
@@ -275,7 +279,38 @@ pub(crate) fn walk_augmented(
             x_prev,
             f: 0.0,
             tau: (t0 + t as f64) / time_scale,
+            x_free: 0.0,
+            gain,
         };
+        if free {
+            // x_free = sum_{i >= 2} a_i u_eff(t+1-i) - sum_j b_j x(t+1-j), and its tangent
+            s.x_free = free_response(lin, &u_eff, &x, t, &state.linear);
+            xcols.zero(&mut dfree);
+            for i in 2..=na {
+                // u_eff(t + 1 - i) is lag i - 1 from t
+                xcols.axpy(&mut dfree, a[i - 1], du.lag(i - 1));
+                dfree[i - 1] += if i - 1 <= t {
+                    u_eff[t + 1 - i]
+                } else {
+                    state.linear.u_past[i - 1 - t - 1]
+                };
+            }
+            for j in 1..=nb {
+                // x(t + 1 - j) is lag j - 1 from t (lag 0: x(t))
+                if j == 1 {
+                    xcols.axpy(&mut dfree, -b[0], &dxt);
+                } else {
+                    xcols.axpy(&mut dfree, -b[j - 1], dxr.lag(j - 1));
+                }
+                dfree[na + j - 1] -= if j == 1 {
+                    xt
+                } else if j - 1 <= t {
+                    x[t + 1 - j]
+                } else {
+                    state.linear.x_past[j - 1 - t - 1]
+                };
+            }
+        }
         // the drive input of the linear block at t
         let mut v = u[t];
         if driven {
@@ -284,6 +319,7 @@ pub(crate) fn walk_augmented(
                 dx: &dxt,
                 dx_prev: dxr.lag(1),
                 df: &[],
+                dx_free: &dfree,
             };
             for (e, cols) in drive.iter_mut() {
                 v = e.drive_tangent(v, &mut dv, &s, &d, cols);
@@ -360,6 +396,7 @@ pub(crate) fn walk_augmented(
                 dx: &dxt,
                 dx_prev: dxr.lag(1),
                 df: &dy,
+                dx_free: &[],
             };
             for (e, cols) in output.iter_mut() {
                 out = e.output_tangent(out, &mut dout, &s, &d, cols);
