@@ -22,7 +22,12 @@ use crate::error::{Error, Result};
 use crate::identify::gradient::OeGradient;
 use crate::identify::output_error_cost;
 use crate::identify::sensitivity::{oe_threads, overflowed};
-use crate::linalg::streaming::{fold_stream, TriangularFactor};
+use crate::linalg::streaming::{fold_stream_shared, TriangularFactor};
+
+/// The factor's batches the producing thread folds itself (one in OWN_EVERY), beside the
+/// folding thread (`fold_stream_shared`): its rows cost about a quarter of their fold at the
+/// benchmark's p = 41.
+const OWN_EVERY: usize = 3;
 use crate::model::polynomial::spectral_radius;
 use crate::model::signal::{check_same_length, check_signal};
 
@@ -379,7 +384,7 @@ impl WienerHammersteinProblem {
     pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
         let p = self.free.len();
         let (y, warmup) = (&self.y, self.warmup);
-        let (factor, cost) = fold_stream(p, oe_threads(self.u.len()), |sink| {
+        let (factor, cost) = fold_stream_shared(p, oe_threads(self.u.len()), OWN_EVERY, |sink| {
             self.walk(theta, |t, yt, row| match t >= warmup {
                 true => sink.push(row, y[t] - yt),
                 false => Ok(()),
