@@ -25,8 +25,9 @@ use crate::identify::sensitivity::{
 };
 use crate::linalg::streaming::default_threads;
 use crate::model::backlash::GeneralBacklash;
-use crate::model::linear::Boxed;
+use crate::model::backlash::Step;
 use crate::model::linear::LinearBlock;
+use crate::model::linear::{BlockRecursion, Boxed};
 use crate::model::switching::switching;
 
 /// g = J^T r over the samples t >= warmup and the cost sum r^2.
@@ -128,12 +129,8 @@ fn gradient_from_threads(
     branch_degree(backlash)?;
     if threads >= 2 && start.is_none() {
         let split = match backlash.padded_step() {
-            Some(padded) => split_gradient(linear, backlash, u, y, warmup, |xt, yp| {
-                padded.switching(xt, yp)
-            }),
-            None => split_gradient(linear, backlash, u, y, warmup, |xt, yp| {
-                switching(backlash, xt, yp)
-            }),
+            Some(padded) => split_gradient(linear, backlash, u, y, warmup, padded),
+            None => split_gradient(linear, backlash, u, y, warmup, backlash),
         };
         if let Some(out) = split {
             return out.finished();
@@ -193,7 +190,7 @@ fn split_gradient(
     u: &[f64],
     y: &[f64],
     warmup: usize,
-    flags: impl Fn(f64, f64) -> (bool, bool) + Copy + Send + Sync,
+    step: impl Step + Send + Sync,
 ) -> Option<OeGradient> {
     let (len, nb) = (u.len(), linear.nb());
     let n = backlash.left().coefficients().len();
@@ -206,13 +203,44 @@ fn split_gradient(
     if rho.is_nan() || rho >= 1.0 || (rho > 0.0 && DECAYED.ln() / rho.ln() > m as f64 / 10.0) {
         return None;
     }
+    // the forward pass in blocks: x, then y and the case of each sample (f1 + 2 f2) from
+    // the step itself, so that the reverse pass reads the case instead of recomputing it
     let mut rec = linear.with_recursion(&linear.rest_state(), Boxed);
-    let mut x_head = vec![0.0; m];
-    rec.run_block(&u[..m], &mut x_head);
-    if !x_head.iter().all(|v| v.is_finite()) {
+    let forward = |rec: &mut Box<dyn BlockRecursion>,
+                   u: &[f64],
+                   x: &mut [f64],
+                   y: &mut [f64],
+                   case: &mut [u8],
+                   y0: f64| {
+        let mut finite = true;
+        let mut y_prev = y0;
+        for (k, uk) in u.chunks(FORWARD_BLOCK).enumerate() {
+            let at = k * FORWARD_BLOCK;
+            let xs = &mut x[at..at + uk.len()];
+            rec.run_block(uk, xs);
+            for ((xt, yt), ct) in xs
+                .iter()
+                .zip(&mut y[at..at + uk.len()])
+                .zip(&mut case[at..at + uk.len()])
+            {
+                let (v, c) = step.step_case(*xt, y_prev);
+                (*yt, *ct, y_prev) = (v, c, v);
+                finite &= xt.is_finite() & v.is_finite();
+            }
+        }
+        finite
+    };
+    let (mut x_head, mut y_head, mut case_head) = (vec![0.0; m], vec![0.0; m], vec![0u8; m]);
+    if !forward(
+        &mut rec,
+        &u[..m],
+        &mut x_head,
+        &mut y_head,
+        &mut case_head,
+        0.0,
+    ) {
         return None;
     }
-    let y_head = backlash.simulate(&x_head, 0.0).ok()?;
     let cols = cascade_cols(linear, backlash);
     let head = Reverse {
         linear,
@@ -224,13 +252,16 @@ fn split_gradient(
         warmup,
         start: None,
     };
+    let flags_head = |t: usize| decode(case_head[t]);
     std::thread::scope(|scope| {
         let second = scope.spawn(|| {
+            let flags = flags_head;
+            let horner = |xt: f64, yp: f64| decode(step.step_case(xt, yp).1);
             // the particular solution over t < M, then the homogeneous ones
             let mut g = vec![0.0; cols];
             let mut state = ReverseState::zero();
             head.kernel_any(flags, FIXED, m, &mut g, &mut state, true);
-            head.general(flags, FIXED, &mut g, &mut state, true);
+            head.general(horner, FIXED, &mut g, &mut state, true);
             let units: Vec<Vec<f64>> = (0..=nb)
                 .map(|k| {
                     let mut unit = ReverseState::zero();
@@ -239,7 +270,7 @@ fn split_gradient(
                     } else {
                         unit.nu_lags[k - 1] = 1.0;
                     }
-                    head.homogeneous(flags, m, unit, cols)
+                    head.homogeneous(flags, horner, m, unit, cols)
                 })
                 .collect();
             (g, state.cost, units)
@@ -247,17 +278,20 @@ fn split_gradient(
         // the first thread: the rest of the simulation, then the reverse pass over t >= M on
         // the record from M - FIXED (the kernel's lags)
         let rest = len - m + FIXED;
-        let mut x_tail = vec![0.0; rest];
+        let (mut x_tail, mut y_tail, mut case_tail) =
+            (vec![0.0; rest], vec![0.0; rest], vec![0u8; rest]);
         x_tail[..FIXED].copy_from_slice(&x_head[m - FIXED..]);
-        rec.run_block(&u[m..], &mut x_tail[FIXED..]);
-        let tail_out = if x_tail.iter().all(|v| v.is_finite()) {
-            backlash.simulate(&x_tail[FIXED..], y_head[m - 1]).ok()
-        } else {
-            None
-        };
-        let tail_out = tail_out.map(|y_rest| {
-            let mut y_tail = y_head[m - FIXED..].to_vec();
-            y_tail.extend_from_slice(&y_rest);
+        y_tail[..FIXED].copy_from_slice(&y_head[m - FIXED..]);
+        case_tail[..FIXED].copy_from_slice(&case_head[m - FIXED..]);
+        let finite = forward(
+            &mut rec,
+            &u[m..],
+            &mut x_tail[FIXED..],
+            &mut y_tail[FIXED..],
+            &mut case_tail[FIXED..],
+            y_head[m - 1],
+        );
+        let tail_out = finite.then(|| {
             let tail = Reverse {
                 linear,
                 backlash,
@@ -270,7 +304,14 @@ fn split_gradient(
             };
             let mut g = vec![0.0; cols];
             let mut state = ReverseState::zero();
-            tail.kernel_any(flags, FIXED, rest, &mut g, &mut state, true);
+            tail.kernel_any(
+                |t: usize| decode(case_tail[t]),
+                FIXED,
+                rest,
+                &mut g,
+                &mut state,
+                true,
+            );
             (g, state)
         });
         let (g_head, cost_head, units) = second.join().expect("the gradient's second thread");
@@ -290,6 +331,15 @@ fn split_gradient(
         out.cost = at_m.cost + cost_head;
         Some(out)
     })
+}
+
+/// Samples of x made per block before their backlash steps (`split_gradient`).
+const FORWARD_BLOCK: usize = 4096;
+
+/// (f1, f2) from f1 + 2 f2.
+#[inline(always)]
+fn decode(case: u8) -> (bool, bool) {
+    (case & 1 != 0, case & 2 != 0)
 }
 
 /// The backward pass of `cascade_oe_gradient` over a simulated record.
@@ -339,8 +389,10 @@ impl Reverse<'_> {
         // behind), then the first FIXED by the general loop: the same operations in the same
         // order as the general loop throughout, the same bits
         let len = self.u.len();
+        let (x, y_sim) = (self.x, self.y_sim);
+        let at = |t: usize| flags(x[t], y_sim[t - 1]); // t >= FIXED > 0
         let end = if len > FIXED
-            && self.kernel_any(flags, FIXED, len, &mut out.gradient, &mut state, true)
+            && self.kernel_any(at, FIXED, len, &mut out.gradient, &mut state, true)
         {
             FIXED
         } else {
@@ -355,7 +407,7 @@ impl Reverse<'_> {
     /// orders are beyond it.
     fn kernel_any(
         &self,
-        flags: impl Fn(f64, f64) -> (bool, bool),
+        flags: impl Fn(usize) -> (bool, bool),
         lo: usize,
         hi: usize,
         g: &mut [f64],
@@ -383,7 +435,7 @@ impl Reverse<'_> {
     #[allow(clippy::too_many_arguments)]
     fn kernel<const N: usize, const NR: usize>(
         &self,
-        flags: impl Fn(f64, f64) -> (bool, bool),
+        flags: impl Fn(usize) -> (bool, bool),
         lo: usize,
         hi: usize,
         g: &mut [f64],
@@ -411,7 +463,7 @@ impl Reverse<'_> {
             mut cost,
         } = *state;
         for t in (lo..hi).rev() {
-            let (f1, f2) = flags(x[t], y_sim[t - 1]); // t >= FIXED > 0
+            let (f1, f2) = flags(t);
             let r = if t >= warmup { y[t] - y_sim[t] } else { 0.0 };
             let (wl, wr) = (f64::from(u8::from(f1)), f64::from(u8::from(f2)));
             lambda = r + next_holds * lambda;
@@ -474,7 +526,8 @@ impl Reverse<'_> {
     /// DECAYED) or the record starts: its contribution to g (the model's `cols` columns).
     fn homogeneous(
         &self,
-        flags: impl Fn(f64, f64) -> (bool, bool) + Copy,
+        flags: impl Fn(usize) -> (bool, bool) + Copy,
+        horner: impl Fn(f64, f64) -> (bool, bool),
         hi: usize,
         unit: ReverseState,
         cols: usize,
@@ -490,7 +543,7 @@ impl Reverse<'_> {
                 return g;
             }
         }
-        self.general(flags, t, &mut g, &mut state, false);
+        self.general(horner, t, &mut g, &mut state, false);
         g
     }
 
