@@ -87,9 +87,12 @@ pub(crate) fn cascade_oe_gradient_from(
     )
 }
 
-/// Samples from which the cascade's gradient pass runs on two threads (`split_gradient`).
-/// Example 1 on this 2-core machine (2026-11-24): 1 / 2 threads 5.2 / 5.0 ms at N = 2e5,
-/// 26 / 15 ms at 1e6.
+/// Samples from which the cascade's gradient pass runs on two threads (`split_gradient`):
+/// where the second thread's start and its homogeneous responses (about 1000 samples each on
+/// Example 1) are small against the pass (about 5 ms at 2e5); below it the pass is the
+/// one-thread one, bit for bit. A split pass at 1e6 costs slightly less CPU than the
+/// one-thread pass (60 passes: 1.52 against 1.65-1.71 s user time, 2026-11-24); wall times on
+/// the shared 2-core machine were too noisy to place the threshold finer.
 const GRADIENT_SECOND_THREAD_FROM: usize = 200_000;
 
 /// Threads of the cascade's gradient pass for `rows` samples (`cascade_oe_gradient_threads`).
