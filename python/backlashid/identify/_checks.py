@@ -32,10 +32,15 @@ def branch_problems(model: Any, u: NDArray[np.float64], warmup: int) -> str | No
     first = model.linear if hasattr(model, "linear") else model.input_linear
     records = u if isinstance(u, list) else [u]
     x = np.concatenate([np.asarray(first.simulate(r))[warmup:] for r in records])
-    x = x[np.isfinite(x)]
     if x.size == 0:
         return None
-    check = model.backlash.check_branches(float(x.min()), float(x.max()))
+    lo, hi = float(x.min()), float(x.max())  # both finite: every x is (min and max pass NaN on)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        x = x[np.isfinite(x)]
+        if x.size == 0:
+            return None
+        lo, hi = float(x.min()), float(x.max())
+    check = model.backlash.check_branches(lo, hi)
     if check.is_valid:
         return None
     parts = []

@@ -32,7 +32,7 @@ from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
 from ._starts import linear_start, pole_restarts, scale_starts
 from ._state import lm_holding_vanishing
 from ._structure import Structure
-from ._valid import ValidOnly, why_not_acceptable
+from ._valid import ValidOnly, acceptable_motion, why_not_acceptable
 
 __all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
 
@@ -760,8 +760,10 @@ def _fit(
     # an optimum that is no valid backlash or hardly moves it: continue from the fit of the
     # next lower degree, the search kept among valid models that move (_valid.py)
     why = guard = None
+    checked: tuple[NDArray[np.float64], float | None] | None = None  # a theta and its moving fraction
     if refined is not None and structure.degree > 1:
-        why = why_not_acceptable(structure, whole, refined.theta, u_arr, user_warmup, min_moving)
+        why, moved = acceptable_motion(structure, whole, refined.theta, u_arr, user_warmup, min_moving)
+        checked = refined.theta, moved
         lower = _lower_degree_fallback(structure, whole, u_arr, user_warmup, min_moving, arguments) if why else None
         if lower is None:
             why = None
@@ -806,7 +808,12 @@ def _fit(
         failure = "the identification diverged: the estimate simulates to no finite output"
     if failure is None and invalid is not None:
         failure = f"the final estimate is not a valid model ({invalid}); try a lower branch degree, other orders or other starts"
-    moving = _moving(structure, theta, u_arr, user_warmup, model) if model is not None else 0.0
+    if model is None:
+        moving = 0.0
+    elif checked is not None and checked[0] is theta and checked[1] is not None:
+        moving = checked[1]  # found by the check above at this very theta (a long record's simulation spared)
+    else:
+        moving = _moving(structure, theta, u_arr, user_warmup, model)
     if failure is not None:
         try:
             noise_var, covariance = _covariance(structure, run, refined)

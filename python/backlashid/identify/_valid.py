@@ -18,7 +18,7 @@ from ..errors import ModelError
 from . import _records
 from ._structure import Structure
 
-__all__ = ["ValidOnly", "why_not_acceptable"]
+__all__ = ["ValidOnly", "acceptable_motion", "why_not_acceptable"]
 
 
 def why_not_acceptable(
@@ -31,19 +31,32 @@ def why_not_acceptable(
 ) -> str | None:
     """None for a stable, valid model that moves the backlash on at least ``min_moving`` of
     the samples after ``warmup`` (from rest; over every record of a list), else what is wrong."""
+    return acceptable_motion(structure, prob, theta, u, warmup, min_moving)[0]
+
+
+def acceptable_motion(
+    structure: Structure,
+    prob: Any,
+    theta: NDArray[np.float64],
+    u: NDArray[np.float64] | list[NDArray[np.float64]],
+    warmup: int,
+    min_moving: float,
+) -> tuple[str | None, float | None]:
+    """:func:`why_not_acceptable` and the moving fraction it found (None if it stopped
+    before simulating), which the fit reports without simulating the record again."""
     if not prob.feasible(theta):
-        return "is unstable"
+        return "is unstable", None
     try:
         model = structure.model(theta)
     except ModelError as exc:
-        return f"is no valid backlash ({exc})"
+        return f"is no valid backlash ({exc})", None
     try:
         moving = _records.moving(model, u, warmup)
     except ModelError as exc:
-        return f"does not simulate ({exc})"
+        return f"does not simulate ({exc})", None
     if moving < min_moving:
-        return f"moves the backlash on only {100 * moving:.1f} % of samples (min_moving = {min_moving:g})"
-    return None
+        return f"moves the backlash on only {100 * moving:.1f} % of samples (min_moving = {min_moving:g})", moving
+    return None, moving
 
 
 class ValidOnly:

@@ -22,7 +22,18 @@ use crate::error::{Error, Result};
 use crate::identify::gradient::OeGradient;
 use crate::identify::output_error_cost;
 use crate::identify::sensitivity::{oe_threads, overflowed};
-use crate::linalg::streaming::{fold_stream, TriangularFactor};
+use crate::linalg::streaming::default_threads;
+use crate::linalg::streaming::{fold_stream_shared, TriangularFactor};
+
+/// The factor's batches the producing thread folds itself (one in OWN_EVERY), beside the
+/// folding thread (`fold_stream_shared`): its rows cost about a quarter of their fold at the
+/// benchmark's p = 41.
+const OWN_EVERY: usize = 3;
+
+/// Samples from which the factor's rows are made on one thread while the other folds them
+/// (below `oe_threads`' threshold, where the producer folds none itself: the same bits as one
+/// thread, the rows' time hidden behind the fold).
+const PIPELINE_FROM: usize = 8192;
 use crate::model::polynomial::spectral_radius;
 use crate::model::signal::{check_same_length, check_signal};
 
@@ -379,7 +390,15 @@ impl WienerHammersteinProblem {
     pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
         let p = self.free.len();
         let (y, warmup) = (&self.y, self.warmup);
-        let (factor, cost) = fold_stream(p, oe_threads(self.u.len()), |sink| {
+        let len = self.u.len();
+        // long records: both threads fold (rounding differs from one thread); shorter ones
+        // from PIPELINE_FROM: rows on one thread, folds on the other, the same bits
+        let (threads, own_every) = match (oe_threads(len), len >= PIPELINE_FROM) {
+            (t, _) if t >= 2 => (t, OWN_EVERY),
+            (_, true) => (default_threads().min(2), 0),
+            _ => (1, 0),
+        };
+        let (factor, cost) = fold_stream_shared(p, threads, own_every, |sink| {
             self.walk(theta, |t, yt, row| match t >= warmup {
                 true => sink.push(row, y[t] - yt),
                 false => Ok(()),

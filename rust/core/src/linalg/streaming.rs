@@ -548,6 +548,12 @@ enum SinkTarget {
     Channel {
         full: std::sync::mpsc::SyncSender<(usize, Vec<f64>, Vec<f64>)>,
         empty: std::sync::mpsc::Receiver<(Vec<f64>, Vec<f64>)>,
+        /// With `own_every` > 0, every `own_every`-th batch (counted over all parts in
+        /// `handed`) is folded by the producer into `own`, the others by the folding thread
+        /// (`fold_stream_shared`); a fixed pattern, so a fixed result.
+        own: Vec<TriangularFactor>,
+        own_every: usize,
+        handed: usize,
     },
 }
 
@@ -649,7 +655,20 @@ impl RowSink {
                 self.a[part].clear();
                 self.b[part].clear();
             }
-            SinkTarget::Channel { full, empty } => {
+            SinkTarget::Channel {
+                full,
+                empty,
+                own,
+                own_every,
+                handed,
+            } => {
+                *handed += 1;
+                if *own_every > 0 && *handed % *own_every == 0 {
+                    own[part].fold(&self.a[part], &self.b[part])?;
+                    self.a[part].clear();
+                    self.b[part].clear();
+                    return Ok(());
+                }
                 let most = self.widths.iter().max().copied().unwrap_or(0);
                 let (mut a, mut b) = match empty.try_recv() {
                     Ok((mut a, mut b)) => {
@@ -700,6 +719,35 @@ pub fn fold_stream(
 pub fn fold_stream_parts(
     widths: &[usize],
     threads: usize,
+    produce: impl FnOnce(&mut RowSink) -> Result<()>,
+) -> Result<StreamedParts> {
+    fold_stream_inner(widths, threads, 0, produce)
+}
+
+/// `fold_stream` for rows that are cheap to make against their fold (many columns): with
+/// `threads` >= 2 the producer folds every `own_every`-th batch itself (into a factor merged
+/// at the end) while the second thread folds the others, so both cores fold. The result
+/// depends on `threads` and `own_every` only through rounding (a fixed pattern: the same
+/// bits run to run). Wiener-Hammerstein at p = 41 (2026-11-24): the producer's rows cost
+/// about a quarter of their fold.
+pub fn fold_stream_shared(
+    p: usize,
+    threads: usize,
+    own_every: usize,
+    produce: impl FnOnce(&mut RowSink) -> Result<()>,
+) -> Result<(TriangularFactor, f64)> {
+    let mut out = fold_stream_inner(&[p], threads, own_every, produce)?;
+    let factor = out
+        .factors
+        .pop()
+        .unwrap_or_else(|| TriangularFactor::new(p));
+    Ok((factor, out.sum_squares))
+}
+
+fn fold_stream_inner(
+    widths: &[usize],
+    threads: usize,
+    own_every: usize,
     produce: impl FnOnce(&mut RowSink) -> Result<()>,
 ) -> Result<StreamedParts> {
     let new_factors = || {
@@ -763,12 +811,16 @@ pub fn fold_stream_parts(
             SinkTarget::Channel {
                 full: full_tx,
                 empty: empty_rx,
+                own: new_factors(),
+                own_every,
+                handed: 0,
             },
             HANDOVER_BLOCKS * BLOCK_ROWS,
         );
         let produced = produce(&mut s).and_then(|_| s.finish());
-        let SinkTarget::Channel { full, empty } =
-            std::mem::replace(&mut s.target, SinkTarget::Local(Vec::new()))
+        let SinkTarget::Channel {
+            full, empty, own, ..
+        } = std::mem::replace(&mut s.target, SinkTarget::Local(Vec::new()))
         else {
             unreachable!("the sink was made with a channel")
         };
@@ -777,6 +829,15 @@ pub fn fold_stream_parts(
             Ok(f) => f,
             Err(panic) => std::panic::resume_unwind(panic),
         };
+        // the producer's own batches join the folder's factors (nothing to merge without)
+        let folded = folded.and_then(|mut factors| {
+            for (f, o) in factors.iter_mut().zip(&own) {
+                if o.rows > 0 {
+                    f.merge(o)?;
+                }
+            }
+            Ok(factors)
+        });
         // every buffer is back: the folder returned each one it took
         for buffers in empty.try_iter() {
             keep_spare(buffers);
@@ -1226,5 +1287,52 @@ mod tests {
                 (one.clone(), ss1)
             );
         }
+    }
+
+    #[test]
+    fn shared_folding_agrees_with_one_folder_and_repeats_its_bits() {
+        // rows over several hand-over batches: the producer folds every third batch, the
+        // folding thread the rest, merged at the end
+        let (rows, p) = (4 * HANDOVER_BLOCKS * BLOCK_ROWS + 321, 12);
+        let (a, b) = problem(rows, p, 17);
+        let produce = |sink: &mut RowSink| {
+            for t in 0..rows {
+                sink.push(&a[t * p..(t + 1) * p], b[t])?;
+            }
+            Ok(())
+        };
+        let (one, ss1) = fold_stream(p, 1, produce).unwrap();
+        let (shared, ss2) = fold_stream_shared(p, 2, 3, produce).unwrap();
+        assert_eq!(ss1, ss2);
+        assert_eq!(shared.rows, rows);
+        let names = names(p);
+        let (x1, x2) = (one.solve(&names).unwrap(), shared.solve(&names).unwrap());
+        for j in 0..p {
+            assert!((x1.theta[j] - x2.theta[j]).abs() < 1e-12 * (1.0 + x1.theta[j].abs()));
+        }
+        // R^T R is the same to rounding (R itself only up to the signs of its rows)
+        let n = p + 1;
+        for i in 0..n {
+            for j in 0..n {
+                let gram = |r: &[f64]| (0..n).map(|k| r[k * n + i] * r[k * n + j]).sum::<f64>();
+                let (g1, g2) = (gram(one.r_aug()), gram(shared.r_aug()));
+                assert!(
+                    (g1 - g2).abs() < 1e-11 * (1.0 + g1.abs()),
+                    "{i} {j}: {g1} {g2}"
+                );
+            }
+        }
+        // a fixed pattern: the same bits on every run; one thread or own_every 0 is fold_stream
+        for _ in 0..3 {
+            assert_eq!(
+                fold_stream_shared(p, 2, 3, produce).unwrap(),
+                (shared.clone(), ss2)
+            );
+        }
+        assert_eq!(
+            fold_stream_shared(p, 1, 3, produce).unwrap(),
+            (one.clone(), ss1)
+        );
+        assert_eq!(fold_stream_shared(p, 2, 0, produce).unwrap(), (one, ss1));
     }
 }

@@ -249,9 +249,25 @@ pub(crate) trait Step: Copy {
     fn step(&self, x: f64, y_prev: f64) -> f64;
     /// f1(t) or f2(t) of eq (12)-(13): the step takes a branch (`switching::switching`).
     fn moves(&self, x: f64, y_prev: f64) -> bool;
+    /// The step and its case, f1 + 2 f2 (`switching::switching`'s flags, the same bits).
+    fn step_case(&self, x: f64, y_prev: f64) -> (f64, u8);
+}
+
+/// f1 + 2 f2 of eq (12)-(13) (case order of eq 1) from L(x) and R(x), as
+/// `switching::switching` computes them.
+#[inline(always)]
+fn case_of(l: f64, r: f64, y_prev: f64) -> (f64, u8) {
+    let f1 = l - y_prev <= 0.0;
+    let f2 = y_prev - r <= 0.0 && !f1;
+    (select(l, r, y_prev), u8::from(f1) | (u8::from(f2) << 1))
 }
 
 impl Step for &GeneralBacklash {
+    #[inline(always)]
+    fn step_case(&self, x: f64, y_prev: f64) -> (f64, u8) {
+        case_of(self.left.value(x), self.right.value(x), y_prev)
+    }
+
     #[inline(always)]
     fn step(&self, x: f64, y_prev: f64) -> f64 {
         GeneralBacklash::step(self, x, y_prev)
@@ -314,6 +330,11 @@ impl PaddedStep {
 }
 
 impl Step for PaddedStep {
+    #[inline(always)]
+    fn step_case(&self, x: f64, y_prev: f64) -> (f64, u8) {
+        case_of(self.left.value(x), self.right.value(x), y_prev)
+    }
+
     #[inline(always)]
     fn step(&self, x: f64, y_prev: f64) -> f64 {
         select(self.left.value(x), self.right.value(x), y_prev)
