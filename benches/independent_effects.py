@@ -61,11 +61,19 @@ and marked ``params["kappa_rule"]``):
   friction (its stick band looks like wider play), a small extra lag and a branch change near
   a cubic were absorbed by the nominal fit almost entirely (validation
   RMSE within 5 % of the noise floor at ENR 3). ``--check`` prints kappa beside the nominal
-  fit's own figure, sqrt((RMSE / sigma)^2 - 1) / ENR (on a sample they agreed within 0.15). The rule is
-  linear in d and ignores the widths' bound c >= 0, so it cannot judge an output offset (to
-  first order an offset is a width change): output_offset has its own rule below, and a
-  nominal refit still absorbs much of it (in --check about 0.2 of it is left: a sensor offset on
-  a plant with play mostly reads as play asymmetry);
+  fit's own figure, sqrt((RMSE / sigma)^2 - 1) / ENR. Their medians on the tune seeds agree
+  within 0.1 for saturation, branch_degree, compliance, quantization, hysteresis_memory,
+  colored_noise and cogging; the fit leaves more than kappa for width_drift (0.9 vs 0.7) and
+  gain_drift (0.5-0.6 vs 0.4-0.5), where kappa is conservative; but the nonlinear
+  nominal fit absorbs more than this first-order rule sees for dead_time (kappa median 0.30-0.36,
+  the fit leaves 0.09-0.10), linear_order (0.26-0.31 vs 0.09-0.12) and friction at ENR 3 (0.29
+  vs 0.12): on those, much of the stated ENR is not visible to any diagnoser that starts from
+  the nominal fit (a known limit of this generator; a rule on the nominal fit itself would
+  make the cases depend on the package). The rule is linear in d and ignores the widths' bound
+  c >= 0, so it cannot judge an output offset (to first order an offset is a width change):
+  output_offset has its own rule below, and a nominal refit still absorbs much of it (the fit
+  leaves about 0.18 of it: a sensor offset on a plant with play mostly reads as play
+  asymmetry);
 - every effect: sigma / std(y_nominal) must lie in SIGMA_RATIO = [0.002, 0.35] (outside it, a
   noise no real sensor has, or an effect so large it is not a "missing detail");
 - saturation: the clip must be active on 3-30 % of the samples;
