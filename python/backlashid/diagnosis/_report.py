@@ -144,8 +144,9 @@ class DiagnosisDetails:
     modulation_p_value : float
         p-value of the residual being a slowly modulated copy of the output.
     position_p_value : float
-        p-value of the residual being a function of where the drive is (of the nominal model's
-        x and output, binned): noise does not depend on the position, a cogging torque does.
+        p-value of the residual being a function of where the drive is (its bin means of the
+        nominal model's x and output, fitted on the estimation record, predict the validation
+        residual): noise does not depend on the position, a cogging torque does.
     significance_level : float
         The Bonferroni-corrected level the candidates were judged at.
     noise_floor : str
