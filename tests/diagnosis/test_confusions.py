@@ -178,3 +178,38 @@ def test_dead_time_is_named_over_a_higher_order_on_the_same_footing() -> None:
     assert report.best_effect == "dead_time" and report.best.params["d"] == 2
     order = next(c for c in report.ranking if c.effect == "linear_order")
     assert report.best.criterion < order.criterion and report.best.n_extra == 1 and order.n_extra == 2
+
+
+# -- a position-dependent residual is not noise ---------------------------------------------------
+
+
+def _records_with(extra: str, seed: int) -> tuple[bx.CascadeModel, np.ndarray, np.ndarray]:
+    m = bx.example1()
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-1.5, 1.5, 2 * N)
+    clean = m.simulate(u)
+    y = clean + 0.02 * rng.standard_normal(2 * N)
+    if extra == "cogging":  # a torque ripple periodic in the position: out of the catalogue
+        y = y + 0.04 * np.sin(2 * np.pi * clean / 0.15)
+    else:  # AR(1) sensor noise, independent of the position
+        w = 0.03 * rng.standard_normal(2 * N)
+        v = np.zeros(2 * N)
+        for t in range(1, 2 * N):
+            v[t] = 0.9 * v[t - 1] + w[t]
+        y = y + v
+    return m, u, y
+
+
+def test_a_residual_that_depends_on_the_position_is_not_named_colored_noise() -> None:
+    m, u, y = _records_with("cogging", 7)
+    report = bx.diagnose(m, (u[:N], y[:N]), (u[N:], y[N:]))
+    assert report.best_effect == "unexplained"
+    assert report.details.position_p_value < 1e-10
+    assert any("position" in why for why in report.details.colored_noise_ruled_out)
+
+
+def test_colored_noise_does_not_depend_on_the_position() -> None:
+    m, u, y = _records_with("ar", 7)
+    report = bx.diagnose(m, (u[:N], y[:N]), (u[N:], y[N:]))
+    assert report.best_effect == "colored_noise"
+    assert report.details.position_p_value > report.details.significance_level

@@ -20,7 +20,9 @@
    - else colored_noise if no significant deterministic candidate closes a quarter (noise is
      independent of the input), its noise model predicts the residual significantly better,
      and the residual is neither explained by the input (a cross-validated black box of input
-     features) nor modulated by the model's output (a drifting gain: prewhitened F-test);
+     features), nor modulated by the model's output (a drifting gain: prewhitened F-test),
+     nor a function of the drive's position (a cogging torque: bin means of x and of the
+     output fitted on the estimation record predict the validation residual);
    - else "unexplained".
    Where none of these names a deterministic candidate ("none", colored_noise, "unexplained"),
    quantization is named if the measured outputs of both records lie on one lattice
@@ -70,6 +72,7 @@ __all__ = ["diagnose", "ALPHA", "CLOSE_ENOUGH", "default_warmup", "estimated_sta
 ALPHA = 0.01  # family-wise significance level of "the validation error improved"
 CLOSE_ENOUGH = 0.5  # a candidate must close at least this fraction of the gap
 MATERIAL = 0.25  # a significant deterministic candidate closing this much rules out colored noise
+POSITION_BINS = 32  # bins of x and of y_nom in the test of a position-dependent residual
 MATERIAL_GAP = 0.01  # a gap under this fraction of the noise variance is "none", however significant
 HAC_LAGS = 20  # Newey-West lags of the paired test
 SIGNATURE_Z = 3.0  # |z| of the residual against the effect's change after augmentation
@@ -324,6 +327,28 @@ def _modulation_p(residual: Array, y_nom: Array, phi: Array, order: int = 4) -> 
     return float(stats.f.sf(((rss0 - rss1) / m) / (rss1 / dof), m, dof))
 
 
+def _position_bins(x: Array, y_nom: Array, edges: tuple[Array, Array]) -> Array:
+    """Indicators of the bins of x and of y_nom (the first bin of each is the base), and ones."""
+    cols = [np.ones(x.size)]
+    for s, e in zip((x, y_nom), edges):
+        idx = np.searchsorted(e, s, side="right")
+        cols.append((idx[:, None] == np.arange(1, e.size + 1)[None, :]).astype(float))
+    return np.column_stack(cols)
+
+
+def _position_p(x_e: Array, ynom_e: Array, r_e: Array, x_v: Array, ynom_v: Array, r_v: Array, bins: int = POSITION_BINS) -> float:
+    """Is the residual a function of where the drive is, rather than noise? The nominal
+    residual's mean in each quantile bin of x(t) and of y_nom(t) (a cogging torque, a
+    position-dependent load: periodic or irregular in the position, so bins and not a
+    polynomial), fitted on the estimation record, must predict the validation residual
+    (paired test of the squared errors): cross-validated, so slow colored noise, whose bin means
+    on one record say nothing of the next, leaves the test valid."""
+    q = np.linspace(0.0, 1.0, bins + 1)[1:-1]
+    edges = (np.quantile(x_e, q), np.quantile(ynom_e, q))
+    coef = lstsq(_position_bins(x_e, ynom_e, edges), r_e)
+    return _paired_p(r_v, r_v - _position_bins(x_v, ynom_v, edges) @ coef)
+
+
 def _signature_removed(residual: Array, change: Array) -> bool:
     """The candidate's residual no longer correlates with the change the effect makes."""
     nc = float(np.linalg.norm(change))
@@ -515,6 +540,9 @@ def diagnose(
         estimated = True
     phi = scored["colored_noise"].model.ar if "colored_noise" in scored else np.zeros(0)
     p_modulation = _modulation_p(r0, ynom_v[warmup:], phi)
+    x_v = model.linear.simulate(u_v)
+    x_e = model.linear.simulate(u_e)
+    p_position = _position_p(x_e[warmup:], ynom_e[warmup:], (y_e - ynom_e)[warmup:], x_v[warmup:], ynom_v[warmup:], r0)
     gap = max(mse0 - floor, 0.0)
     gap_closed = {e: (mse0 - s.mse) / gap if gap > 0 else 0.0 for e, s in scored.items()}
 
@@ -552,6 +580,7 @@ def diagnose(
             and not any(gap_closed[s.effect] >= MATERIAL for s in deterministic)
             and p_input >= level
             and p_modulation >= level
+            and p_position >= level
         ):
             # noise independent of the input: no deterministic candidate may improve the
             # validation error materially
@@ -577,6 +606,8 @@ def diagnose(
             ruled_out.append(f"the residual depends on the input (p {p_input:.2g})")
         if p_modulation < level:
             ruled_out.append(f"the residual is modulated by the output (p {p_modulation:.2g})")
+        if p_position < level:
+            ruled_out.append(f"the residual depends on the drive's position (p {p_position:.2g})")
         material = [s.effect for s in deterministic if gap_closed[s.effect] >= MATERIAL]
         if material:
             ruled_out.append(f"{material[0]} closes over a quarter of the gap")
@@ -608,6 +639,7 @@ def diagnose(
         black_box_p_value=p_black_box,
         input_p_value=p_input,
         modulation_p_value=p_modulation,
+        position_p_value=p_position,
         significance_level=level,
         noise_floor=(
             "given noise_std"
@@ -633,7 +665,6 @@ def diagnose(
         ),
         nominal_fit="converged" if nominal_converged else NOT_CONVERGED,
     )
-    x_v = model.linear.simulate(u_v)
     tests = residual_tests(residual_full[warmup:], u_v[warmup:], x_v[warmup:])
     regimes = regime_shares(
         model, u_v, residual_full, warmup=warmup,

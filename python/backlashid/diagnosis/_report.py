@@ -143,6 +143,10 @@ class DiagnosisDetails:
         the input?).
     modulation_p_value : float
         p-value of the residual being a slowly modulated copy of the output.
+    position_p_value : float
+        p-value of the residual being a function of where the drive is (its bin means of the
+        nominal model's x and output, fitted on the estimation record, predict the validation
+        residual): noise does not depend on the position, a cogging torque does.
     significance_level : float
         The Bonferroni-corrected level the candidates were judged at.
     noise_floor : str
@@ -175,6 +179,7 @@ class DiagnosisDetails:
     black_box_p_value: float = float("nan")
     input_p_value: float = float("nan")
     modulation_p_value: float = float("nan")
+    position_p_value: float = float("nan")
     significance_level: float = float("nan")
     noise_floor: str = ""
     warmup_rule: str = ""
