@@ -277,9 +277,9 @@ def _lag(s: Array, k: int) -> Array:
     return np.concatenate([np.zeros(k), s[:-k]]) if k else s
 
 
-def _features(model: CascadeModel, u: Array, y_nom: Array, resid: Array | None, t0: float, total: float) -> Array:
-    """Regressors of the black-box residual model (see the module docstring)."""
-    x = model.linear.simulate(u)
+def _features(u: Array, x: Array, y_nom: Array, resid: Array | None, t0: float, total: float) -> Array:
+    """Regressors of the black-box residual model (see the module docstring); x is the nominal
+    linear block's output."""
     dx = x - _lag(x, 1)
     tau = (t0 + np.arange(u.size)) / total
     cols = [np.ones(u.size), tau, y_nom * tau, y_nom, y_nom**2, y_nom**3, dx, np.sign(dx), np.abs(dx)]
@@ -289,12 +289,12 @@ def _features(model: CascadeModel, u: Array, y_nom: Array, resid: Array | None, 
     return np.column_stack(cols)
 
 
-def _black_box(model, u_e, y_e, ynom_e, u_v, y_v, ynom_v, warmup, n_est, with_past):
+def _black_box(u_e, x_e, y_e, ynom_e, u_v, x_v, y_v, ynom_v, warmup, n_est, with_past):
     """Validation residual of the black-box residual model fitted on the estimation record."""
     total = float(n_est + u_v.size)
     r_e, r_v = y_e - ynom_e, y_v - ynom_v
-    a_e = _features(model, u_e, ynom_e, r_e if with_past else None, 0.0, total)[warmup:]
-    a_v = _features(model, u_v, ynom_v, r_v if with_past else None, n_est, total)[warmup:]
+    a_e = _features(u_e, x_e, ynom_e, r_e if with_past else None, 0.0, total)[warmup:]
+    a_v = _features(u_v, x_v, ynom_v, r_v if with_past else None, n_est, total)[warmup:]
     scale = np.maximum(np.std(a_e, axis=0), 1e-12)
     coef = lstsq(a_e / scale, r_e[warmup:])
     return r_v[warmup:] - (a_v / scale) @ coef
@@ -528,9 +528,10 @@ def diagnose(
             criterion=n * math.log(max(mse, 1e-300)) + aug.n_extra * math.log(n),
         )
 
-    # the noise floor and the gap
-    r_bb_in = _black_box(model, u_e, y_e, ynom_e, u_v, y_v, ynom_v, warmup, n_est, with_past=False)
-    r_bb = _black_box(model, u_e, y_e, ynom_e, u_v, y_v, ynom_v, warmup, n_est, with_past=True)
+    # the noise floor and the gap (x: the nominal linear block's output, simulated once)
+    x_e, x_v = model.linear.simulate(u_e), model.linear.simulate(u_v)
+    r_bb_in = _black_box(u_e, x_e, y_e, ynom_e, u_v, x_v, y_v, ynom_v, warmup, n_est, with_past=False)
+    r_bb = _black_box(u_e, x_e, y_e, ynom_e, u_v, x_v, y_v, ynom_v, warmup, n_est, with_past=True)
     p_input = _paired_p(r0, r_bb_in)
     p_black_box = _paired_p(r0, r_bb)
     if noise_std is not None:
@@ -540,8 +541,6 @@ def diagnose(
         estimated = True
     phi = scored["colored_noise"].model.ar if "colored_noise" in scored else np.zeros(0)
     p_modulation = _modulation_p(r0, ynom_v[warmup:], phi)
-    x_v = model.linear.simulate(u_v)
-    x_e = model.linear.simulate(u_e)
     p_position = _position_p(x_e[warmup:], ynom_e[warmup:], (y_e - ynom_e)[warmup:], x_v[warmup:], ynom_v[warmup:], r0)
     gap = max(mse0 - floor, 0.0)
     gap_closed = {e: (mse0 - s.mse) / gap if gap > 0 else 0.0 for e, s in scored.items()}
