@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _fits import fit_structure  # docs/case_studies/_fits.py, beside this script
 
 import backlashid as bid
 from backlashid.app import Record, concatenate, decimate, load_record
@@ -96,19 +97,6 @@ def simulate(model: Any, u: np.ndarray, y: np.ndarray, init: int) -> np.ndarray:
     return run(u, y0, True)
 
 
-def fit(kind: str, u: list[np.ndarray], y: list[np.ndarray], kw: dict[str, int]) -> tuple[bid.FitResult, bool]:
-    """The fit and whether it is a valid backlash (no FitWarning about its branches)."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        if kind == "cascade":
-            result = bid.fit_cascade(u, y, initial_state="estimate", warmup=WARMUP, **kw)
-        elif kind == "sandwich":
-            result = bid.fit_sandwich(u, y, initial_state="estimate", warmup=WARMUP, **kw)
-        else:
-            result = bid.fit_hammerstein_backlash(u, y, initial_state="estimate", warmup=WARMUP, **kw)
-    return result, not any("branches" in str(w.message) for w in caught)
-
-
 def main() -> None:
     start_all = time.perf_counter()
     folder = bid.shared_data_folder(Path(__file__).parent) / "friction_damper_backlash"
@@ -146,7 +134,7 @@ def main() -> None:
     fits: dict[str, tuple[bid.FitResult, float]] = {}
     for label, kind, kw in STRUCTURES:
         t = time.perf_counter()
-        result, valid = fit(kind, U, Y, kw)
+        result, valid = fit_structure(kind, U, Y, kw, WARMUP)
         seconds = time.perf_counter() - t
         scores = validation_scores(result.model)
         fits[label] = (result, float(np.mean(scores)))

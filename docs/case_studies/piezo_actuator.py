@@ -31,11 +31,11 @@ record removed, read as µm (as the authors do); 200 Hz.
 from __future__ import annotations
 
 import time
-import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _fits import fit_structure  # docs/case_studies/_fits.py, beside this script
 
 import backlashid as bid
 from backlashid.identify import Scaling
@@ -57,19 +57,6 @@ STRUCTURES: list[tuple[str, str, dict[str, int]]] = [
     ("sandwich 1/1-1/1, degree 3", "sandwich", dict(na=1, nb=1, nr=1, ns=1, degree=3)),
     ("sandwich 2/2-2/2, degree 3", "sandwich", dict(na=2, nb=2, nr=2, ns=2, degree=3)),
 ]
-
-
-def fit(kind: str, u: np.ndarray, y: np.ndarray, kw: dict[str, int]) -> tuple[bid.FitResult, bool]:
-    """The fit and whether it is a valid backlash (no FitWarning about its branches)."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        if kind == "cascade":
-            result = bid.fit_cascade(u, y, initial_state="estimate", warmup=WARMUP, **kw)
-        elif kind == "sandwich":
-            result = bid.fit_sandwich(u, y, initial_state="estimate", warmup=WARMUP, **kw)
-        else:
-            result = bid.fit_hammerstein_backlash(u, y, initial_state="estimate", warmup=WARMUP, **kw)
-    return result, not any("branches" in str(w.message) for w in caught)
 
 
 def free_run(model: Any, u: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -107,9 +94,9 @@ def main() -> None:
     print("|---|---|---|---|" + "---|" * len(RUNS))
     rows = []
     for label, kind, kw in STRUCTURES:
-        result, valid = fit(kind, U[:head], Y[:head], kw)
+        result, valid = fit_structure(kind, U[:head], Y[:head], kw, WARMUP)
         tail = um * rmse((free_run(result.model, U[head:], Y[head:]) - Y[head:])[INIT:])
-        whole, _ = fit(kind, U, Y, kw)
+        whole, _ = fit_structure(kind, U, Y, kw, WARMUP)
         e_t = um * (free_run(whole.model, TU, TY) - TY)
         test = {k: rmse(e_t[a:b]) for k, (a, b) in RUNS.items()}
         rows.append((label, kind, len(result.parameters), tail, whole.model, test))
