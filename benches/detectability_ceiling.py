@@ -93,7 +93,7 @@ import numpy as np
 from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import independent_effects as ie  # noqa: E402  (the benchmark's generator, unmodified)
+import independent_effects as ie  # the benchmark's generator, unmodified
 
 NULL_SET = "null"
 NULL_SEED = 18_303  # first entropy word of the extra no-effect cases: disjoint from tune and final
