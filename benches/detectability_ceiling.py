@@ -286,11 +286,17 @@ def summarise(rows: list[dict[str, Any]], tune_json: str | None) -> dict[str, An
 
     # misses: not detectable vs detectable but named wrong
     print("== misses of the diagnoser (this run), sorted by the oracle")
-    mism = [x for x in eff_rows + none_tune if tune_reported and tune_reported.get((x["effect"], x["level"], x["index"])) not in (None, x["reported"]) and x["seeds"] == "tune"]
+    mism = [
+        x
+        for x in eff_rows + none_tune
+        if tune_reported and tune_reported.get((x["effect"], x["level"], x["index"])) not in (None, x["reported"]) and x["seeds"] == "tune"
+    ]
     if tune_reported:
         print(f"verdicts differing from {tune_json}: {len(mism)}")
         for x in mism:
-            print(f"  {x['effect']} ENR {x['level']:g} #{x['index']}: now {x['reported']}, then {tune_reported[(x['effect'], x['level'], x['index'])]}")
+            print(
+                f"  {x['effect']} ENR {x['level']:g} #{x['index']}: now {x['reported']}, then {tune_reported[(x['effect'], x['level'], x['index'])]}"
+            )
     cost: dict[str, dict[str, int]] = {}
     for level in sorted({x["level"] for x in eff_rows}, reverse=True):
         cat = [x for x in eff_rows if x["level"] == level]
@@ -302,7 +308,9 @@ def summarise(rows: list[dict[str, Any]], tune_json: str | None) -> dict[str, An
             s = oracle_stat(x) if x["effect"] not in ie.OUT_OF_CATALOGUE else {"z": null_stats(x)["any"], "R": float("nan")}
             key = f"{x['effect']} -> {x['reported']}"
             cost.setdefault(f"{level:g}", {})[key] = cost.get(f"{level:g}", {}).get(key, 0) + 1
-            print(f"  detectable: {x['effect']:<18} #{x['index']:<2} {x['input_class']:<9} z {s['z']:7.2f}  R {s['R']:.3f}  -> {x['reported']}")
+            print(
+                f"  detectable: {x['effect']:<18} #{x['index']:<2} {x['input_class']:<9} z {s['z']:7.2f}  R {s['R']:.3f}  -> {x['reported']}"
+            )
     summary["detectable_misses"] = cost
     print("\ndetectable misses by confusion (true -> reported):")
     for level, d in cost.items():
