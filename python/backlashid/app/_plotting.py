@@ -37,8 +37,8 @@ def _with_unit(name: str, unit: str | None) -> str:
 def _time(n: int, dt: float | None, time_unit: str) -> tuple[NDArray[np.float64], str]:
     """The time axis of n samples and its label (in samples when dt is None or 1)."""
     if dt is None or dt == 1.0:
-        return np.arange(n, dtype=np.float64), "sample"
-    return np.arange(n) * float(dt), f"time [{time_unit}]"
+        return np.arange(n, dtype=np.float64), "sample of the record"
+    return np.arange(n) * float(dt), f"time from the record's start [{time_unit}]"
 
 
 def _worst_window(error: NDArray[np.float64], warmup: int, window: int) -> slice:
@@ -401,12 +401,13 @@ def _plot_error_panels(e: NDArray[np.float64], t: NDArray[np.float64], time_labe
         pad = 0.05 * float(np.ptp(after))
         ax_err.set_ylim(float(after.min()) - pad, float(after.max()) + pad)
     ax_err.set_xlabel(time_label)
-    ax_err.set_ylabel(_with_unit(f"error, {ylabel}", unit))
+    ax_err.set_ylabel(_with_unit(f"measured - simulated {ylabel}", unit))
     ax_err.set_title(f"Free-run simulation error over the whole record ({len(e)} samples)")
     _legend_outside(ax_err)
     ax_err.grid(alpha=0.3)
-    step = 1.0 if time_label == "sample" else float(dt)
-    f_unit = "cycles/sample" if time_label == "sample" else f"1/{time_unit}"
+    in_samples = time_label.startswith("sample")
+    step = 1.0 if in_samples else float(dt)
+    f_unit = "cycles/sample" if in_samples else ("Hz" if time_unit == "s" else f"1/{time_unit}")
     for signal, color, label in ((ys[warmup:], "0.3", "measured output"), (after, "C0", "error (measured - simulated)")):
         if signal.size >= 8:
             f, density = _spectrum(signal, step)
@@ -494,7 +495,7 @@ def plot_residuals(
     n = len(e)
     bound = 1.96 / np.sqrt(n)
     t, time_label = _time(n, dt, time_unit)
-    lag_unit = "samples" if time_label == "sample" else f"samples of {dt:g} {time_unit}"
+    lag_unit = "samples" if time_label.startswith("sample") else f"samples of {dt:g} {time_unit}"
     axes[0, 0].plot(t, e, lw=0.5 if n > WINDOW else 0.7, color="C0")
     axes[0, 0].set_title(f"residual (RMS {np.sqrt(np.mean(e ** 2)):.4g}{' ' + unit if unit else ''})")
     axes[0, 0].set_xlabel(time_label)
