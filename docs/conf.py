@@ -23,6 +23,8 @@ if os.environ.get("BACKLASHID_DOCS_SOURCE"):
 
 import backlashid
 
+sys.path.insert(0, str(Path(__file__).resolve().parent / "_ext"))  # mathml_offline
+
 project = "backlashid"
 author = "backlashid developers"
 copyright = "2026, backlashid developers"
@@ -33,10 +35,11 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.autosummary",
     "numpydoc",
-    "sphinx.ext.mathjax",
+    "mathml_offline",  # formulas as MathML: readable offline, no MathJax from a CDN (docs/_ext)
     "sphinx.ext.viewcode",
 ]
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence"]
+html_math_renderer = "mathml"
 myst_heading_anchors = 3
 source_suffix = {".md": "markdown"}
 exclude_patterns = ["_build"]
@@ -55,7 +58,7 @@ html_theme = "alabaster"
 html_theme_options = {"description": "Identification of systems with general backlash", "fixed_sidebar": True}
 html_title = f"backlashid {release}"
 html_static_path = ["_static"]
-html_css_files = ["parameters.css"]  # the Parameters sections as tables (one row per parameter)
+html_css_files = ["parameters.css", "math.css"]  # the Parameters sections as tables (one row per parameter); MathML layout
 
 
 # -- API reference: one page per public module, generated from its __all__ -----------------------
