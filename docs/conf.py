@@ -45,7 +45,17 @@ source_suffix = {".md": "markdown"}
 exclude_patterns = ["_build"]
 
 autodoc_member_order = "groupwise"
-autodoc_typehints = "none"  # the types are in the numpydoc Parameters tables
+autodoc_typehints = "signature"
+# numpy's aliases by name, not expanded into their unions (_Buffer | _SupportsArray[...] | ...);
+# the modules use ``from __future__ import annotations``, so autodoc sees the names.
+# (Array and Signal are the modules' own names for NDArray[np.float64], Fitted the effects' refit result).
+autodoc_type_aliases = {
+    "ArrayLike": "numpy.typing.ArrayLike",
+    "NDArray": "numpy.typing.NDArray",
+    "Array": "numpy.typing.NDArray",
+    "Signal": "numpy.typing.NDArray",
+    "Fitted": "tuple[numpy.typing.NDArray, dict[str, float], float]",
+}
 autodoc_default_options = {"members": True}  # no "Bases:" line: the bases are private (_ModelIO)
 autosummary_generate = False  # the summary tables link to the entries below them, no stub pages
 
