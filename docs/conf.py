@@ -202,5 +202,21 @@ def _lookup(dotted: str) -> Any:
         return getattr(_lookup(head), attr, None) if head else None
 
 
+def _alias_names(app: Any, what: str, name: str, obj: Any, options: Any, signature: str | None,
+                 return_annotation: str | None) -> tuple[str | None, str | None]:
+    """Sphinx writes an alias inside a union or a tuple as ``TypeAliasForwardRef('numpy.typing.ArrayLike')``:
+    keep the name; and drop the ``~`` of a class path written in full."""
+    import re
+
+    def clean(text: str | None) -> str | None:
+        if text is None:
+            return None
+        text = re.sub(r"TypeAliasForwardRef\('([^']*)'\)", r"\1", text)
+        return re.sub(r"~((?:\w+\.)+)(\w+)", lambda m: m.group(2) if "._" in m.group(1) else m.group(1) + m.group(2), text)
+
+    return clean(signature), clean(return_annotation)
+
+
 def setup(app: Any) -> None:
     app.connect("missing-reference", _resolve_reexports)
+    app.connect("autodoc-process-signature", _alias_names)

@@ -994,7 +994,7 @@ min_moving : float, default 0.02
     rest) is fitted: four 25-sample bursts in 4000 samples (1.3 % moving) recover Example 1
     within 0.002 with ``min_moving=0.01``.
 restarts : int, optional
-    Levenberg-Marquardt restarts from the result plus N(0, ``perturbation`` ** 2) noise, each
+    Levenberg-Marquardt restarts from the result plus N(0, ``perturbation ** 2``) noise, each
     kept only if it lowers the simulation error. By default 4 on records of up to 20 000
     samples after the warm-up and none on longer ones, where they change nothing.
 perturbation : float, default 0.05
