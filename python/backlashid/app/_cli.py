@@ -266,9 +266,11 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         click.echo(f"fitted {len(u_m)} estimation records as one model, each from its own start")
     if not scaling.is_identity:
         click.echo("model units: " + ", ".join(f"{k} {v:.6g}" for k, v in scaling.to_dict().items()))
+    if not scaling.is_identity:
+        click.echo("the fit, in model units (a model-unit error times output_scale is in the measured output's units):")
     click.echo(result.summary())
     for name, m in metrics.items():
-        click.echo(f"{name}: {m}")
+        click.echo(f"{name} (errors in {_measured_units(output)}): {m}")
     if json_path:
         payload = {
             "backlashid_version": __version__,
@@ -286,6 +288,12 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         click.echo(f"wrote {json_path}")
     for p in figures:
         click.echo(f"wrote {p}")
+
+
+def _measured_units(output: str) -> str:
+    """The measured output's units for printed errors: --output-unit, else named by the signal."""
+    unit = (_UNITS.get() or {}).get("output_unit")
+    return f"{unit}, the measured {output}" if unit else f"the measured {output}'s units"
 
 
 def _dashboard_units(output: str, decimate_by: int) -> dict[str, Any]:
@@ -402,7 +410,7 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
     np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
     click.echo(f"simulated {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else ""))
     if output:
-        click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, warmup=warmup, init_samples=init_samples)))
+        click.echo(f"errors in {_measured_units(output)}: " + str(evaluate_scaled(model, scaling, record.u, record.y, warmup=warmup, init_samples=init_samples)))
     click.echo(f"wrote {out}")
 
 
