@@ -293,7 +293,7 @@ class FitResult:
         self, shown: list[str] | None = None, *, truth: Model | None = None, ax: Any = None, title: str | None = None
     ) -> Any:
         """Plot the parameter estimates over the iterations (the paper's Figs 5, 6, 8-10),
-        with the final estimate as stars; :func:`backlashid.app.plot_trajectories`.
+        then the final estimate after the refinement as stars; :func:`backlashid.app.plot_trajectories`.
 
         Parameters
         ----------
@@ -307,7 +307,8 @@ class FitResult:
 
         values = dict(zip(self.names, map(float, self.structure.pack(truth)))) if truth is not None else None
         return plot_trajectories(
-            self.history, self.names, shown or self.names, truth=values, final=self.parameters, ax=ax, title=title
+            self.history, self.names, shown or self.names, truth=values, final=self.parameters,
+            refinement_steps=self.refinement_steps, ax=ax, title=title,
         )
 
 
