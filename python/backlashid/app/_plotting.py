@@ -77,7 +77,9 @@ def plot_characteristic(
     """Draw the branches L(x), R(x) of a general backlash, as in the paper's Figs 1, 4 and 7.
 
     When x and y are given, the path (x(t), y(t)) of a simulation is drawn under the branches
-    and the axes are limited to its range. The legend sits to the right of the axes.
+    and the axes are limited to its range; each branch is solid where the backlash moves along
+    it on that record (f1, f2 of eq 12-13: L while x decreases, R while it increases) and
+    dotted elsewhere. The legend sits to the right of the axes.
 
     Parameters
     ----------
@@ -130,9 +132,19 @@ def plot_characteristic(
         lo, hi = x_range
     grid, left, right = backlash.characteristic(lo, hi, 600)
     pad = 0.05 * (y_hi - y_lo) if np.isfinite(y_hi - y_lo) else 0.0
-    for values, name, style in ((left, "L(x)", "C0"), (right, "R(x)", "C3")):
+    # with a record: each branch solid where the backlash moves along it (f1, f2 of eq 12-13),
+    # dotted over the rest of the record's range
+    spans = _active_ranges(backlash, x, (lo, hi)) if x is not None and y is not None else [(lo, hi), (lo, hi)]
+    rest = []
+    for values, name, style, span in ((left, "L(x)", "C0", spans[0]), (right, "R(x)", "C3", spans[1])):
         shown = np.where((values >= y_lo - pad) & (values <= y_hi + pad), values, np.nan)
-        ax.plot(grid, shown, color=style, lw=2, label=name, zorder=2)
+        active = np.zeros(grid.shape, dtype=bool) if span is None else (grid >= span[0]) & (grid <= span[1])
+        ax.plot(grid, np.where(active, shown, np.nan), color=style, lw=2, label=name, zorder=2)
+        rest.append((np.where(active, np.nan, shown), style))
+    if x is not None and y is not None:
+        for values, style in rest:
+            ax.plot(grid, values, color=style, lw=1, ls=":", zorder=2)
+        ax.plot([], [], color="0.3", lw=1, ls=":", label="branch where it is not active\non this record")
     ax.axhline(0.0, color="k", lw=0.5)
     ax.axvline(0.0, color="k", lw=0.5)
     ax.set_xlabel(_with_unit("x(t), input of the backlash", unit))
