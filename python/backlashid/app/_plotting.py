@@ -390,7 +390,8 @@ def plot_simulation(
     ax.set_ylabel(_with_unit(ylabel, unit))
     heading = title or "Measured and simulated output"
     if long:
-        heading += f"\nwindow of {window} of {len(ys)} samples where the error is largest (fit % and RMSE: whole record)"
+        heading += (f"\nwindow of {window} of {len(ys)} samples where the error is largest (fit % and RMSE: whole record);"
+                    "\nthe error (too small to see here when the fit is good) is drawn below")
     ax.set_title(heading)
     _legend_outside(ax)
     ax.grid(alpha=0.3)
@@ -426,7 +427,8 @@ def _plot_error_panels(e: NDArray[np.float64], t: NDArray[np.float64], time_labe
             ax_psd.semilogy(f[1:], density[1:], color=color, lw=0.9, label=label)
     squared = f"{unit}²" if unit else "(units of the record)²"
     ax_psd.set_xlabel(f"frequency [{f_unit}]")
-    ax_psd.set_ylabel(f"power spectral density [{squared}/({f_unit})]")
+    per = f_unit if f_unit == "Hz" else f"({f_unit})"
+    ax_psd.set_ylabel(f"power spectral density [{squared}/{per}]")
     ax_psd.set_title("Where the error lies in frequency (Welch spectra after the transient)")
     _legend_outside(ax_psd)
     ax_psd.grid(alpha=0.3, which="both")
