@@ -300,7 +300,7 @@ def plot_trajectories(
         ax.set_xlim(0.5, last + 0.5)
         ticks = [int(t) for t in ax.get_xticks() if 1 <= t <= last - max(1.0, 0.08 * last)]
         ax.set_xticks([*ticks, last], [*map(str, ticks), "final"])
-    ax.set_xlabel(f"iteration of the paper's algorithm ({len(h)} in all)" + (", then the final estimate" if final is not None else ""))
+    ax.set_xlabel(f"iteration ({len(h)} in all)" + (", then the final estimate" if final is not None else ""))
     ax.set_ylabel("estimate (value of the parameter)")
     ax.set_title(title or "Parameter estimates")
     from matplotlib.lines import Line2D
