@@ -23,6 +23,8 @@ if os.environ.get("BACKLASHID_DOCS_SOURCE"):
 
 import backlashid
 
+sys.path.insert(0, str(Path(__file__).resolve().parent / "_ext"))  # mathml_offline
+
 project = "backlashid"
 author = "backlashid developers"
 copyright = "2026, backlashid developers"
@@ -33,16 +35,27 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.autosummary",
     "numpydoc",
-    "sphinx.ext.mathjax",
+    "mathml_offline",  # formulas as MathML: readable offline, no MathJax from a CDN (docs/_ext)
     "sphinx.ext.viewcode",
 ]
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence"]
+html_math_renderer = "mathml"
 myst_heading_anchors = 3
 source_suffix = {".md": "markdown"}
 exclude_patterns = ["_build"]
 
 autodoc_member_order = "groupwise"
-autodoc_typehints = "none"  # the types are in the numpydoc Parameters tables
+autodoc_typehints = "signature"
+# numpy's aliases by name, not expanded into their unions (_Buffer | _SupportsArray[...] | ...);
+# the modules use ``from __future__ import annotations``, so autodoc sees the names.
+# (Array and Signal are the modules' own names for NDArray[np.float64], Fitted the effects' refit result).
+autodoc_type_aliases = {
+    "ArrayLike": "numpy.typing.ArrayLike",
+    "NDArray": "numpy.typing.NDArray",
+    "Array": "numpy.typing.NDArray",
+    "Signal": "numpy.typing.NDArray",
+    "Fitted": "tuple[numpy.typing.NDArray, dict[str, float], float]",
+}
 autodoc_default_options = {"members": True}  # no "Bases:" line: the bases are private (_ModelIO)
 autosummary_generate = False  # the summary tables link to the entries below them, no stub pages
 
@@ -55,7 +68,7 @@ html_theme = "alabaster"
 html_theme_options = {"description": "Identification of systems with general backlash", "fixed_sidebar": True}
 html_title = f"backlashid {release}"
 html_static_path = ["_static"]
-html_css_files = ["parameters.css"]  # the Parameters sections as tables (one row per parameter)
+html_css_files = ["parameters.css", "math.css"]  # the Parameters sections as tables (one row per parameter); MathML layout
 
 
 # -- API reference: one page per public module, generated from its __all__ -----------------------
@@ -189,5 +202,21 @@ def _lookup(dotted: str) -> Any:
         return getattr(_lookup(head), attr, None) if head else None
 
 
+def _alias_names(app: Any, what: str, name: str, obj: Any, options: Any, signature: str | None,
+                 return_annotation: str | None) -> tuple[str | None, str | None]:
+    """Sphinx writes an alias inside a union or a tuple as ``TypeAliasForwardRef('numpy.typing.ArrayLike')``:
+    keep the name; and drop the ``~`` of a class path written in full."""
+    import re
+
+    def clean(text: str | None) -> str | None:
+        if text is None:
+            return None
+        text = re.sub(r"TypeAliasForwardRef\('([^']*)'\)", r"\1", text)
+        return re.sub(r"~((?:\w+\.)+)(\w+)", lambda m: m.group(2) if "._" in m.group(1) else m.group(1) + m.group(2), text)
+
+    return clean(signature), clean(return_annotation)
+
+
 def setup(app: Any) -> None:
     app.connect("missing-reference", _resolve_reexports)
+    app.connect("autodoc-process-signature", _alias_names)

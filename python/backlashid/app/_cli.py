@@ -7,6 +7,7 @@ identified) ends the command with one line ``Error: ...`` and exit code 1, not a
 
 from __future__ import annotations
 
+import contextvars
 import functools
 import json
 import sys
@@ -63,6 +64,33 @@ def _clean_errors(command: F) -> F:
                     else:
                         warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
+    return wrapper  # type: ignore[return-value]
+
+
+# The record's units for the figures (--sample-time, --input-unit, --output-unit), set by _unit_options.
+_UNITS: contextvars.ContextVar[dict[str, Any] | None] = contextvars.ContextVar("units", default=None)
+
+
+def _unit_options(command: F) -> F:
+    """--sample-time, --input-unit and --output-unit: the record's units on the figures' axes,
+    kept out of the command's signature (read through _UNITS)."""
+
+    @functools.wraps(command)
+    def wrapper(*args: Any, sample_time: float | None = None, input_unit: str | None = None,
+                output_unit: str | None = None, **kwargs: Any) -> Any:
+        token = _UNITS.set({"sample_time": sample_time, "input_unit": input_unit, "output_unit": output_unit})
+        try:
+            return command(*args, **kwargs)
+        finally:
+            _UNITS.reset(token)
+
+    options = [
+        click.option("--sample-time", type=click.FloatRange(min=0.0, min_open=True), help="Seconds per sample of the files: the figures' time axes in seconds [default: in samples]."),
+        click.option("--input-unit", help="Unit of the input, for the figures' axes (e.g. mm)."),
+        click.option("--output-unit", help="Unit of the output, for the figures' axes (e.g. kN)."),
+    ]
+    for option in reversed(options):
+        wrapper = option(wrapper)
     return wrapper  # type: ignore[return-value]
 
 
@@ -194,6 +222,7 @@ def _model_options(command: F) -> F:
 @click.option("--orders", type=click.Choice(["given", "auto"]), default="given", show_default=True, help="auto: choose --na, --nb (--nr, --ns) and --degree by select_structure (held-out simulation RMSE and BIC) and print its table.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write model, parameters, standard errors and metrics here.")
 @click.option("--plots", "plots_dir", type=click.Path(file_okay=False, path_type=Path), help="Folder for the figures (PNG; needs matplotlib).")
+@_unit_options
 @_clean_errors
 def fit(data: Path | None, input_: str, output: str, split: float | None, estimation: str | None, validation: str | None,
         estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
@@ -237,9 +266,11 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         click.echo(f"fitted {len(u_m)} estimation records as one model, each from its own start")
     if not scaling.is_identity:
         click.echo("model units: " + ", ".join(f"{k} {v:.6g}" for k, v in scaling.to_dict().items()))
+    if not scaling.is_identity:
+        click.echo("the fit, in model units (a model-unit error times output_scale is in the measured output's units):")
     click.echo(result.summary())
     for name, m in metrics.items():
-        click.echo(f"{name}: {m}")
+        click.echo(f"{name} (errors in {_measured_units(output)}): {m}")
     if json_path:
         payload = {
             "backlashid_version": __version__,
@@ -259,6 +290,19 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         click.echo(f"wrote {p}")
 
 
+def _measured_units(output: str) -> str:
+    """The measured output's units for printed errors: --output-unit, else named by the signal."""
+    unit = (_UNITS.get() or {}).get("output_unit")
+    return f"{unit}, the measured {output}" if unit else f"the measured {output}'s units"
+
+
+def _dashboard_units(output: str, decimate_by: int) -> dict[str, Any]:
+    """The diagnosis dashboard's ``output`` label and ``sample_time`` from the unit options."""
+    units = _UNITS.get() or {}
+    unit, dt = units.get("output_unit"), units.get("sample_time")
+    return {"output": f"{output} [{unit}]" if unit else output, "sample_time": None if dt is None else dt * decimate_by}
+
+
 def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup: int) -> list[Path]:
     from .._optional import pyplot
     from ..identify import simulate_scaled
@@ -266,15 +310,21 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup:
 
     plt = pyplot()
     out.mkdir(parents=True, exist_ok=True)
-    units = "" if scaling.is_identity else " (model units)"
+    units = _UNITS.get() or {}
+    factor = int(sel.description.get("decimate", 1))
+    dt = 1.0 if units.get("sample_time") is None else units["sample_time"] * factor
+    output_name, input_name = str(sel.description["output"]), str(sel.description["input"])
+    output_unit = units.get("output_unit")
+    # with m_L1 = 1 (and r1 = 1) the backlash's x and y are in the output's units (model units when scaled)
+    model_unit = "model units" if not scaling.is_identity else (f"{output_unit}, as {output_name}" if output_unit else f"units of {output_name}")
     u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
     sim = result.model.simulate(u_m, internals=True)
     is_sandwich = isinstance(result.model, SandwichModel)
-    ax = plot_characteristic(result.model.backlash, sim.x, sim.y if is_sandwich else y_m,
-                             title="Estimated branches over the estimation data" + units)
+    ax = plot_characteristic(result.model.backlash, sim.x, sim.y if is_sandwich else y_m, unit=model_unit,
+                             title="Estimated branches over the estimation data")
     if not is_sandwich:
         ax.collections[0].set_label("(simulated x(t), measured y(t))")
-        ax.legend(loc="upper left")
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize="small")
     paths = [_save(plt, ax.figure, out / "characteristic.png")]
     if hasattr(result, "history"):  # the iterative algorithms (not the Wiener-Hammerstein fit)
         names = result.names
@@ -284,17 +334,21 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup:
             "output block (r, s)": [n for n in names if n[0] in "rs"],
         }
         groups = {k: v for k, v in groups.items() if v}
-        fig, axes = plt.subplots(1, len(groups), figsize=(5.5 * len(groups), 4))
+        fig, axes = plt.subplots(1, len(groups), figsize=(7.5 * len(groups), 4.2), layout="constrained")
         for ax, (title, shown) in zip(np.atleast_1d(axes), groups.items()):
-            plot_trajectories(result.history, names, shown, final=result.parameters, ax=ax, title=f"{title}; stars: final estimate")
+            plot_trajectories(result.history, names, shown, final=result.parameters, refinement_steps=result.refinement_steps,
+                              ax=ax, title=title + ("" if scaling.is_identity else " (model units)"))
         paths.append(_save(plt, fig, out / "iterations.png"))
     record, which = (sel.validation, "validation") if sel.validation is not None else (sel.estimation, "estimation")
     warmup_here = metrics_warmup if which == "validation" else max(metrics_warmup, result.warmup)
     y_sim = simulate_scaled(result.model, scaling, record.u)
-    ax = plot_simulation(record.y, y_sim, warmup=warmup_here, ylabel=sel.description["output"], title=f"Measured and simulated output, {which} record")
+    time_unit = {} if dt == 1.0 else {"dt": dt, "time_unit": "s"}
+    ax = plot_simulation(record.y, y_sim, warmup=warmup_here, ylabel=output_name, unit=output_unit, **time_unit,
+                         title=f"Measured and simulated output, {which} record")
     paths.append(_save(plt, ax.figure, out / "simulation.png"))
-    fig = plot_residuals((record.y - y_sim)[warmup_here:], record.u[warmup_here:],
-                         title=f"Residual diagnostics, free-run simulation error on the {which} record")
+    fig = plot_residuals((record.y - y_sim)[warmup_here:], record.u[warmup_here:], ylabel=output_name, unit=output_unit,
+                         **time_unit, title=f"Residual diagnostics, free-run simulation error on the {which} record "
+                                            f"(input {input_name}, after the {warmup_here}-sample warm-up)")
     paths.append(_save(plt, fig, out / "residuals.png"))
     return paths
 
@@ -356,7 +410,7 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
     np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
     click.echo(f"simulated {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else ""))
     if output:
-        click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, warmup=warmup, init_samples=init_samples)))
+        click.echo(f"errors in {_measured_units(output)}: " + str(evaluate_scaled(model, scaling, record.u, record.y, warmup=warmup, init_samples=init_samples)))
     click.echo(f"wrote {out}")
 
 
@@ -373,6 +427,7 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
               help="How every model starts the validation record: estimated (linear block at equilibrium, backlash memory fitted) or from rest.")
 @click.option("--png", "png", type=click.Path(dir_okay=False, path_type=Path), help="Write the diagnosis dashboard here.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON here.")
+@_unit_options
 @_clean_errors
 def diagnose(data: Path | None, input_: str, output: str, split: float | None, estimation: str | None, validation: str | None,
              estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
@@ -423,7 +478,7 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
     click.echo(report.summary())
     if png:
         png.parent.mkdir(parents=True, exist_ok=True)
-        report.plot(png, scaling=scaling, output=str(output))  # the record's units and signal name
+        report.plot(png, scaling=scaling, **_dashboard_units(str(output), decimate_by))  # the record's units and signal name
         click.echo(f"wrote {png}")
     if json_path:
         _write_json(json_path, {"backlashid_version": __version__, "scaling": scaling.to_dict(), "data": sel.description, "report": report.to_dict()})
@@ -459,15 +514,22 @@ def demo(n: int, snr: float, seed: int, out: Path) -> None:
         plt = pyplot()
         out.mkdir(parents=True, exist_ok=True)
         sim = result.model.simulate(data.u, internals=True)
-        ax = plot_characteristic(result.model.backlash, sim.x, data.noisy, title="Example 1: estimated branches over the data")
+        ax = plot_characteristic(result.model.backlash, sim.x, data.noisy, unit="dimensionless",
+                                 title="Example 1: estimated branches over the data")
+        ax.collections[0].set_label("(simulated x(t), measured y(t))")
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize="small")
         paths = [_save(plt, ax.figure, out / "characteristic_estimated.png")]
-        x_range = (float(sim.x.min()), float(sim.x.max()))
-        ax = plot_branches_comparison(truth.backlash, result.model.backlash, x_range, title="Example 1: true and estimated backlash (Fig. 4)")
+        x_true = truth.simulate(data.u, internals=True).x
+        x_range = (float(min(sim.x.min(), x_true.min())), float(max(sim.x.max(), x_true.max())))
+        ax = plot_branches_comparison(truth.backlash, result.model.backlash, x_range, x=x_true, x_estimated=sim.x, unit="dimensionless",
+                                      title="Example 1: true and estimated backlash (Fig. 4)")
         paths.append(_save(plt, ax.figure, out / "characteristic_true_vs_estimated.png"))
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+        fig, axes = plt.subplots(1, 2, figsize=(14, 4.4), layout="constrained")
         truth_values = dict(zip(result.names, result.structure.pack(truth)))
-        plot_trajectories(result.history, result.names, ["a1", "a2", "b1", "b2"], truth=truth_values, ax=axes[0], title="linear block")
-        plot_trajectories(result.history, result.names, ["m_R1", "c_L", "c_R", "m_R2", "m_L3", "m_R3", "m_L2"], truth=truth_values, ax=axes[1], title="backlash")
+        for ax, shown, title in ((axes[0], ["a1", "a2", "b1", "b2"], "linear block"),
+                                 (axes[1], ["m_R1", "c_L", "c_R", "m_R2", "m_L3", "m_R3", "m_L2"], "backlash")):
+            plot_trajectories(result.history, result.names, shown, truth=truth_values, final=result.parameters,
+                              refinement_steps=result.refinement_steps, ax=ax, title=title)
         paths.append(_save(plt, fig, out / "iterations.png"))
     except BacklashIdError as exc:
         raise click.ClickException(str(exc)) from None

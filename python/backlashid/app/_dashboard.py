@@ -201,7 +201,7 @@ def _plot_regimes(report: Any, ax: Any) -> None:
             ax.text(i + 0.2, energy[i] + 1.5, mark, ha="center", fontsize=11 if r.excess else 8)
     ax.set_xticks(pos)
     ax.set_xticklabels([n.replace("_", "\n") for n in names], fontsize=8)
-    ax.set_ylabel("%")
+    ax.set_ylabel("share [%]")
     ax.set_title("Error share by regime (* significantly more error)", fontsize=10)
     total = sum(samples)
     if total > 100.5:  # a sample can be in several regimes (after a reversal and in the dead band)
@@ -210,8 +210,11 @@ def _plot_regimes(report: Any, ax: Any) -> None:
             transform=ax.transAxes, ha="center", va="top", fontsize=8,
             bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.6", alpha=0.9),
         )
-        ax.set_ylim(0, max(max(samples), max(energy)) * 1.25 + 5)
-    ax.legend(fontsize="small", loc="center right")
+        ax.texts[-1].set_position((0.99, 0.97))
+        ax.texts[-1].set_horizontalalignment("right")
+    # the legend in a band above the tallest bar (and the overlap note), never over a bar
+    ax.set_ylim(0, max(max(samples), max(energy)) * (1.55 if total > 100.5 else 1.35) + 5)
+    ax.legend(fontsize="small", loc="upper left")
     ax.grid(alpha=0.3, axis="y")
 
 
@@ -231,9 +234,10 @@ def _plot_tests(report: Any, ax: Any) -> None:
     ax.axhline(0.0, color="k", lw=0.5)
     failed = ", ".join(report.tests.failed) or "none"
     ax.set_title(textwrap.fill(f"Residual correlations (failed tests: {failed})", width=60), fontsize=10)
-    ax.set_xlabel("lag k")
+    ax.set_xlabel("lag k [samples]")
     ax.set_ylabel("normalised correlation")
-    ax.legend(fontsize="x-small")
+    _headroom(ax, 0.45)  # the legend above the bars
+    ax.legend(fontsize="x-small", loc="upper right", ncol=2)
     ax.grid(alpha=0.3)
 
 

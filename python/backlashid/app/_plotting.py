@@ -20,6 +20,49 @@ __all__ = [
     "plot_trajectories",
 ]
 
+# A record longer than this many samples is drawn as a window plus its whole error trace.
+WINDOW = 1000
+
+
+def _legend_outside(ax: Any, **kw: Any) -> Any:
+    """A legend to the right of the axes, never over the data."""
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize="small", **kw)
+
+
+def _with_unit(name: str, unit: str | None) -> str:
+    """``name [unit]``; without a unit, say the values are in the record's own units."""
+    return f"{name} [{unit}]" if unit else f"{name} (units of the record)"
+
+
+def _time(n: int, dt: float | None, time_unit: str) -> tuple[NDArray[np.float64], str]:
+    """The time axis of n samples and its label (in samples when dt is None or 1)."""
+    if dt is None or dt == 1.0:
+        return np.arange(n, dtype=np.float64), "sample of the record"
+    return np.arange(n) * float(dt), f"time from the record's start [{time_unit}]"
+
+
+def _worst_window(error: NDArray[np.float64], warmup: int, window: int) -> slice:
+    """The window of ``window`` samples after the warm-up with the largest error energy."""
+    e2 = np.square(error)
+    e2[:warmup] = 0.0
+    if len(e2) - warmup <= window:
+        return slice(warmup, len(e2))
+    energy = np.convolve(e2[warmup:], np.ones(window), mode="valid")
+    start = warmup + int(np.argmax(energy))
+    return slice(start, start + window)
+
+
+def _spectrum(e: NDArray[np.float64], dt: float, segment: int = 2048) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Welch power spectral density (Hann windows, half overlap) of e: frequencies, density."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    n = min(segment, len(e))
+    frames = sliding_window_view(e - e.mean(), n)[:: max(n // 2, 1)]
+    taper = np.hanning(n) if n > 2 else np.ones(n)
+    power = np.mean(np.abs(np.fft.rfft(frames * taper, axis=1)) ** 2, axis=0)
+    density = 2.0 * power * dt / max(float(np.sum(taper**2)), 1e-300)
+    return np.fft.rfftfreq(n, dt), density
+
 
 def plot_characteristic(
     backlash: GeneralBacklash,
@@ -29,11 +72,14 @@ def plot_characteristic(
     x_range: tuple[float, float] | None = None,
     ax: Any = None,
     title: str | None = None,
+    unit: str | None = None,
 ) -> Any:
     """Draw the branches L(x), R(x) of a general backlash, as in the paper's Figs 1, 4 and 7.
 
     When x and y are given, the path (x(t), y(t)) of a simulation is drawn under the branches
-    and the axes are limited to its range.
+    and the axes are limited to its range; each branch is solid where the backlash moves along
+    it on that record (f1, f2 of eq 12-13: L while x decreases, R while it increases) and
+    dotted elsewhere. The legend sits to the right of the axes.
 
     Parameters
     ----------
@@ -49,6 +95,9 @@ def plot_characteristic(
         Axes to draw on [default: a new figure].
     title : str, optional
         Title [default: the dead-band widths c_L and c_R].
+    unit : str, optional
+        Unit of x and y for the axis labels (with m_L1 = 1 both are in the units of the
+        backlash output; "model units" for a scaled record) [default: not stated].
 
     Returns
     -------
@@ -83,17 +132,38 @@ def plot_characteristic(
         lo, hi = x_range
     grid, left, right = backlash.characteristic(lo, hi, 600)
     pad = 0.05 * (y_hi - y_lo) if np.isfinite(y_hi - y_lo) else 0.0
-    for values, name, style in ((left, "L(x)", "C0"), (right, "R(x)", "C3")):
+    # with a record: each branch solid where the backlash moves along it (f1, f2 of eq 12-13),
+    # dotted over the rest of the record's range
+    spans = _active_ranges(backlash, x, (lo, hi)) if x is not None and y is not None else [(lo, hi), (lo, hi)]
+    rest = []
+    for values, name, style, span in ((left, "L(x)", "C0", spans[0]), (right, "R(x)", "C3", spans[1])):
         shown = np.where((values >= y_lo - pad) & (values <= y_hi + pad), values, np.nan)
-        ax.plot(grid, shown, color=style, lw=2, label=name, zorder=2)
+        active = np.zeros(grid.shape, dtype=bool) if span is None else (grid >= span[0]) & (grid <= span[1])
+        ax.plot(grid, np.where(active, shown, np.nan), color=style, lw=2, label=name, zorder=2)
+        rest.append((np.where(active, np.nan, shown), style))
+    if x is not None and y is not None:
+        for values, style in rest:
+            ax.plot(grid, values, color=style, lw=1, ls=":", zorder=2)
+        ax.plot([], [], color="0.3", lw=1, ls=":", label="branch where it is not active\non this record")
     ax.axhline(0.0, color="k", lw=0.5)
     ax.axvline(0.0, color="k", lw=0.5)
-    ax.set_xlabel("x (input of the backlash)")
-    ax.set_ylabel("y (output of the backlash)")
+    ax.set_xlabel(_with_unit("x(t), input of the backlash", unit))
+    ax.set_ylabel(_with_unit("y(t), output of the backlash", unit))
     ax.set_title(title or f"General backlash, c_L = {backlash.c_left:.3g}, c_R = {backlash.c_right:.3g}")
-    ax.legend(loc="upper left")
+    _legend_outside(ax)
     ax.grid(alpha=0.3)
     return ax
+
+
+def _active_ranges(backlash: GeneralBacklash, x: ArrayLike | None, x_range: tuple[float, float]) -> list[tuple[float, float] | None]:
+    """Where the left and the right branch are active on the record x (f1 and f2 of eq 12-13:
+    the operator moves along L while x decreases in contact, along R while it increases), or
+    the whole x_range of both when no record is given; None for a branch never active."""
+    if x is None:
+        return [x_range, x_range]
+    xs = as_signal(x, "x")
+    signals = backlash.switching(xs)
+    return [(float(xs[f].min()), float(xs[f].max())) if f.any() else None for f in (signals.f1, signals.f2)]
 
 
 @fill(plot=PLOT)
@@ -102,10 +172,17 @@ def plot_branches_comparison(
     estimated: GeneralBacklash,
     x_range: tuple[float, float],
     *,
+    x: ArrayLike | None = None,
+    x_estimated: ArrayLike | None = None,
+    unit: str | None = None,
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
     """Draw true and estimated branches on one plot, as in the paper's Figs 4 and 7.
+
+    Given the record's internal signal x(t), each branch is drawn only where the backlash
+    actually moves along it (the left branch L where x decreases in contact, f1 of eq 12; the
+    right branch R where it increases, f2 of eq 13), not over the whole range of x.
 
     Parameters
     ----------
@@ -114,7 +191,14 @@ def plot_branches_comparison(
     estimated : GeneralBacklash
         The estimate (dashed lines).
     x_range : tuple of float
-        (low, high) of the backlash input x shown.
+        (low, high) of the backlash input x shown; the branches span it when no record is given.
+    x : array_like, optional
+        The true system's backlash input x(t) on the record: the true branches are drawn over
+        the range where they are active on it.
+    x_estimated : array_like, optional
+        The estimated model's x(t) on the same record, for the estimated branches [default: x].
+    unit : str, optional
+        Unit of x and y for the axis labels [default: not stated].
     {plot}
 
     Examples
@@ -127,16 +211,27 @@ def plot_branches_comparison(
     plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 5))
-    for bl, style, label in ((true_backlash, "-", "true"), (estimated, "--", "estimated")):
-        grid, left, right = bl.characteristic(*x_range, 600)
-        ax.plot(grid, left, style, color="C0", lw=2, label=f"L(x) {label}")
-        ax.plot(grid, right, style, color="C3", lw=2, label=f"R(x) {label}")
+    records = (x, x if x_estimated is None else x_estimated)
+    # the truth wide and light, the estimate thin, dashed and dark on top: both stay visible where they agree
+    looks = (("-", 4.0, 0.45, ("C0", "C3")), ("--", 1.6, 1.0, ("navy", "darkred")))
+    for bl, record, (style, lw, alpha, colors), label in zip((true_backlash, estimated), records, looks, ("true", "estimated")):
+        ranges = _active_ranges(bl, record, x_range)
+        for span, name, color, branch in zip(ranges, ("L(x)", "R(x)"), colors, ("left", "right")):
+            if span is None:
+                ax.plot([], [], style, color=color, lw=lw, alpha=alpha, label=f"{name} {label}: never active")
+                continue
+            grid = np.linspace(span[0], span[1], 400)
+            values = bl.left(grid) if branch == "left" else bl.right(grid)
+            ax.plot(grid, values, style, color=color, lw=lw, alpha=alpha, label=f"{name} {label}")
     ax.axhline(0.0, color="k", lw=0.5)
     ax.axvline(0.0, color="k", lw=0.5)
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
+    ax.set_xlim(*x_range)
+    ax.set_xlabel(_with_unit("x(t), input of the backlash", unit))
+    ax.set_ylabel(_with_unit("y(t), output of the backlash", unit))
     ax.set_title(title or "General backlash: true and estimated")
-    ax.legend(loc="upper left")
+    if x is not None:
+        ax.plot([], [], " ", label="each branch where it is active:\nL while x decreases (f1),\nR while x increases (f2)")
+    _legend_outside(ax)
     ax.grid(alpha=0.3)
     return ax
 
@@ -149,13 +244,16 @@ def plot_trajectories(
     *,
     truth: dict[str, float] | None = None,
     final: dict[str, float] | None = None,
+    refinement_steps: int | None = None,
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
     """Draw parameter estimates over the iterations, as in the paper's Figs 5, 6 and 8-10.
 
-    Dotted lines mark the true values when given, stars the final estimates (after the
-    refinement) one step after the last iteration.
+    Dotted lines mark the true values when given. The final estimates (after the output-error
+    refinement, the values the fit prints) are stars one step after the last iteration, joined
+    to it by a dashed segment: the curves end at the printed estimates. The legend, to the right
+    of the axes, names every curve and explains the line styles.
 
     Parameters
     ----------
@@ -169,6 +267,9 @@ def plot_trajectories(
         True values by name.
     final : dict of str to float, optional
         Final estimates by name (``FitResult.parameters``).
+    refinement_steps : int, optional
+        Levenberg-Marquardt steps of the refinement (``FitResult.refinement_steps``), named in
+        the legend.
     {plot}
 
     Examples
@@ -183,20 +284,36 @@ def plot_trajectories(
         _, ax = plt.subplots(figsize=(6, 4))
     h = np.asarray(history, dtype=np.float64)
     its = np.arange(1, len(h) + 1)
+    last = len(h) + 1
     for k, name in enumerate(shown):
         color = f"C{k % 10}"
         ax.plot(its, h[:, names.index(name)], "-o", ms=3, color=color, label=name)
         if truth is not None:
             ax.axhline(truth[name], color=color, ls=":", lw=1)
         if final is not None:
-            ax.plot([len(h) + 1], [final[name]], "*", ms=10, color=color)
+            ax.plot([len(h), last], [h[-1, names.index(name)], final[name]], "--", lw=1, color=color)
+            ax.plot([last], [final[name]], "*", ms=10, color=color)
     from matplotlib.ticker import MaxNLocator
 
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("estimate")
+    if final is not None:  # integer ticks, the last one replaced by "final" (one step after the last iteration)
+        ax.set_xlim(0.5, last + 0.5)
+        ticks = [int(t) for t in ax.get_xticks() if 1 <= t <= last - max(1.0, 0.08 * last)]
+        ax.set_xticks([*ticks, last], [*map(str, ticks), "final"])
+    ax.set_xlabel(f"iteration ({len(h)} in all)" + (", then the final estimate" if final is not None else ""))
+    ax.set_ylabel("estimate (value of the parameter)")
     ax.set_title(title or "Parameter estimates")
-    ax.legend(loc="best", fontsize="small", ncol=2)
+    from matplotlib.lines import Line2D
+
+    handles, labels = ax.get_legend_handles_labels()
+    if truth is not None:
+        handles.append(Line2D([], [], ls=":", color="0.3", lw=1))
+        labels.append("true value (dotted)")
+    if final is not None:
+        steps = "" if refinement_steps is None else f", {refinement_steps} LM step{'' if refinement_steps == 1 else 's'}"
+        handles.append(Line2D([], [], ls="--", marker="*", color="0.3", lw=1, ms=8))
+        labels.append(f"final estimate after the\noutput-error refinement{steps}")
+    _legend_outside(ax, handles=handles, labels=labels, ncol=1 if len(shown) <= 8 else 2)
     ax.grid(alpha=0.3)
     return ax
 
@@ -209,12 +326,19 @@ def plot_simulation(
     warmup: int = 0,
     dt: float = 1.0,
     ylabel: str = "output",
+    unit: str | None = None,
+    time_unit: str = "s",
+    window: int = WINDOW,
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
     """Draw the measured output against the free-run simulation, with the fit %.
 
-    The fit % and RMSE count the samples from ``warmup`` on; the warm-up is shaded.
+    The fit % and RMSE count the samples from ``warmup`` on; the warm-up is shaded. A record
+    longer than ``window`` samples is not drawn whole (its traces would hide each other): the
+    figure shows the window of ``window`` samples with the largest error, the error
+    (measured - simulated) over the whole record with that window marked, and the power
+    spectra of the error and of the measured output. The legends sit to the right of the axes.
 
     Parameters
     ----------
@@ -225,9 +349,15 @@ def plot_simulation(
     warmup : int, default 0
         Samples at the start left out of the fit % and RMSE (an unknown initial state).
     dt : float, default 1.0
-        Sampling period: the time axis is in its units (in samples when 1).
+        Sampling period in ``time_unit``: the time axis is in time (in samples when 1).
     ylabel : str, default "output"
-        Label of the output axis.
+        Name of the output signal for the axis labels.
+    unit : str, optional
+        Unit of the output for the axis labels [default: not stated].
+    time_unit : str, default "s"
+        Unit of ``dt``.
+    window : int, default 1000
+        Longest record drawn whole; longer ones show a window of this many samples.
     {plot}
 
     Examples
@@ -240,22 +370,68 @@ def plot_simulation(
     from ..identify import fit_percent, rmse
 
     plt = pyplot()
-    if ax is None:
-        _, ax = plt.subplots(figsize=(10, 3.8))
     ys, sims = as_signal(y, "y").ravel(), as_signal(y_sim, "y_sim").ravel()
-    t = np.arange(len(ys)) * dt
+    t, time_label = _time(len(ys), dt, time_unit)
     fit = fit_percent(ys, sims, warmup=warmup)
     err = rmse(ys, sims, warmup=warmup)
-    ax.plot(t, ys, color="0.3", lw=1, label="measured")
-    ax.plot(t, sims, color="C3", lw=1, label=f"simulated (free run): fit {fit:.1f} %, RMSE {err:.4g}")
-    if warmup:
-        ax.axvspan(t[0], t[warmup - 1], color="0.9", zorder=0, label=f"skipped transient ({warmup} samples)")
-    ax.set_xlabel("time" if dt != 1.0 else "sample")
-    ax.set_ylabel(ylabel)
-    ax.set_title(title or "Measured and simulated output")
-    ax.legend(loc="upper right", fontsize="small")
+    rmse_text = f"RMSE {err:.4g}" + (f" {unit}" if unit else "")
+    long = len(ys) > window and ax is None
+    if ax is None and not long:
+        _, ax = plt.subplots(figsize=(10, 3.8))
+    elif long:
+        fig = plt.figure(figsize=(11, 9.5), layout="constrained")
+        ax, ax_err, ax_psd = fig.subplots(3, 1, height_ratios=[1.2, 1.0, 1.0])
+    shown = _worst_window(ys - sims, warmup, window) if long else slice(0, len(ys))
+    ax.plot(t[shown], ys[shown], color="k", lw=1.6, alpha=0.55, label="measured")
+    ax.plot(t[shown], sims[shown], color="C3", lw=0.9, ls="--", label=f"simulated (free run): fit {fit:.1f} %, {rmse_text}")
+    if warmup and shown.start < warmup:
+        ax.axvspan(t[shown.start], t[warmup - 1], color="0.9", zorder=0, label=f"skipped transient ({warmup} samples)")
+    ax.set_xlabel(time_label)
+    ax.set_ylabel(_with_unit(ylabel, unit))
+    heading = title or "Measured and simulated output"
+    if long:
+        heading += (f"\nwindow of {window} of {len(ys)} samples where the error is largest (fit % and RMSE: whole record);"
+                    "\nthe error (too small to see here when the fit is good) is drawn below")
+    ax.set_title(heading)
+    _legend_outside(ax)
     ax.grid(alpha=0.3)
+    if long:
+        _plot_error_panels(ys - sims, t, time_label, dt, warmup, shown, err, ylabel, unit, time_unit, ys, ax_err, ax_psd)
     return ax
+
+
+def _plot_error_panels(e: NDArray[np.float64], t: NDArray[np.float64], time_label: str, dt: float, warmup: int, shown: slice,
+                       err: float, ylabel: str, unit: str | None, time_unit: str, ys: NDArray[np.float64], ax_err: Any, ax_psd: Any) -> None:
+    """The error over the whole record (the window marked) and the spectra of error and output."""
+    if warmup:
+        ax_err.axvspan(t[0], t[warmup - 1], color="0.9", zorder=0, label=f"skipped transient ({warmup} samples)")
+    ax_err.axvspan(t[shown.start], t[shown.stop - 1], color="C1", alpha=0.25, lw=0, zorder=0, label="window shown above")
+    ax_err.plot(t, e, color="C0", lw=0.4, label="measured - simulated")
+    for sign in (-1.0, 1.0):
+        ax_err.axhline(sign * err, color="k", ls="--", lw=0.8, label="+-RMSE" if sign > 0 else None)
+    after = e[warmup:]
+    if after.size and np.ptp(after) > 0:  # scale to the evaluated samples, not the transient
+        pad = 0.05 * float(np.ptp(after))
+        ax_err.set_ylim(float(after.min()) - pad, float(after.max()) + pad)
+    ax_err.set_xlabel(time_label)
+    ax_err.set_ylabel(_with_unit(f"measured - simulated {ylabel}", unit))
+    ax_err.set_title(f"Free-run simulation error over the whole record ({len(e)} samples)")
+    _legend_outside(ax_err)
+    ax_err.grid(alpha=0.3)
+    in_samples = time_label.startswith("sample")
+    step = 1.0 if in_samples else float(dt)
+    f_unit = "cycles/sample" if in_samples else ("Hz" if time_unit == "s" else f"1/{time_unit}")
+    for signal, color, label in ((ys[warmup:], "0.3", "measured output"), (after, "C0", "error (measured - simulated)")):
+        if signal.size >= 8:
+            f, density = _spectrum(signal, step)
+            ax_psd.semilogy(f[1:], density[1:], color=color, lw=0.9, label=label)
+    squared = f"{unit}²" if unit else "(units of the record)²"
+    ax_psd.set_xlabel(f"frequency [{f_unit}]")
+    per = f_unit if f_unit == "Hz" else f"({f_unit})"
+    ax_psd.set_ylabel(f"power spectral density [{squared}/{per}]")
+    ax_psd.set_title("Where the error lies in frequency (Welch spectra after the transient)")
+    _legend_outside(ax_psd)
+    ax_psd.grid(alpha=0.3, which="both")
 
 
 def _correlation(a: NDArray[np.float64], b: NDArray[np.float64], lags: NDArray[np.int_]) -> NDArray[np.float64]:
@@ -272,6 +448,10 @@ def plot_residuals(
     u: ArrayLike,
     *,
     max_lag: int = 40,
+    dt: float = 1.0,
+    ylabel: str = "output",
+    unit: str | None = None,
+    time_unit: str = "s",
     fig: Any = None,
     title: str | None = None,
 ) -> Any:
@@ -289,6 +469,14 @@ def plot_residuals(
         The input over the same samples.
     max_lag : int, default 40
         Largest lag of the correlations.
+    dt : float, default 1.0
+        Sampling period in ``time_unit`` (the time axis is in samples when 1).
+    ylabel : str, default "output"
+        Name of the output signal for the axis labels.
+    unit : str, optional
+        Unit of the output (and so of the residual) [default: not stated].
+    time_unit : str, default "s"
+        Unit of ``dt``.
     fig : matplotlib.figure.Figure, optional
         Figure to draw on [default: a new one].
     title : str, optional
@@ -320,24 +508,31 @@ def plot_residuals(
     axes = fig.subplots(2, 2)
     n = len(e)
     bound = 1.96 / np.sqrt(n)
-    axes[0, 0].plot(e, lw=0.7, color="C0")
-    axes[0, 0].set_title(f"residual (RMS {np.sqrt(np.mean(e ** 2)):.4g})")
-    axes[0, 0].set_xlabel("sample")
+    t, time_label = _time(n, dt, time_unit)
+    lag_unit = "samples" if time_label.startswith("sample") else f"samples of {dt:g} {time_unit}"
+    axes[0, 0].plot(t, e, lw=0.5 if n > WINDOW else 0.7, color="C0")
+    axes[0, 0].set_title(f"residual (RMS {np.sqrt(np.mean(e ** 2)):.4g}{' ' + unit if unit else ''})")
+    axes[0, 0].set_xlabel(time_label)
+    axes[0, 0].set_ylabel(_with_unit(f"measured - simulated {ylabel}", unit))
     axes[0, 1].hist(e, bins=50, color="C0", alpha=0.8)
     axes[0, 1].set_title("residual histogram")
+    axes[0, 1].set_xlabel(_with_unit("residual", unit))
+    axes[0, 1].set_ylabel("samples")
     lags = np.arange(0, max_lag + 1)
     auto = _correlation(e, e, lags)
     axes[1, 0].stem(lags, auto, basefmt=" ")
     axes[1, 0].set_title("residual autocorrelation")
+    axes[1, 0].set_ylabel("normalised correlation r_ee(k)")
     cross_lags = np.arange(-max_lag, max_lag + 1)
     axes[1, 1].stem(cross_lags, _correlation(e, us, cross_lags), basefmt=" ")
     axes[1, 1].set_title("cross-correlation residual / input")
+    axes[1, 1].set_ylabel("normalised correlation r_eu(k)")
     for ax in (axes[1, 0], axes[1, 1]):
-        ax.axhspan(-bound, bound, color="C2", alpha=0.2, label="95 % bounds (white, independent)")
-        ax.set_xlabel("lag")
-        ax.legend(loc="upper right", fontsize="small")
+        ax.axhspan(-bound, bound, color="C2", alpha=0.2)
+        ax.set_xlabel(f"lag k [{lag_unit}]")
     for ax in axes.flat:
         ax.grid(alpha=0.3)
-    fig.suptitle(title or "Residual diagnostics (free-run simulation error)")
+    heading = title or "Residual diagnostics (free-run simulation error)"
+    fig.suptitle(f"{heading}\ngreen band: 95 % bounds +-1.96/sqrt(N) of a white residual independent of the input")
     fig.tight_layout()
     return fig

@@ -3,7 +3,7 @@ the default one side by side, with tables of estimates per iteration and Figs 4-
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -85,6 +85,8 @@ class ExampleRun:
         The default fit (iterations with step control, then the output-error refinement).
     x_range : tuple of float
         The range of the true internal signal x, for the figures of the branches.
+    u : ndarray of float64 or None
+        The input record, to find where each branch is active in the figures.
     """
 
     setting: ExampleSetting
@@ -94,6 +96,7 @@ class ExampleRun:
     paper_outcome: str
     default: FitResult
     x_range: tuple[float, float]
+    u: NDArray[np.float64] | None = field(default=None, repr=False, compare=False)
 
 
 def run_example(number: int, *, seed: int = 0, n: int = 1500) -> ExampleRun:
@@ -136,7 +139,7 @@ def run_example(number: int, *, seed: int = 0, n: int = 1500) -> ExampleRun:
     structure = default.structure
     truth = dict(zip(structure.names, structure.pack(model)))
     sim = model.simulate(data.u, internals=True)
-    return ExampleRun(st, structure, truth, history, outcome, default, (float(sim.x.min()), float(sim.x.max())))
+    return ExampleRun(st, structure, truth, history, outcome, default, (float(sim.x.min()), float(sim.x.max())), data.u)
 
 
 def iteration_table(names: list[str], truth: dict[str, float], history: NDArray[np.float64], final: NDArray[np.float64] | None = None) -> str:
@@ -246,15 +249,19 @@ def write_figures(run: ExampleRun, out_dir: Path) -> list[Path]:
     st, names = run.setting, run.structure.names
     written = []
     char_name = "fig4_characteristic" if st.number == 1 else "fig7_characteristic"
+    # each branch over the range where it is active on the record (true and estimated x(t))
+    x_true, x_est = ((st.make().simulate(run.u, internals=True).x, run.default.model.simulate(run.u, internals=True).x)
+                     if run.u is not None else (None, None))
     ax = plot_branches_comparison(
-        st.make().backlash, run.default.model.backlash, run.x_range,
+        st.make().backlash, run.default.model.backlash, run.x_range, x=x_true, x_estimated=x_est, unit="dimensionless",
         title=f"Example {st.number}: general backlash, true and estimated (default)",
     )
     written.append(_save(plt, ax.figure, out_dir / f"example{st.number}_{char_name}.png"))
     for fig_name, shown in st.figures.items():
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+        fig, axes = plt.subplots(1, 2, figsize=(14, 4.4), sharey=True, layout="constrained")
         plot_trajectories(run.paper_history, names, shown, truth=run.truth, ax=axes[0], title="the paper's algorithm")
-        plot_trajectories(run.default.history, names, shown, truth=run.truth, ax=axes[1], title="default (before refinement)")
+        plot_trajectories(run.default.history, names, shown, truth=run.truth, final=run.default.parameters,
+                          refinement_steps=run.default.refinement_steps, ax=axes[1], title="default (iterations, then the refinement)")
         if np.max(np.abs(run.paper_history)) > 10 * max(abs(v) for v in run.truth.values()):
             axes[0].set_ylim(-2, 2)  # a diverging run would hide everything else
         fig.suptitle(f"Example {st.number}: {fig_name.split('_', 1)[1].replace('_', ' ')} parameters")

@@ -293,7 +293,7 @@ class FitResult:
         self, shown: list[str] | None = None, *, truth: Model | None = None, ax: Any = None, title: str | None = None
     ) -> Any:
         """Plot the parameter estimates over the iterations (the paper's Figs 5, 6, 8-10),
-        with the final estimate as stars; :func:`backlashid.app.plot_trajectories`.
+        then the final estimate after the refinement as stars; :func:`backlashid.app.plot_trajectories`.
 
         Parameters
         ----------
@@ -307,7 +307,8 @@ class FitResult:
 
         values = dict(zip(self.names, map(float, self.structure.pack(truth)))) if truth is not None else None
         return plot_trajectories(
-            self.history, self.names, shown or self.names, truth=values, final=self.parameters, ax=ax, title=title
+            self.history, self.names, shown or self.names, truth=values, final=self.parameters,
+            refinement_steps=self.refinement_steps, ax=ax, title=title,
         )
 
 
@@ -994,7 +995,7 @@ min_moving : float, default 0.02
     rest) is fitted: four 25-sample bursts in 4000 samples (1.3 % moving) recover Example 1
     within 0.002 with ``min_moving=0.01``.
 restarts : int, optional
-    Levenberg-Marquardt restarts from the result plus N(0, ``perturbation`` ** 2) noise, each
+    Levenberg-Marquardt restarts from the result plus N(0, ``perturbation ** 2``) noise, each
     kept only if it lowers the simulation error. By default 4 on records of up to 20 000
     samples after the warm-up and none on longer ones, where they change nothing.
 perturbation : float, default 0.05

@@ -4,7 +4,10 @@
   fed back). This is how models are judged; use data not used for fitting.
 - **One-step prediction** error: the measured output of the previous samples is fed back
   where the model has it (the backlash memory y(t-1) of the cascade; the output block's past
-  w(t-j) of the sandwich). Always smaller; it says little about simulation quality.
+  w(t-j) of the sandwich). Often smaller, but not always: the fed-back output carries the
+  measurement noise, which the model's feedback passes on (on the Wiener-Hammerstein benchmark
+  the sandwich's one-step RMSE is 0.75 mV against a free-run 0.51 mV). Either way it says
+  little about simulation quality.
 
 ``warmup`` samples at the start are left out (records rarely start at rest), as in the fits.
 """
