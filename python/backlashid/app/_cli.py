@@ -21,6 +21,7 @@ import click
 import numpy as np
 
 from .. import __version__
+from .._files import atomic_write, save_figure, write_text
 from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ..models import SandwichModel
 
@@ -160,7 +161,7 @@ def _metrics_dict(metrics: Any) -> dict[str, Any]:
 
 def _write_json(path: Path, payload: dict[str, Any]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(payload, indent=2) + "\n")
+    write_text(path, json.dumps(payload, indent=2) + "\n")  # atomically: an interrupted write leaves the old file
 
 
 def _model_options(command: F) -> F:
@@ -353,7 +354,8 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
     if output:
         columns.update({"y": record.y, "residual": record.y - y_sim})
     out.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
+    with atomic_write(out, "w", encoding="utf-8") as fh:  # an interrupted write leaves the old file or none
+        np.savetxt(fh, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
     click.echo(f"simulated {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else ""))
     if output:
         click.echo(str(evaluate_scaled(model, scaling, record.u, record.y, warmup=warmup, init_samples=init_samples)))
@@ -501,7 +503,7 @@ def paper(seed: int, out: Path, examples: tuple[str, ...]) -> None:
 
 
 def _save(plt: object, fig: object, path: Path) -> Path:
-    fig.savefig(path, dpi=110, bbox_inches="tight")  # type: ignore[attr-defined]
+    save_figure(fig, path, dpi=110, bbox_inches="tight")
     plt.close(fig)  # type: ignore[attr-defined]
     return path
 
