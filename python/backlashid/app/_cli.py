@@ -334,16 +334,19 @@ def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:
 def simulate(model_file: Path, data: Path, input_: str, output: str | None, range_: str | None, decimate_by: int | None, warmup: int, init_samples: int, out: Path) -> None:
     """Simulate a model (JSON from fit --json, or a model's to_json) on an input record."""
     from ..identify import evaluate_scaled, simulate_from_samples, simulate_scaled
-    from ._io import Record, decimate, parse_range, read_signals
+    from ._io import Record, _finite_record, _read_signals, decimate, parse_range
 
     model, scaling, described = _read_model_file(model_file)
     names = [input_] + ([output] if output else [])
-    signals = read_signals(data, names)
+    signals = _read_signals(data, names)  # checked finite below, on the --range used
     u = signals[input_]
     y = signals[output] if output else np.zeros_like(u)
     record = Record(u, y, str(data))
     if range_:
-        record = record.slice(parse_range(range_, len(record), "--range"), "--range")
+        part = parse_range(range_, len(record), "--range")
+        record = _finite_record(record.slice(part, "--range"), input_, output or "y", "choose a --range without it", part.start, f"--range {range_}", str(data))
+    else:
+        _finite_record(record, input_, output or "y", "select a --range without it")
     factor = decimate_by if decimate_by is not None else int(described.get("decimate", 1))
     record = decimate(record, factor)
     if init_samples and not output:
