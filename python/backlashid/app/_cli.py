@@ -307,17 +307,33 @@ def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:
     from ..models import model_from_dict
 
     if not path.is_file():
-        raise DataError(f"{path}: no such model file")
+        raise DataError(f"{path}: no such model file" + (f" (relative to {Path.cwd()})" if not path.is_absolute() else ""))
     try:
-        payload = json.loads(path.read_text())
+        payload = json.loads(path.read_bytes().decode("utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: not a JSON file ({exc}); give the file written by backlashid fit --json") from None
+    except RecursionError:
+        raise DataError(f"{path}: not a backlashid model (JSON nested too deeply); give the file written by backlashid fit --json") from None
     if not isinstance(payload, dict):
         raise DataError(f"{path}: not a backlashid model (expected a JSON object)")
-    if isinstance(payload.get("model"), dict):  # written by backlashid fit
-        scaling = Scaling.from_dict(payload["scaling"]) if "scaling" in payload else Scaling()
-        return model_from_dict(payload["model"]), scaling, payload.get("data", {})
-    return model_from_dict(payload), Scaling(), {}
+    fit_file = isinstance(payload.get("model"), dict)  # written by backlashid fit
+    described = payload.get("data", {}) if fit_file else {}
+    if not isinstance(described, dict) or not _whole(described.get("decimate", 1)):
+        raise DataError(f"{path}: 'data' must be an object whose 'decimate' is a whole number >= 1; give the file written by backlashid fit --json")
+    try:
+        scaling = Scaling.from_dict(payload["scaling"]) if fit_file and "scaling" in payload else Scaling()
+        model = model_from_dict(payload["model"] if fit_file else payload)
+    except BacklashIdError as exc:
+        raise DataError(f"{path}: {exc}") from None
+    except (TypeError, ValueError, OverflowError, KeyError, AttributeError, IndexError, RecursionError) as exc:  # values of the wrong kind
+        raise DataError(f"{path}: not a valid backlashid model ({type(exc).__name__}: {str(exc)[:200]}); "
+                        "give the file written by backlashid fit --json or model.to_json()") from None
+    return model, scaling, described
+
+
+def _whole(value: object) -> bool:
+    """A whole number >= 1 (not a bool), as a decimation factor must be."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 
 @main.command()

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import csv
 import re
+import zipfile
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -474,10 +476,10 @@ def _load_npz(path: Path) -> dict[str, NDArray]:
     try:
         with np.load(path, allow_pickle=False) as data:
             return {k: data[k] for k in data.files}
-    except ValueError as exc:  # pickled objects
+    except ValueError as exc:  # pickled objects, an unknown .npy format
         raise DataError(f"{path}: cannot read the arrays ({exc}); save plain numeric arrays with numpy.savez") from None
-    except (OSError, EOFError) as exc:
-        raise DataError(f"{path}: not a readable .npz file ({exc})") from None
+    except (OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as exc:  # a corrupt or truncated archive
+        raise DataError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc}); save the arrays again with numpy.savez") from None
 
 
 def _load_mat(path: Path) -> dict[str, NDArray]:
