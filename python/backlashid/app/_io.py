@@ -640,8 +640,9 @@ def select_records(
     Raises
     ------
     DataError
-        If the choices contradict each other (``split`` with ranges, say), select nothing, or a
-        file cannot be read.
+        If the choices contradict each other (``split`` with ranges, say), select nothing, a
+        file cannot be read, or a selected sample is not finite (the ranges are applied first:
+        samples outside them may be NaN; the message names the range and the sample).
 
     Examples
     --------
