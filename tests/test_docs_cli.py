@@ -40,6 +40,13 @@ def test_the_page_has_its_commands_and_reads_data_from_the_documented_folder() -
         assert block.lstrip().startswith("D=${BACKLASHID_DATA:-../shared/data}/"), "each block sets its own data folder"
 
 
+def test_every_page_reads_the_shared_records_from_the_documented_folder() -> None:
+    for page in sorted(DOC.parent.rglob("*.md")):
+        for block in bash_blocks(page.read_text()):
+            paths = re.findall(r"\S*shared/data\S*", block)
+            assert all(p.startswith(("${BACKLASHID_DATA:-../shared/data}", "D=${BACKLASHID_DATA:-../shared/data}")) for p in paths), (page.name, paths)
+
+
 def test_every_command_of_docs_cli_runs_as_written_from_the_repository_root(tmp_path: Path) -> None:
     needed = ["friction_damper_backlash", "coupled_electric_drives", "wiener_hammerstein_2009"]
     if not all((SHARED_DATA / name).is_dir() for name in needed):
