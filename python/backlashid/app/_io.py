@@ -404,22 +404,33 @@ def _read_csv(path: Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]
 def _csv_rows(path: Path, lines: list[str], delimiter: str) -> tuple[list[list[str]], list[int]]:
     """The non-blank rows of a delimited file and the numbers of its blank lines. A quoted
     field must close on its own line: a stray quote is refused with the line it opened on,
-    whatever the file's length (a reader would otherwise swallow the rest of the file)."""
-    for number in [i for i, line in enumerate(lines, 1) if '"' in line]:  # only lines with a quote: fast
-        try:
-            list(csv.reader(lines[number - 1 : number], delimiter=delimiter, strict=True))
-        except csv.Error as exc:
-            if str(exc).startswith("unexpected end of data"):
-                raise DataError(_open_quote(path, lines, number)) from None
-            raise DataError(f"{path}: line {number} is not valid CSV ({exc}); clean the file") from None
-    reader = csv.reader(lines, delimiter=delimiter, strict=True)  # now one row per line
+    whatever the file's length (the reader would otherwise swallow the rest of the file)."""
     try:
-        rows = list(reader)
-    except csv.Error as exc:  # a field beyond the field size limit, a NUL byte
-        raise DataError(f"{path}: line {reader.line_num} is not valid CSV ({exc}); clean the file") from None
+        rows = list(csv.reader(lines, delimiter=delimiter, strict=True))
+    except csv.Error:
+        rows = None
+    if rows is None or len(rows) != len(lines):  # one row per line, unless a quoted field ran on
+        _refuse_quoting(path, lines, delimiter)
     kept = [row for row in rows if "".join(row).strip()]
     blank = [] if len(kept) == len(rows) else [i for i, row in enumerate(rows, 1) if not "".join(row).strip()]
     return kept, blank
+
+
+def _refuse_quoting(path: Path, lines: list[str], delimiter: str) -> None:
+    """Read again, row by row, to the first row that is not one line, and say where it starts.
+    A runaway quote ends at the reader's field size limit, so this stops early in a long file."""
+    reader = csv.reader(lines, delimiter=delimiter, strict=True)
+    start = 1  # the line the next row starts on
+    try:
+        for _ in reader:
+            if reader.line_num != start:
+                raise DataError(_open_quote(path, lines, start))
+            start = reader.line_num + 1
+    except csv.Error as exc:
+        if reader.line_num > start or str(exc).startswith("unexpected end of data"):
+            raise DataError(_open_quote(path, lines, start)) from None
+        raise DataError(f"{path}: line {start} is not valid CSV ({exc}); clean the file") from None
+    raise DataError(f"{path}: the file's quoting is not valid CSV; clean the file")  # pragma: no cover - the first pass failed
 
 
 def _open_quote(path: Path, lines: list[str], number: int) -> str:
