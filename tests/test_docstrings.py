@@ -31,6 +31,13 @@ from typing import Any
 
 import numpy as np
 import pytest
+
+# The package imports scipy when first needed: import it here so the examples are timed, not the imports.
+import scipy.io
+import scipy.linalg
+import scipy.optimize
+import scipy.signal
+import scipy.stats  # noqa: F401
 from numpydoc.docscrape import NumpyDocString
 
 import backlashid

@@ -28,16 +28,9 @@ Simulate the paper's Example 1 and identify it from its noisy output:
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
+import importlib
+from typing import TYPE_CHECKING, Any
 
-try:
-    __version__ = version("backlashid")
-except PackageNotFoundError:  # running from a source tree
-    __version__ = "0.0.0"
-
-from .app import diagnose_many, fit_many
-from .benchmarks import ExampleData, example1, example2, example_data, shared_data_folder
-from .diagnosis import EFFECTS, DiagnosisReport, diagnose, fit_effect
 from .errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
 from .identify import (
     FitResult,
@@ -69,6 +62,58 @@ from .models import (
     model_from_dict,
     model_from_json,
 )
+
+if TYPE_CHECKING:  # imported on first use (``__getattr__`` below); named here for type checkers
+    from .app import diagnose_many, fit_many
+    from .benchmarks import ExampleData, example1, example2, example_data, shared_data_folder
+    from .diagnosis import EFFECTS, DiagnosisReport, diagnose, fit_effect
+
+    __version__: str
+
+# The diagnosis (scipy.stats, scipy.signal), the benchmarks and the application layer (figures,
+# Dask fleets) load when one of their names is first used, so ``import backlashid`` and
+# ``backlashid --help`` stay fast; ``backlashid.X`` is the same object either way.
+_LAZY = {
+    "diagnose_many": "app",
+    "fit_many": "app",
+    "ExampleData": "benchmarks",
+    "example1": "benchmarks",
+    "example2": "benchmarks",
+    "example_data": "benchmarks",
+    "shared_data_folder": "benchmarks",
+    "EFFECTS": "diagnosis",
+    "DiagnosisReport": "diagnosis",
+    "diagnose": "diagnosis",
+    "fit_effect": "diagnosis",
+}
+_SUBPACKAGES = ("app", "benchmarks", "diagnosis", "identify", "models")
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("backlashid")
+    except PackageNotFoundError:  # running from a source tree
+        return "0.0.0"
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    elif name == "__version__":
+        value = _version()
+    elif name in _SUBPACKAGES:
+        return importlib.import_module(f".{name}", __name__)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value  # found once
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__) | set(_SUBPACKAGES))
+
 
 __all__ = [
     "BacklashIdError",

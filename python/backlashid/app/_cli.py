@@ -22,6 +22,7 @@ import click
 import numpy as np
 
 from .. import __version__
+from .._files import atomic_write, save_figure, write_text
 from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ..models import SandwichModel
 
@@ -188,7 +189,7 @@ def _metrics_dict(metrics: Any) -> dict[str, Any]:
 
 def _write_json(path: Path, payload: dict[str, Any]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(payload, indent=2) + "\n")
+    write_text(path, json.dumps(payload, indent=2) + "\n")  # atomically: an interrupted write leaves the old file
 
 
 def _model_options(command: F) -> F:
@@ -360,17 +361,33 @@ def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:
     from ..models import model_from_dict
 
     if not path.is_file():
-        raise DataError(f"{path}: no such model file")
+        raise DataError(f"{path}: no such model file" + (f" (relative to {Path.cwd()})" if not path.is_absolute() else ""))
     try:
-        payload = json.loads(path.read_text())
+        payload = json.loads(path.read_bytes().decode("utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: not a JSON file ({exc}); give the file written by backlashid fit --json") from None
+    except RecursionError:
+        raise DataError(f"{path}: not a backlashid model (JSON nested too deeply); give the file written by backlashid fit --json") from None
     if not isinstance(payload, dict):
         raise DataError(f"{path}: not a backlashid model (expected a JSON object)")
-    if isinstance(payload.get("model"), dict):  # written by backlashid fit
-        scaling = Scaling.from_dict(payload["scaling"]) if "scaling" in payload else Scaling()
-        return model_from_dict(payload["model"]), scaling, payload.get("data", {})
-    return model_from_dict(payload), Scaling(), {}
+    fit_file = isinstance(payload.get("model"), dict)  # written by backlashid fit
+    described = payload.get("data", {}) if fit_file else {}
+    if not isinstance(described, dict) or not _whole(described.get("decimate", 1)):
+        raise DataError(f"{path}: 'data' must be an object whose 'decimate' is a whole number >= 1; give the file written by backlashid fit --json")
+    try:
+        scaling = Scaling.from_dict(payload["scaling"]) if fit_file and "scaling" in payload else Scaling()
+        model = model_from_dict(payload["model"] if fit_file else payload)
+    except BacklashIdError as exc:
+        raise DataError(f"{path}: {exc}") from None
+    except (TypeError, ValueError, OverflowError, KeyError, AttributeError, IndexError, RecursionError) as exc:  # values of the wrong kind
+        raise DataError(f"{path}: not a valid backlashid model ({type(exc).__name__}: {str(exc)[:200]}); "
+                        "give the file written by backlashid fit --json or model.to_json()") from None
+    return model, scaling, described
+
+
+def _whole(value: object) -> bool:
+    """A whole number >= 1 (not a bool), as a decimation factor must be."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 
 @main.command()
@@ -387,16 +404,19 @@ def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:
 def simulate(model_file: Path, data: Path, input_: str, output: str | None, range_: str | None, decimate_by: int | None, warmup: int, init_samples: int, out: Path) -> None:
     """Simulate a model (JSON from fit --json, or a model's to_json) on an input record."""
     from ..identify import evaluate_scaled, simulate_from_samples, simulate_scaled
-    from ._io import Record, decimate, parse_range, read_signals
+    from ._io import Record, _finite_record, _read_signals, decimate, parse_range
 
     model, scaling, described = _read_model_file(model_file)
     names = [input_] + ([output] if output else [])
-    signals = read_signals(data, names)
+    signals = _read_signals(data, names)  # checked finite below, on the --range used
     u = signals[input_]
     y = signals[output] if output else np.zeros_like(u)
     record = Record(u, y, str(data))
     if range_:
-        record = record.slice(parse_range(range_, len(record), "--range"), "--range")
+        part = parse_range(range_, len(record), "--range")
+        record = _finite_record(record.slice(part, "--range"), input_, output or "y", "choose a --range without it", part.start, f"--range {range_}", str(data))
+    else:
+        _finite_record(record, input_, output or "y", "select a --range without it")
     factor = decimate_by if decimate_by is not None else int(described.get("decimate", 1))
     record = decimate(record, factor)
     if init_samples and not output:
@@ -407,7 +427,8 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
     if output:
         columns.update({"y": record.y, "residual": record.y - y_sim})
     out.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
+    with atomic_write(out, "w", encoding="utf-8") as fh:  # an interrupted write leaves the old file or none
+        np.savetxt(fh, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
     click.echo(f"simulated {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else ""))
     if output:
         click.echo(f"errors in {_measured_units(output)}: " + str(evaluate_scaled(model, scaling, record.u, record.y, warmup=warmup, init_samples=init_samples)))
@@ -563,7 +584,7 @@ def paper(seed: int, out: Path, examples: tuple[str, ...]) -> None:
 
 
 def _save(plt: object, fig: object, path: Path) -> Path:
-    fig.savefig(path, dpi=110, bbox_inches="tight")  # type: ignore[attr-defined]
+    save_figure(fig, path, dpi=110, bbox_inches="tight")
     plt.close(fig)  # type: ignore[attr-defined]
     return path
 

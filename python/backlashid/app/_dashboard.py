@@ -102,7 +102,9 @@ def plot_diagnosis(
     _plot_before_after(report, fig.add_subplot(gs[3, 1]), window, view)
     fig.text(0.5, 1.0 - 8 / (72 * figsize[1]), verdict, ha="center", va="top", fontsize=10)
     if path is not None:
-        fig.savefig(path, dpi=dpi)
+        from .._files import save_figure
+
+        save_figure(fig, path, dpi=dpi)  # atomically
     return fig
 
 

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import csv
 import re
+import zipfile
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -125,9 +127,17 @@ def read_signals(path: str | Path, names: Sequence[str]) -> dict[str, NDArray[np
     >>> bid.app.read_signals(path, ["u", "2"])
     {'u': array([ 0.5 , -0.25]), '2': array([0. , 0.5])}
     """
+    signals = _read_signals(path, names)
+    for name, values in signals.items():
+        _require_finite(values, f"{path}: {name}", "select a range without it")
+    return signals
+
+
+def _read_signals(path: str | Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]]:
+    """:func:`read_signals` without the finiteness check (the caller checks the range it uses)."""
     path = Path(path)
     if not path.is_file():
-        raise DataError(f"{path}: no such file")
+        raise DataError(_missing(path))
     suffix = path.suffix.lower()
     if suffix in (".csv", ".txt"):
         signals = _read_csv(path, names)
@@ -140,11 +150,46 @@ def read_signals(path: str | Path, names: Sequence[str]) -> dict[str, NDArray[np
     lengths = {name: len(v) for name, v in signals.items()}
     if len(set(lengths.values())) > 1:
         raise DataError(f"{path}: signals of different lengths {lengths}; choose signals of one record")
-    for name, values in signals.items():
-        bad = np.flatnonzero(~np.isfinite(values))
-        if bad.size:
-            raise DataError(f"{path}: {name} has a non-finite value at sample {bad[0]}; clean the record or select a range without it")
     return signals
+
+
+def _require_finite(values: NDArray[np.float64], what: str, hint: str, offset: int = 0, within: str = "") -> None:
+    """Refuse a non-finite sample of ``values``, naming its sample (``offset`` + index: the
+    sample of the file) and, for a range, the range (``within``) and the index inside it."""
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        i = int(bad[0])
+        where = f"sample {offset + i}" + (f" (sample {i} of {within})" if within else "")
+        raise DataError(f"{what} has a non-finite value at {where}: {values[i]}; clean the record or {hint}")
+
+
+def _finite_record(record: Record, input: str, output: str, hint: str, offset: int = 0, within: str = "", source: str = "") -> Record:
+    """``record``, refused if a sample is not finite (``source``: the file the range is of)."""
+    for name, values in ((input, record.u), (output, record.y)):
+        _require_finite(values, f"{source or record.source}: {name}", hint, offset, within)
+    return record
+
+
+def _missing(path: Path) -> str:
+    """The message for a data file that does not exist: where relative paths start, and where
+    the shared benchmark records are (``BACKLASHID_DATA``)."""
+    from ..benchmarks import shared_data_folder
+
+    message = f"{path}: no such file"
+    if not path.is_absolute():
+        message += f" (relative to {Path.cwd()})"
+    try:
+        folder = shared_data_folder()
+    except DataError:
+        folder = None
+    parts = path.parts
+    if "data" in parts and parts.index("data") > 0 and parts[parts.index("data") - 1] == "shared" and folder is not None:
+        guess = folder.joinpath(*parts[parts.index("data") + 1 :])
+        if guess.is_file():
+            return f"{message}; the shared records are in {folder}: did you mean {guess}? (BACKLASHID_DATA names their folder)"
+    where = f"found in {folder}" if folder is not None else "not found"
+    return (f"{message}; check the path (the shared benchmark records are read from $BACKLASHID_DATA, else shared/data "
+            f"beside the repository: {where})")
 
 
 def load_record(path: str | Path, input: str, output: str) -> Record:
@@ -179,6 +224,11 @@ def load_record(path: str | Path, input: str, output: str) -> Record:
     (4, [0.0, 1.0, 2.0, 3.0])
     """
     signals = read_signals(path, [input, output])
+    return Record(signals[input], signals[output], str(path))
+
+
+def _load_unchecked(path: str | Path, input: str, output: str) -> Record:
+    signals = _read_signals(path, [input, output])
     return Record(signals[input], signals[output], str(path))
 
 
@@ -316,18 +366,25 @@ def _is_number(text: str) -> bool:
 
 
 def _read_csv(path: Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]]:
+    data = path.read_bytes()
     try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            text = fh.read()
-    except UnicodeDecodeError:
-        raise DataError(f"{path}: not a text file; give a CSV with one column per signal") from None
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise DataError(f"{path}: not a UTF-8 text file (byte {exc.start}, line {line}); give a CSV with one column per signal") from None
     first_line = text.lstrip().split("\n", 1)[0]
     delimiter = next((d for d in ",;\t" if d in first_line), None)
     lines = text.splitlines()
     if delimiter is None:  # whitespace-separated columns
-        rows = [line.split() for line in lines if line.strip()]
+        rows, blank = [], []
+        for number, line in enumerate(lines, 1):
+            cells = line.split()
+            if cells:
+                rows.append(cells)
+            else:
+                blank.append(number)
     else:
-        rows = [row for row in csv.reader(lines, delimiter=delimiter) if any(cell.strip() for cell in row)]
+        rows, blank = _csv_rows(path, lines, delimiter)
     if not rows:
         raise DataError(f"{path}: the file is empty")
     first = [cell.strip() for cell in rows[0]]
@@ -340,11 +397,49 @@ def _read_csv(path: Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]
         raise DataError(f"{path}: a header but no data rows")
     columns = {}
     for name in names:
-        columns[name] = _csv_column(path, header, body, name, 1 if has_header else 0)
+        columns[name] = _csv_column(path, header, body, name, 1 if has_header else 0, blank)
     return columns
 
 
-def _csv_column(path: Path, header: list[str], body: list[list[str]], selector: str, first_line: int) -> NDArray[np.float64]:
+def _csv_rows(path: Path, lines: list[str], delimiter: str) -> tuple[list[list[str]], list[int]]:
+    """The non-blank rows of a delimited file and the numbers of its blank lines. A quoted
+    field must close on its own line: a stray quote is refused with the line it opened on,
+    whatever the file's length (the reader would otherwise swallow the rest of the file)."""
+    try:
+        rows = list(csv.reader(lines, delimiter=delimiter, strict=True))
+    except csv.Error:
+        rows = None
+    if rows is None or len(rows) != len(lines):  # one row per line, unless a quoted field ran on
+        _refuse_quoting(path, lines, delimiter)
+    kept = [row for row in rows if "".join(row).strip()]
+    blank = [] if len(kept) == len(rows) else [i for i, row in enumerate(rows, 1) if not "".join(row).strip()]
+    return kept, blank
+
+
+def _refuse_quoting(path: Path, lines: list[str], delimiter: str) -> None:
+    """Read again, row by row, to the first row that is not one line, and say where it starts.
+    A runaway quote ends at the reader's field size limit, so this stops early in a long file."""
+    reader = csv.reader(lines, delimiter=delimiter, strict=True)
+    start = 1  # the line the next row starts on
+    try:
+        for _ in reader:
+            if reader.line_num != start:
+                raise DataError(_open_quote(path, lines, start))
+            start = reader.line_num + 1
+    except csv.Error as exc:
+        if reader.line_num > start or str(exc).startswith("unexpected end of data"):
+            raise DataError(_open_quote(path, lines, start)) from None
+        raise DataError(f"{path}: line {start} is not valid CSV ({exc}); clean the file") from None
+    raise DataError(f"{path}: the file's quoting is not valid CSV; clean the file")  # pragma: no cover - the first pass failed
+
+
+def _open_quote(path: Path, lines: list[str], number: int) -> str:
+    line = lines[number - 1]
+    return (f"{path}: a quote opened on line {number} ({line[:40]!r}{'...' if len(line) > 40 else ''}) is not closed on that line; "
+            "remove the stray quote (a field of a signal file is one line)")
+
+
+def _csv_column(path: Path, header: list[str], body: list[list[str]], selector: str, first_line: int, blank: list[int]) -> NDArray[np.float64]:
     name, index = _selector(selector)
     if name.isdigit() and index is None and name not in header:
         position = int(name)
@@ -362,6 +457,14 @@ def _csv_column(path: Path, header: list[str], body: list[list[str]], selector: 
         if not -len(matches) <= k < len(matches):
             raise DataError(f"{path}: {len(matches)} columns are named {name!r}; choose {name}[0] to {name}[{len(matches) - 1}]")
         position = matches[k]
+    try:
+        cells = [row[position] for row in body]
+    except IndexError:  # short rows: their missing cells are empty
+        cells = [row[position] if position < len(row) else "" for row in body]
+    try:
+        return np.fromiter(map(float, cells), dtype=np.float64, count=len(cells))
+    except ValueError:
+        pass  # find the cell and its line
     values = np.empty(len(body))
     for i, row in enumerate(body):
         cell = row[position].strip() if position < len(row) else ""
@@ -369,6 +472,9 @@ def _csv_column(path: Path, header: list[str], body: list[list[str]], selector: 
             values[i] = float(cell)
         except ValueError:
             line = i + 1 + first_line
+            for b in blank:  # blank lines were skipped: count them back
+                if b <= line:
+                    line += 1
             what = "is empty" if not cell else f"holds {cell[:30]!r}, not a number"
             raise DataError(f"{path}: column {selector!r} {what} on line {line}; clean the file or select another column") from None
     return values
@@ -381,10 +487,10 @@ def _load_npz(path: Path) -> dict[str, NDArray]:
     try:
         with np.load(path, allow_pickle=False) as data:
             return {k: data[k] for k in data.files}
-    except ValueError as exc:  # pickled objects
+    except ValueError as exc:  # pickled objects, an unknown .npy format
         raise DataError(f"{path}: cannot read the arrays ({exc}); save plain numeric arrays with numpy.savez") from None
-    except (OSError, EOFError) as exc:
-        raise DataError(f"{path}: not a readable .npz file ({exc})") from None
+    except (OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as exc:  # a corrupt or truncated archive
+        raise DataError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc}); save the arrays again with numpy.savez") from None
 
 
 def _load_mat(path: Path) -> dict[str, NDArray]:
@@ -545,8 +651,9 @@ def select_records(
     Raises
     ------
     DataError
-        If the choices contradict each other (``split`` with ranges, say), select nothing, or a
-        file cannot be read.
+        If the choices contradict each other (``split`` with ranges, say), select nothing, a
+        file cannot be read, or a selected sample is not finite (the ranges are applied first:
+        samples outside them may be NaN; the message names the range and the sample).
 
     Examples
     --------
@@ -560,38 +667,52 @@ def select_records(
     """
     if split is not None and (estimation or validation):
         raise DataError("give either --split or --estimation/--validation ranges, not both")
+    hint = "choose --estimation / --validation ranges without it"
+
+    def pick(rec: Record, text: str | None, label: str) -> Record:
+        """Range ``text`` of ``rec`` (all of it when None), checked finite only there."""
+        if not text:
+            return _finite_record(rec, input, output, hint)
+        part = parse_range(text, len(rec), label)
+        return _finite_record(rec.slice(part, label), input, output, hint, part.start, f"{label} {text}", rec.source)
+
+    def joined(files: Sequence[str | Path], text: str | None, label: str) -> Record:
+        records = [_load_unchecked(f, input, output) for f in files]
+        if text:
+            return pick(concatenate(records), text, label)
+        return concatenate([_finite_record(r, input, output, hint) for r in records])
+
     val: Record | None = None
     parts: list[Record] = []
     if estimation_files:
         if split is not None:
             raise DataError("--split divides one file; with --estimation-file give --validation-file or a DATA file for validation")
         for f in estimation_files:
-            rec = load_record(f, input, output)
-            parts.append(rec.slice(parse_range(estimation, len(rec), "--estimation"), "--estimation") if estimation else rec)
+            parts.append(pick(_load_unchecked(f, input, output), estimation, "--estimation"))
         est = concatenate(parts)
         if validation_files:
-            val = concatenate([load_record(f, input, output) for f in validation_files])
-            if validation:
-                val = val.slice(parse_range(validation, len(val), "--validation"), "--validation")
+            val = joined(validation_files, validation, "--validation")
         elif data is not None:
-            val = load_record(data, input, output)
-            if validation:
-                val = val.slice(parse_range(validation, len(val), "--validation"), "--validation")
+            val = pick(_load_unchecked(data, input, output), validation, "--validation")
         elif validation:
             raise DataError("--validation is a range of the DATA file or the --validation-file records: give one")
     else:
         if data is None:
             raise DataError("no data: give a DATA file or --estimation-file")
-        rec = load_record(data, input, output)
-        if validation_files:
-            val = concatenate([load_record(f, input, output) for f in validation_files])
+        rec = _load_unchecked(data, input, output)
         if split is not None:
+            if validation_files:
+                val = joined(validation_files, None, "--validation-file")
             est_part, val_part = split_fraction(split, len(rec))
-            est, val = rec.slice(est_part, "--split"), rec.slice(val_part, "--split")
+            label = f"--split {split:g}"
+            est = _finite_record(rec.slice(est_part, "--split"), input, output, "choose another --split", 0, f"{label} (estimation)", rec.source)
+            val = _finite_record(rec.slice(val_part, "--split"), input, output, "choose another --split", val_part.start, f"{label} (validation)", rec.source)
         else:
-            est = rec.slice(parse_range(estimation, len(rec), "--estimation"), "--estimation") if estimation else rec
+            est = pick(rec, estimation, "--estimation")
             if validation:
-                val = rec.slice(parse_range(validation, len(rec), "--validation"), "--validation")
+                val = pick(rec, validation, "--validation")
+            elif validation_files:
+                val = joined(validation_files, None, "--validation-file")
     est = decimate(est, decimate_by)
     val = decimate(val, decimate_by) if val is not None else None
     description: dict[str, object] = {

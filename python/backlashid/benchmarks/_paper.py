@@ -270,6 +270,8 @@ def write_figures(run: ExampleRun, out_dir: Path) -> list[Path]:
 
 
 def _save(plt: Any, fig: Any, path: Path) -> Path:
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    from .._files import save_figure
+
+    save_figure(fig, path, dpi=110, bbox_inches="tight")  # atomically
     plt.close(fig)
     return path

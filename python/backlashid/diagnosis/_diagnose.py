@@ -54,7 +54,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import stats
 
 from .._numerics import lstsq, minimize_bounded
 from .._validation import check_signals
@@ -270,6 +269,8 @@ def _paired_p(r0: Array, r1: Array) -> float:
         var += 2.0 * (1.0 - k / (HAC_LAGS + 1)) * float(dc[k:] @ dc[:-k]) / n
     if var <= 0.0:
         return 0.0 if d.mean() > 0 else 1.0
+    from scipy import stats  # imported when first needed: import backlashid stays fast
+
     return float(stats.norm.sf(d.mean() / math.sqrt(var / n)))
 
 
@@ -324,6 +325,8 @@ def _modulation_p(residual: Array, y_nom: Array, phi: Array, order: int = 4) -> 
     m, dof = order, e.size - order - 1
     if rss1 <= 0.0 or dof <= 0:
         return 1.0
+    from scipy import stats
+
     return float(stats.f.sf(((rss0 - rss1) / m) / (rss1 / dof), m, dof))
 
 

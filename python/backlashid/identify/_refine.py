@@ -15,7 +15,6 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import linalg
 
 from .. import _core
 from ..errors import BacklashIdError, DataError
@@ -391,6 +390,8 @@ def _project(problem: CompiledProblem, theta: NDArray[np.float64], lin: NDArray[
     r11 = rp[:nl, :nl]
     if not np.all(np.abs(np.diag(r11)) > 1e-12 * np.linalg.norm(r11, axis=0)):  # each column's own scale
         return None
+    from scipy import linalg  # imported when first needed: import backlashid stays fast
+
     dc = linalg.solve_triangular(r11, rp[:nl, p], check_finite=False)
     out = theta.copy()
     out[lin] += dc
@@ -416,6 +417,8 @@ def _projected(
 ) -> OutputErrorFit:
     """:func:`levenberg_marquardt` by variable projection over the parameters not in ``lin``
     (its docstring); the same damping, stability guard, box and stopping rule."""
+    from scipy import linalg
+
     nonlin = ~lin
     n_names = [k for k, f in zip(names, nonlin) if f]
     lo_n, hi_n = lo[nonlin], hi[nonlin]
@@ -495,6 +498,8 @@ def _kept_factor_qtr(r_mat: NDArray[np.float64], g: NDArray[np.float64] | None) 
     (None without a gradient or for a singular R)."""
     if g is None or not np.all(np.abs(np.diag(r_mat)) > 0):
         return None
+    from scipy import linalg
+
     q = linalg.solve_triangular(r_mat, g, trans="T", check_finite=False)
     return q if np.all(np.isfinite(q)) else None
 

@@ -184,7 +184,7 @@ class Scaling:
         """
         try:
             return cls(**{k: float(data[k]) for k in ("input_offset", "input_scale", "output_offset", "output_scale")})
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise DataError(f"not a scaling description ({exc}): expected input/output offset and scale") from None
 
 

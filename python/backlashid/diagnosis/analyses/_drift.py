@@ -25,7 +25,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import stats
 
 from ..._docstrings import TO_DICT, fill
 from ..._json import json_float
@@ -210,6 +209,8 @@ def _trend(t: NDArray[np.float64], v: NDArray[np.float64]) -> tuple[float, float
     se = float(np.sqrt(s2 / sxx))
     if se == 0.0:
         return slope, 0.0, 0.0 if slope != 0.0 else 1.0
+    from scipy import stats  # imported when first needed: import backlashid stays fast
+
     p = float(2.0 * stats.t.sf(abs(slope) / se, b - 2))
     return slope, se, p
 
@@ -251,6 +252,8 @@ def _cusum_split(z: NDArray[np.float64], min_segment: int, scale: float) -> tupl
     if lrv <= (1e-12 * scale) ** 2:
         return k, 0.0 if np.ptp(fit) > 1e-12 * scale else 1.0
     stat = abs(s[k - 1]) / np.sqrt(lrv * n)
+    from scipy import stats
+
     return k, float(stats.kstwobign.sf(stat))
 
 

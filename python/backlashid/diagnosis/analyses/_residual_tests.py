@@ -40,7 +40,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import linalg, stats
 
 from ..._docstrings import TO_DICT, fill
 from ..._validation import check_same_length, check_signals
@@ -78,6 +77,8 @@ def fit_ar(e: NDArray[np.float64], max_order: int = MAX_AR_ORDER) -> NDArray[np.
     if denom == 0.0 or max_order < 1:
         return np.ones(1)
     r = np.array([ec[: n - k] @ ec[k:] for k in range(max_order + 1)]) / denom
+    from scipy import linalg  # imported when first needed: import backlashid stays fast
+
     best, best_aic = np.ones(1), n * np.log(1.0)  # p = 0: innovation variance ratio 1
     for p in range(1, max_order + 1):
         try:
@@ -305,6 +306,8 @@ def _portmanteau(a: NDArray[np.float64], b: NDArray[np.float64], lags: NDArray[n
     g = lagged.T @ a_t
     z_t = lagged * np.abs(a_t)[:, None]
     s = z_t.T @ z_t  # = sum_t a(t)^2 l(t) l(t)^T; one operand (BLAS syrk), where two take a threaded gemm ~30x longer here
+    from scipy import linalg
+
     w, v = linalg.eigh(s)
     if w[-1] <= 0.0:
         return 0.0, 0
@@ -392,6 +395,8 @@ def residual_tests(
     specs["u2_e2"] = (ew2, usq, lags0, True)
     specs["e_e2"] = (ew, ew2, lags1, True)
     specs["e2_e2"] = (ew2, ew2, lags1, True)
+
+    from scipy import stats
 
     bound = float(stats.norm.ppf(1.0 - alpha / 2.0) / np.sqrt(n))
     raw = []

@@ -25,7 +25,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal, stats
 
 from ..._docstrings import TO_DICT, fill
 from ..._json import json_float
@@ -266,6 +265,8 @@ def _effective_segments(n: int, nseg: int) -> float:
     """Welch's K with Hann 50 % overlap, reduced for the correlation of overlapping segments."""
     step = nseg // 2
     k = 1 + (n - nseg) // step
+    from scipy import signal  # imported when first needed: import backlashid stays fast
+
     w = signal.get_window("hann", nseg)
     denom = float(w @ w) ** 2
     corr = 0.0
@@ -336,6 +337,8 @@ def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | 
 
     nseg = int(min(MAX_SEGMENT, 2 ** int(np.floor(np.log2(n / 8)))))
     nseg = max(nseg, 16)
+    from scipy import signal, stats
+
     f_w, psd = signal.welch(e, nperseg=nseg)
     with np.errstate(invalid="ignore", divide="ignore"):  # a zero residual has no coherence (NaN)
         _, coh = signal.coherence(e, u_arr - u_arr.mean(), nperseg=nseg)

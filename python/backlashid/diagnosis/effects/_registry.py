@@ -19,7 +19,6 @@ from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import stats
 
 from ..._numerics import lstsq
 from ..._validation import check_signals
@@ -182,6 +181,8 @@ def screen(
     y_sim = simulate(structure, theta, (), u, t0)
     r = (y - y_sim)[warmup:]
     ctx = ScreenContext(structure, theta, u, y, t0, y_sim)
+    from scipy import stats  # imported when first needed: import backlashid stays fast
+
     out = []
     for name in candidates:
         effect = REGISTRY[name]
