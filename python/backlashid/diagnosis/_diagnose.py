@@ -62,7 +62,7 @@ from ..models import CascadeModel, CascadeState, LinearBlock
 from ._report import Candidate, DiagnosisDetails, DiagnosisReport
 from .analyses import frequency_analysis, regime_shares, residual_tests, time_analysis
 from .effects import EFFECTS, AugmentedModel, fit_effect, screen
-from .effects._base import held_x
+from .effects._base import held_past
 from .effects._dead_time import MAX_DELAY
 from .effects._quantization import lattice
 
@@ -138,11 +138,13 @@ MEMORY_GRID = 33  # backlash memories tried before the 1-D refinement
 MEMORY_PREFIX = 256  # first prefix of the record tried for the memory search (doubled until settled)
 
 
-def held_state(model: CascadeModel, u0: float, y_prev: float) -> CascadeState:
+def held_state(model: CascadeModel, u0: float, y_prev: float, hold: int | None = None) -> CascadeState:
     """The cascade after the input was held at u0.
 
-    The linear block (16) at its equilibrium x = sum a / (1 + sum b) u0, and the backlash
-    memory y_prev.
+    The linear block (16) after the input u0 held for ``hold`` samples from rest, or for ever
+    (its equilibrium x = sum a / (1 + sum b) u0), and the backlash memory y_prev. ``diagnose``
+    holds for the estimation record's length: the equilibrium of a slow pole almost cancelled
+    by a zero at z = 1 is a static gain the records do not determine.
 
     Parameters
     ----------
@@ -152,6 +154,8 @@ def held_state(model: CascadeModel, u0: float, y_prev: float) -> CascadeState:
         The input held before the record.
     y_prev : float
         The backlash memory y(0).
+    hold : int, optional
+        Samples the input is held for, from rest; default for ever (the equilibrium).
 
     Returns
     -------
@@ -161,7 +165,7 @@ def held_state(model: CascadeModel, u0: float, y_prev: float) -> CascadeState:
     Raises
     ------
     ModelError
-        If the linear block has a pole at z = 1 (no equilibrium).
+        If the linear block has a pole at z = 1 and ``hold`` is None (no equilibrium).
 
     Examples
     --------
@@ -170,8 +174,8 @@ def held_state(model: CascadeModel, u0: float, y_prev: float) -> CascadeState:
     >>> held_state(bid.example1(), 0.0, 0.5).y_prev
     0.5
     """
-    x_eq = held_x(model.linear, float(u0))
-    return CascadeState(u_past=(float(u0),) * model.linear.na, x_past=(x_eq,) * model.linear.nb, y_prev=float(y_prev))
+    u_past, x_past = held_past(model.linear, float(u0), hold)
+    return CascadeState(u_past=tuple(u_past), x_past=tuple(x_past), y_prev=float(y_prev))
 
 
 def estimated_start(simulate: Any, u: Array, y: Array, memory_range: tuple[float, float]) -> tuple[Array, float]:
@@ -414,10 +418,11 @@ def diagnose(
         slowest pole, :func:`default_warmup`).
     initial_state : {"estimate", "rest"}, default "estimate"
         How every model (nominal and augmented) starts the validation record. "estimate": the
-        linear block at its equilibrium with u_val[0] and the backlash memory y(0) that best
-        fits the record (one parameter, for every model alike), so a record that starts with
-        the device holding a force is not read as model error; "rest": from zero, as the paper
-        assumes.
+        linear block after u_val[0] held from rest for as long as the estimation record (a
+        hold the records vouch for; the equilibrium unless a pole is that slow) and the
+        backlash memory y(0) that best fits the record (one parameter, for every model
+        alike), so a record that starts with the device holding a force is not read as model
+        error; "rest": from zero, as the paper assumes.
     seed : int, default 0
         Passed to :func:`fit_effect` (no random starts are used).
     nominal_converged : bool, default True
@@ -497,7 +502,7 @@ def diagnose(
         return estimated_start(simulate, u_v, y_v, memory_range)
 
     ynom_v, y0_nominal = on_validation(
-        lambda u, y0, held: model.simulate(u, initial_state=held_state(model, u[0], y0) if held else None)
+        lambda u, y0, held: model.simulate(u, initial_state=held_state(model, u[0], y0, n_est) if held else None)
     )
     r0 = (y_v - ynom_v)[warmup:]
     n = r0.size
@@ -509,7 +514,7 @@ def diagnose(
     scored: dict[str, _Scored] = {}
     for effect in order:
         aug = fit_effect(effect, model, u_e, y_e, warmup=warmup, t0=0.0, seed=seed)
-        sim_v, _ = on_validation(aug.simulator(t0=n_est))
+        sim_v, _ = on_validation(aug.simulator(t0=n_est, hold=n_est))
         if effect == "colored_noise":
             y_hat_v = aug.predict_from(sim_v, y_v)
             y_hat_e = aug.predict(u_e, y_e, t0=0.0)
@@ -651,7 +656,7 @@ def diagnose(
         warmup_rule="given" if warmup_given else "slowest pole's transient to 1e-4 plus the block memory and dead-time search",
         screened_order=tuple(order),
         initial_state=(
-            f"estimated: linear block at equilibrium with u_val[0], backlash memory y(0) = {y0_nominal:.6g} fitted on the record"
+            f"estimated: linear block after u_val[0] held for {n_est} samples from rest, backlash memory y(0) = {y0_nominal:.6g} fitted on the record"
             if estimate_state
             else "from rest"
         ),
@@ -670,7 +675,7 @@ def diagnose(
     tests = residual_tests(residual_full[warmup:], u_v[warmup:], x_v[warmup:])
     regimes = regime_shares(
         model, u_v, residual_full, warmup=warmup,
-        initial_state=held_state(model, u_v[0], y0_nominal) if estimate_state else None,
+        initial_state=held_state(model, u_v[0], y0_nominal, n_est) if estimate_state else None,
     )
     spectrum = frequency_analysis(residual_full[warmup:], u_v[warmup:], noise_std=noise)
     drift = time_analysis(residual_full[warmup:])

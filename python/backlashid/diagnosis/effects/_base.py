@@ -78,31 +78,52 @@ def held_x(block: LinearBlock, u0: float) -> float:
     return gain * u0
 
 
+def held_past(block: LinearBlock, u0: float, hold: int | None = None) -> tuple[list[float], list[float]]:
+    """The pasts (u_past, x_past, most recent first) of the linear block (16) after the input
+    was held at u0: for ``hold`` samples from rest, or for ever if None (its equilibrium,
+    :func:`held_x`).
+
+    A finite hold is what a record of that length can vouch for: the block's step response
+    over ``hold`` samples is its response to an input the record has shown, while its
+    equilibrium is its static gain, which a slow pole almost cancelled by a zero at z = 1 leaves
+    undetermined by the record (a pole at 1 - 1e-8 makes the gain anything from its fast part
+    to +-1e8 times the pole's residue; the validation start from it ran away to 1e5 times the
+    output's range, issue 18)."""
+    if hold is None:
+        x_eq = held_x(block, u0)
+        return [u0] * block.na, [x_eq] * block.nb
+    x = block.simulate(np.full(hold, u0)) if hold > 0 else np.zeros(0)
+    x_past = [float(v) for v in x[::-1][: block.nb]]
+    return [u0] * min(hold, block.na) + [0.0] * max(block.na - hold, 0), x_past + [0.0] * (block.nb - len(x_past))
+
+
 def simulate(
     structure: Structure, theta: Array, effects: CoreEffects, u: Array, t0: float, y_prev: float = 0.0, held: bool = False
 ) -> Array:
     """The augmented cascade's output (``_core.simulate_augmented``). ``held``: the linear block
-    starts at its equilibrium with u[0] (the input held before the record) instead of at rest;
-    ``y_prev`` is the backlash memory y(0)."""
+    starts at its equilibrium with u[0] (the input held before the record for ever) instead of
+    at rest; ``y_prev`` is the backlash memory y(0)."""
     return Simulator(structure, theta, effects, t0)(u, y_prev, held)
 
 
 class Simulator:
     """One augmented cascade's simulation, unpacked once: ``(u, y_prev, held) -> output``, for
-    the many runs of one model that differ in the start only (the validation start's search)."""
+    the many runs of one model that differ in the start only (the validation start's search).
+    ``hold``: the held start holds the input for that many samples from rest (None: for ever,
+    the equilibrium), :func:`held_past`."""
 
-    def __init__(self, structure: Structure, theta: Array, effects: CoreEffects, t0: float) -> None:
+    def __init__(self, structure: Structure, theta: Array, effects: CoreEffects, t0: float, hold: int | None = None) -> None:
         self.chain = structure.unpack(theta).chain()
         self.effects = list(effects)
         self.t0 = float(t0)
+        self.hold = hold
         self._held: dict[float, dict[str, Any]] = {}
 
     def held_state(self, u0: float) -> dict[str, Any]:
-        """The linear block's past at its equilibrium with the input held at u0."""
+        """The linear block's past after the input was held at u0 (:func:`held_past`)."""
         if u0 not in self._held:
-            a, b = self.chain[0], self.chain[1]
-            x_eq = held_x(LinearBlock(a, b), u0)
-            self._held[u0] = {"u_past": [u0] * len(a), "x_past": [x_eq] * len(b)}
+            u_past, x_past = held_past(LinearBlock(self.chain[0], self.chain[1]), u0, self.hold)
+            self._held[u0] = {"u_past": u_past, "x_past": x_past}
         return self._held[u0]
 
     def __call__(self, u: Array, y_prev: float = 0.0, held: bool = False) -> Array:
@@ -190,7 +211,7 @@ class AugmentedModel:
         u_arr = as_signal(u, "u").ravel()
         return self.simulator(t0)(u_arr, y_prev, held)
 
-    def simulator(self, t0: float = 0.0) -> Simulator:
+    def simulator(self, t0: float = 0.0, hold: int | None = None) -> Simulator:
         """This model's simulation unpacked once, ``(u, y_prev, held) -> output`` (u checked by
         the caller), for many runs that differ in the start.
 
@@ -198,13 +219,16 @@ class AugmentedModel:
         ----------
         t0 : float, default 0.0
             Time of u[0] in samples (drifts only).
+        hold : int, optional
+            The held start (``held=True``) holds u[0] for this many samples from rest (the
+            diagnosis: the estimation record's length); default for ever (the equilibrium).
 
         Returns
         -------
         Simulator
             Callable ``(u, y_prev=0.0, held=False) -> ndarray``, as :meth:`simulate`.
         """
-        return Simulator(self.structure, self.theta, self.core, t0)
+        return Simulator(self.structure, self.theta, self.core, t0, hold)
 
     def predict(self, u: ArrayLike, y: ArrayLike, t0: float = 0.0) -> Array:
         """One-step prediction: the simulation plus the noise model's prediction of the output
