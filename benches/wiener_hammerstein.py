@@ -335,7 +335,7 @@ def main() -> None:
     parser.add_argument("--no-output-feedthrough", action="store_true", help="with --feedthrough: G1 only (the new fit only)")
     parser.add_argument("--max-iter", type=int, default=None, help="the new fit's final iterations on the whole record")
     parser.add_argument("--segment-iter", type=int, default=None,
-                        help="the new fit's iterations on the 30 000-sample segment (a private constant, default 30)")
+                        help="the new fit's iterations on the 20 000-sample segment (a private constant, default 30)")
     parser.add_argument("--repeats", type=int, default=1, help="fits of each, interleaved; the best time is shown")
     parser.add_argument("--old", action="store_true", help="also run today's path (frozen copy, scipy)")
     parser.add_argument("--no-new", action="store_true", help="only today's path")

@@ -174,7 +174,11 @@ def levenberg_marquardt(
     must be free) and the stopping rule (over n, the Gauss-Newton gain ||q2||^2 of the
     projected problem) are the same. The factor of a trial is folded at the linearised c,
     within a second-order distance of its c*, where the next step is computed. The valley
-    along which c and n trade off is walked in one step rather than crept along.
+    along which c and n trade off is walked in one step rather than crept along. Far from
+    c* (e.g. early, when a step moves f's coefficients a lot) that factor's R22 can point
+    the wrong way at any damping: a trial rejected from a factor not folded at c* (up to a
+    negligible change of the cost) therefore makes the search fold at c* before the damping
+    grows.
 
     Parameters
     ----------
@@ -372,9 +376,13 @@ class _Projected:
     refolded: bool = False
 
 
-def _project(problem: CompiledProblem, theta: NDArray[np.float64], lin: NDArray[np.bool_], refolded: bool = False) -> _Projected | None:
+def _project(
+    problem: CompiledProblem, theta: NDArray[np.float64], lin: NDArray[np.bool_], refolded: bool = False, tol: float = 0.0
+) -> _Projected | None:
     """One factor at theta, the linear parameters moved to their exact optimum c* (None if
-    theta is infeasible, diverges, or R11 is singular)."""
+    theta is infeasible, diverges, or R11 is singular). The factor counts as folded at c*
+    (``refolded``) also when moving c to c* lowers the cost by no more than ``tol`` times the
+    cost (c was at its optimum up to a negligible change)."""
     try:
         if not problem.feasible(theta):
             return None
@@ -399,6 +407,7 @@ def _project(problem: CompiledProblem, theta: NDArray[np.float64], lin: NDArray[
     cost_star = float(rp[nl:, p] @ rp[nl:, p])  # ||q2||^2 + rho^2
     kept = np.vstack([np.column_stack([r_mat, qtr_star]), np.zeros(p + 1)])
     kept[p, p] = abs(float(rp[p, p]))
+    refolded = refolded or cost - cost_star <= tol * cost_star
     return _Projected(out, cost_star, kept, r11, rp[:nl, nl:p], rp[nl:p, nl:p], rp[nl:p, p], refolded)
 
 
@@ -422,11 +431,13 @@ def _projected(
     nonlin = ~lin
     n_names = [k for k, f in zip(names, nonlin) if f]
     lo_n, hi_n = lo[nonlin], hi[nonlin]
-    point = _project(problem, theta, lin)
+    tol = se_tol**2 / dof  # a change of the cost by se_tol standard errors, relative to the cost
+    point = _project(problem, theta, lin, tol=tol)
     if point is None:
         raise unusable
     # the Jacobian of n depends on c (e.g. through f'(x)): the start's c may be far from c*
-    point = _project(problem, point.theta, lin, refolded=True) or point
+    if not point.refolded:
+        point = _project(problem, point.theta, lin, refolded=True) or point
     scale = np.zeros(int(nonlin.sum()))
     lam = 1e-3
     steps, converged = 0, False
@@ -450,7 +461,7 @@ def _projected(
             trial = point.theta.copy()
             trial[nonlin] += delta
             trial[lin] -= linalg.solve_triangular(point.r11, point.r12 @ delta, check_finite=False)
-            new = _project(problem, trial, lin) if np.all(np.isfinite(trial)) else None
+            new = _project(problem, trial, lin, tol=tol) if np.all(np.isfinite(trial)) else None
             if new is not None and new.cost < point.cost:
                 small = point.cost - new.cost <= negligible or np.linalg.norm(delta) <= xtol * (
                     np.linalg.norm(theta_n) + xtol
@@ -458,10 +469,14 @@ def _projected(
                 point, accepted, steps = new, True, steps + 1
                 lam = max(lam / 3.0, 1e-12)
                 break
+            if not point.refolded:
+                # the factor was folded at the trial's linearised c, not at its c*: its R22 and
+                # hence the step's direction can be wrong at any damping (on the SYSID 2009
+                # record such a climb to lam = 1e12 took 25 folds), so fold at c* at once
+                break
             lam *= 4.0
         if not accepted and not point.refolded:  # no step from a factor folded off c*: fold at c*
             point = _project(problem, point.theta, lin, refolded=True) or dataclasses.replace(point, refolded=True)
-            lam = 1e-3
             continue
         if not accepted or small:
             converged = True
