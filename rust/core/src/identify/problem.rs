@@ -20,6 +20,7 @@
 //! record is not checked again.
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::identify::gradient::OeGradient;
 use crate::identify::gradient::{cascade_oe_gradient_from, sandwich_oe_gradient_from};
 use crate::identify::initial::{self, InitialState, Start};
@@ -494,7 +495,7 @@ impl Problem {
     /// Free-run output of the estimate theta, from rest or from theta's initial state(s);
     /// several records' outputs concatenated in order.
     pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
-        let mut out = Vec::with_capacity(self.samples());
+        let mut out = guard::buffer(self.samples(), "the simulated output")?;
         for ((blocks, _), rec) in self.unpack_all(theta)?.into_iter().zip(&self.records) {
             out.extend(Self::simulate_blocks(blocks, &rec.u)?);
         }

@@ -5,6 +5,7 @@
 //! feedthrough r_0) is the same block.
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::model::polynomial::{monic_roots, Root};
 use crate::model::signal::check_coefficients;
 
@@ -149,7 +150,7 @@ impl LinearBlock {
     pub fn simulate(&self, u: &[f64], state: &LinearState) -> Result<Vec<f64>> {
         crate::model::signal::check_signal("u", u)?;
         self.check_state(state, "state")?;
-        let x = self.with_recursion(state, Outputs(u));
+        let x = self.with_recursion(state, Outputs(u))?;
         check_no_overflow(self, &x, "x")?;
         Ok(x)
     }
@@ -219,9 +220,14 @@ impl RecursionUser for Boxed {
 pub(crate) struct Outputs<'a>(pub(crate) &'a [f64]);
 
 impl RecursionUser for Outputs<'_> {
-    type Output = Vec<f64>;
-    fn run<R: Recursion>(self, mut rec: R) -> Vec<f64> {
-        self.0.iter().map(|&ut| rec.next(ut)).collect()
+    type Output = Result<Vec<f64>>;
+    fn run<R: Recursion>(self, mut rec: R) -> Result<Vec<f64>> {
+        let mut x = guard::buffer(self.0.len(), "x")?;
+        for chunk in self.0.chunks(guard::CHUNK) {
+            guard::check()?;
+            x.extend(chunk.iter().map(|&ut| rec.next(ut)));
+        }
+        Ok(x)
     }
 }
 
