@@ -31,7 +31,7 @@ use crate::identify::{CascadeRegression, SandwichRegression};
 use crate::linalg::{LeastSquares, TriangularFactor};
 use crate::model::backlash::GeneralBacklash;
 use crate::model::cascade::CascadeModel;
-use crate::model::linear::{blame_feeding_block, LinearBlock};
+use crate::model::linear::{blame_feeding_block, LinearBlock, MAX_ORDER};
 use crate::model::sandwich::SandwichModel;
 use crate::model::signal::{check_same_length, check_signal};
 
@@ -116,6 +116,22 @@ impl Structure {
     ) -> Result<Self> {
         whole("na", na, 1)?;
         whole("degree", degree, 1)?;
+        // before anything proportional to them (the names, the layout) is built
+        for (name, value) in [
+            ("na", na),
+            ("nb", nb),
+            ("degree", degree),
+            ("nr", nr),
+            ("ns", ns),
+        ] {
+            if value > MAX_ORDER {
+                return Err(Error::Model(format!(
+                    "{name} = {value}: orders and the degree are at most {MAX_ORDER} (a linear \
+                     block's poles are the eigenvalues of its companion matrix, O(order^3), and \
+                     no record identifies that many parameters)"
+                )));
+            }
+        }
         if output_feedthrough && nr == 0 {
             return Err(Error::Data(
                 "output_feedthrough is for the sandwich's output block: a cascade has none".into(),

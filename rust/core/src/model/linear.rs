@@ -25,11 +25,28 @@ pub struct LinearState {
     pub x_past: Vec<f64>,
 }
 
+/// The largest order of a block's denominator (nb), and of every order and the degree of an
+/// identification's `Structure`. The poles, which `poles()` and every stability check
+/// compute, are the eigenvalues of the nb x nb companion matrix: O(nb^3) time, 0.03 s at
+/// nb = 200 but about 30 s at 2000 (2026-11-24), and with it an identification's p x p
+/// algebra; orders that high are far beyond what a record identifies.
+pub const MAX_ORDER: usize = 200;
+
 impl LinearBlock {
-    /// `a` (at least one coefficient) and `b` (possibly none: an FIR block), all finite.
+    /// `a` (at least one coefficient) and `b` (possibly none: an FIR block, at most
+    /// `MAX_ORDER`), all finite.
     pub fn new(a: Vec<f64>, b: Vec<f64>) -> Result<Self> {
         check_coefficients("a", &a, false)?;
         check_coefficients("b", &b, true)?;
+        if b.len() > MAX_ORDER {
+            return Err(Error::Model(format!(
+                "b has {} coefficients: the denominator's order nb is at most {MAX_ORDER} (its \
+                 poles, which poles() and every stability check compute, are the eigenvalues \
+                 of an nb x nb companion matrix: O(nb^3) time, 0.03 s at nb = 200, about 30 s \
+                 at 2000)",
+                b.len()
+            )));
+        }
         Ok(LinearBlock { a, b, a0: None })
     }
 
@@ -387,6 +404,17 @@ mod tests {
                 assert!((v - whole[cut + k]).abs() < 1e-14);
             }
         }
+    }
+
+    #[test]
+    fn denominator_orders_above_the_cap_are_refused() {
+        assert!(LinearBlock::new(vec![1.0], vec![1e-3; MAX_ORDER]).is_ok());
+        let err = LinearBlock::new(vec![1.0], vec![1e-3; 2000]).unwrap_err();
+        assert!(matches!(err, Error::Model(ref m) if m.contains("at most 200")));
+        // a long numerator has no poles to compute
+        assert!(LinearBlock::new(vec![1e-3; 2000], vec![0.5]).is_ok());
+        let s = crate::identify::Structure::new(1_000_000_000, 2, 3, 0, 0, false, false);
+        assert!(matches!(s, Err(Error::Model(ref m)) if m.starts_with("na = 1000000000")));
     }
 
     #[test]
