@@ -663,19 +663,6 @@ def _search(
     return run, k, refined
 
 
-def _within_budget(fit: Callable[..., FitResult]) -> Callable[..., FitResult]:
-    """``fit`` run within its ``time_budget`` (``_refine.time_budget``: the searches stop
-    between iterations once it has passed; a nested fit keeps the earlier deadline)."""
-
-    @functools.wraps(fit)
-    def run(*args: Any, **kwargs: Any) -> FitResult:
-        with time_budget(kwargs.get("time_budget")):
-            return fit(*args, **kwargs)
-
-    return run
-
-
-@_within_budget
 def _fit(
     structure: Structure,
     u: ArrayLike,
@@ -1150,9 +1137,12 @@ def fit_cascade(
     >>> round(result.parameters["c_L"], 2), result.converged
     (0.6, True)
     """
-    return _fit(
-        Structure(na, nb, degree, feedthrough=feedthrough), u, y, "y", initial=initial, switching=switching, step=step, **options
-    )
+    # the searches stop between iterations once the budget has passed (_refine.time_budget;
+    # set here, not in _fit, so that no frame comes between the caller and _fit's warnings)
+    with time_budget(options.get("time_budget")):
+        return _fit(
+            Structure(na, nb, degree, feedthrough=feedthrough), u, y, "y", initial=initial, switching=switching, step=step, **options
+        )
 
 
 @_shared_options
@@ -1204,4 +1194,5 @@ def fit_sandwich(
     (0.5, 2)
     """
     structure = Structure(na, nb, degree, nr, ns, feedthrough=feedthrough, output_feedthrough=output_feedthrough)
-    return _fit(structure, u, w, "w", initial=initial, switching="simulated", step=step, **options)
+    with time_budget(options.get("time_budget")):  # as in fit_cascade
+        return _fit(structure, u, w, "w", initial=initial, switching="simulated", step=step, **options)
