@@ -177,4 +177,22 @@ mod tests {
         let (_, stopped) = interruptible(|| false, check);
         assert!(!stopped);
     }
+
+    #[test]
+    fn a_long_simulation_stops_when_interrupted() {
+        let model = crate::test_params::example1_model();
+        let u: Vec<f64> = (0..3 * CHUNK).map(|k| (k as f64 * 0.01).sin()).collect();
+        let (out, stopped) = interruptible(
+            || true,
+            || {
+                std::thread::sleep(HOOK_EVERY);
+                model.simulate(&u, &model.rest_state())
+            },
+        );
+        assert!(stopped);
+        assert_eq!(out, Err(Error::Interrupted));
+        // without an interruption: the whole record
+        let (out, stopped) = interruptible(|| false, || model.simulate(&u, &model.rest_state()));
+        assert!(!stopped && out.unwrap().len() == u.len());
+    }
 }
