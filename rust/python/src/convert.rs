@@ -57,6 +57,9 @@ pub(crate) fn matrix(name: &str, arr: &SignalIn<'_>) -> PyResult<(Vec<f64>, usiz
     }
 }
 
+/// The vector as a NumPy array that wraps its buffer (rust-numpy's `into_pyarray`: only a
+/// small owner object and the array header are allocated, nothing proportional to the
+/// record, which the core allocated fallibly, `core::guard`).
 pub(crate) fn vec_f64(py: Python<'_>, v: Vec<f64>) -> SignalOut<'_> {
     v.into_pyarray(py)
 }
