@@ -85,7 +85,7 @@ class NotIdentifiableError(BacklashIdError):
 
 
 class NotConvergedError(BacklashIdError):
-    """The identification diverged or did not converge.
+    """The identification diverged, did not converge, or ran out of its ``time_budget``.
 
     Parameters
     ----------

@@ -28,7 +28,7 @@ from ..models import Model
 from . import _records
 from ._checks import warn_if_suspicious
 from ._coarse import refine_whole
-from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
+from ._refine import OutputErrorFit, budget_hit, levenberg_marquardt, out_of_time, spectral_radius, time_budget
 from ._starts import linear_start, pole_restarts, scale_starts
 from ._state import lm_holding_vanishing
 from ._structure import Structure
@@ -445,6 +445,9 @@ def _run(structure: Structure, prob: _core.Problem, u: NDArray[np.float64], y: N
     rows = _records.rows(u, max(warmup, 1 if s.is_sandwich else 0))
     was_cycling = False
     for _ in range(2, max_iter + 1):
+        if out_of_time():
+            run.reason = "time budget"
+            break
         try:
             (theta_ls, rss, cov, _rcond), moving, rmse_now = _iteration(prob, theta, switching)
         except NotIdentifiableError as exc:
@@ -609,6 +612,8 @@ def _search(
     starts_lm = [th for r in usable for th in {id(x): x for x in (r.history[r.best()], r.history[0])}.values()]
     candidates, truncated = [], set()
     for th in starts_lm + scaled:
+        if candidates and out_of_time():
+            break
         # the scale starts begin far away: a short search each, the chosen one then finished
         short = any(th is x for x in scaled)
         try:
@@ -645,6 +650,8 @@ def _search(
         rng = np.random.default_rng(seed)
         moved = refined
         for _ in range(restarts):
+            if out_of_time():
+                break
             start = refined.theta + perturbation * rng.standard_normal(structure.size)
             try:
                 trial = levenberg_marquardt(prob, start)
@@ -678,6 +685,7 @@ def _fit(
     seed: int = 0,
     coarse: int | None = None,
     initial_state: str = "rest",
+    time_budget: float | None = None,
 ) -> FitResult:
     arguments = dict(locals())  # the call, for a fit of lower degree (_lower_degree_fallback)
     if initial_state not in ("rest", "estimate"):
@@ -809,6 +817,13 @@ def _fit(
         failure = "the identification diverged: the estimate simulates to no finite output"
     if failure is None and invalid is not None:
         failure = f"the final estimate is not a valid model ({invalid}); try a lower branch degree, other orders or other starts"
+    if failure is None and budget_hit():
+        failure = (
+            f"the fit ran out of its time budget (time_budget = {time_budget:g} s) before it converged: its best "
+            "estimate so far is in best and best_stable; give a larger time_budget, or a shorter record or coarse segment"
+            if time_budget is not None else
+            "the fit ran out of the time budget of its caller before it converged: its best estimate so far is in best and best_stable"
+        )
     if model is None:
         moving = 0.0
     elif checked is not None and checked[0] is theta and checked[1] is not None:
@@ -1017,7 +1032,15 @@ initial_state : {'rest', 'estimate'}, default 'rest'
     together with the model (``FitResult.initial_state``), so that a record cut from the
     middle of a run is fitted whole, without a warm-up. Needs ``refine=True`` and
     ``paper=False``; the standard errors treat the state as nuisance parameters. The state is
-    the one at the first sample, so a warm-up leaves it poorly determined: use ``warmup=0``."""
+    the one at the first sample, so a warm-up leaves it poorly determined: use ``warmup=0``.
+time_budget : float, optional
+    Seconds the fit may take. Checked between iterations (of the paper's algorithm and of
+    each Levenberg-Marquardt search; one iteration is a few passes over the record), so the
+    fit overruns it by at most about one iteration; a fit cut short raises
+    ``NotConvergedError`` whose ``best`` and ``best_stable`` hold its best estimate so far.
+    None (the default): no limit, since the time grows with the record (a default limit
+    would fail long records that converge); ``max_iter`` bounds the paper's iterations and
+    each search is bounded in iterations anyway. Ctrl-C interrupts a fit at any time."""
 _DATA_DOC = """u : array_like or list of array_like
     Input u(t), 1-D, finite; or a list of records of one system (several experiments), fitted
     as one model: one parameter vector, each record run from its own start (``warmup`` and
@@ -1044,8 +1067,12 @@ NotIdentifiableError
     If the data do not determine the parameters (a constant input or output, a
     rank-deficient regressor, a backlash that hardly moves).
 NotConvergedError
-    If the estimate is unstable, diverges or is no valid model; its ``best`` holds it."""
-_OPTIONS = ("starts", "max_iter", "tol", "refine", "paper", "warmup", "min_moving", "restarts", "perturbation", "seed", "coarse", "initial_state")
+    If the estimate is unstable, diverges or is no valid model, or the fit ran out of its
+    ``time_budget``; its ``best`` holds it."""
+_OPTIONS = (
+    "starts", "max_iter", "tol", "refine", "paper", "warmup", "min_moving", "restarts", "perturbation", "seed", "coarse", "initial_state",
+    "time_budget",
+)
 
 
 def _shared_options(function: Callable[..., FitResult]) -> Callable[..., FitResult]:
@@ -1111,9 +1138,12 @@ def fit_cascade(
     >>> round(result.parameters["c_L"], 2), result.converged
     (0.6, True)
     """
-    return _fit(
-        Structure(na, nb, degree, feedthrough=feedthrough), u, y, "y", initial=initial, switching=switching, step=step, **options
-    )
+    # the searches stop between iterations once the budget has passed (_refine.time_budget;
+    # set here, not in _fit, so that no frame comes between the caller and _fit's warnings)
+    with time_budget(options.get("time_budget")):
+        return _fit(
+            Structure(na, nb, degree, feedthrough=feedthrough), u, y, "y", initial=initial, switching=switching, step=step, **options
+        )
 
 
 @_shared_options
@@ -1165,4 +1195,5 @@ def fit_sandwich(
     (0.5, 2)
     """
     structure = Structure(na, nb, degree, nr, ns, feedthrough=feedthrough, output_feedthrough=output_feedthrough)
-    return _fit(structure, u, w, "w", initial=initial, switching="simulated", step=step, **options)
+    with time_budget(options.get("time_budget")):  # as in fit_cascade
+        return _fit(structure, u, w, "w", initial=initial, switching="simulated", step=step, **options)

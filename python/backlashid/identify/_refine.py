@@ -9,7 +9,12 @@ record by :func:`problem`): each trial passes theta only.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
+import math
+import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -18,6 +23,58 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from ..errors import BacklashIdError, DataError
+
+
+@dataclass
+class _Budget:
+    """A time budget: its deadline (``time.monotonic()``), its length, and whether a search
+    was cut short by it."""
+
+    deadline: float
+    seconds: float
+    hit: bool = False
+
+
+_BUDGET: contextvars.ContextVar[_Budget | None] = contextvars.ContextVar("backlashid_time_budget", default=None)
+
+
+@contextlib.contextmanager
+def time_budget(seconds: float | None, name: str = "time_budget") -> Iterator[_Budget | None]:
+    """The searches run inside end early (between their iterations) once ``seconds`` have
+    passed; None adds no budget. Nested, the earlier deadline holds. Yields the budget in
+    force (None without one), whose ``hit`` says whether a search was cut short."""
+    outer = _BUDGET.get()
+    if seconds is None:
+        yield outer
+        return
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not (math.isfinite(seconds) and seconds > 0):
+        raise DataError(f"{name} = {seconds!r}: give a number of seconds > 0, or None for no limit")
+    deadline = time.monotonic() + float(seconds)
+    if outer is not None and outer.deadline <= deadline:
+        yield outer
+        return
+    budget = _Budget(deadline, float(seconds))
+    token = _BUDGET.set(budget)
+    try:
+        yield budget
+    finally:
+        _BUDGET.reset(token)
+
+
+def budget_hit() -> bool:
+    """Whether a search was cut short by the time budget in force (False without one)."""
+    budget = _BUDGET.get()
+    return budget is not None and budget.hit
+
+
+def out_of_time() -> bool:
+    """Whether the time budget in force (``time_budget``) has run out (and if so, marks it
+    hit); False without one."""
+    budget = _BUDGET.get()
+    if budget is None or time.monotonic() < budget.deadline:
+        return False
+    budget.hit = True
+    return True
 
 
 @dataclass(frozen=True)
@@ -135,6 +192,7 @@ def levenberg_marquardt(
     se_tol: float = 1e-2,
     xtol: float = 1e-12,
     linear: ArrayLike | None = None,
+    time_budget: float | None = None,
 ) -> OutputErrorFit:
     """The package's one Levenberg-Marquardt search: minimise the output-error cost
     sum_t (y(t) - y_sim(t, theta))^2 over t >= warmup of a compiled problem from theta0,
@@ -199,6 +257,11 @@ def levenberg_marquardt(
         others): search by variable projection over the others. Their bounds must be
         infinite. The returned ``r_aug`` is then [R | Q^T r] at ``theta`` with R folded at the
         last trial's linearised c (Q^T r exact at ``theta``).
+    time_budget : float, optional
+        Seconds the search may take: checked between its trials (each one pass over the
+        record), it then ends like ``max_iter`` does, at the best point so far with
+        ``converged`` False. None (the default): no limit, as the time grows with the
+        record; a budget set by the caller (``fit_cascade(..., time_budget=)``) holds too.
 
     Returns
     -------
@@ -224,6 +287,24 @@ def levenberg_marquardt(
     >>> bool(fit.converged and np.max(np.abs(fit.theta - truth)) < 0.05)
     True
     """
+    with _time_budget(time_budget):
+        return _search(problem, theta0, lower, upper, max_iter, se_tol, xtol, linear)
+
+
+_time_budget = time_budget  # the name levenberg_marquardt's argument hides
+
+
+def _search(
+    problem: CompiledProblem,
+    theta0: ArrayLike,
+    lower: ArrayLike | None,
+    upper: ArrayLike | None,
+    max_iter: int,
+    se_tol: float,
+    xtol: float,
+    linear: ArrayLike | None,
+) -> OutputErrorFit:
+    """:func:`levenberg_marquardt` within its time budget."""
     names = list(problem.names)
     n_par = len(names)
     n_res = problem.samples - problem.warmup
@@ -292,11 +373,16 @@ def _descend(
         if _gain(r_mat, qtr, free, names) <= negligible:  # also spares climbing the damping to ~1e12
             converged = True
             break
+        if out_of_time():  # the time budget: the best point so far, not converged
+            break
         scale = np.maximum(scale, np.linalg.norm(r_mat, axis=0))  # Marquardt's D: column norms of J
         d = np.where(scale > 0, scale, 1.0)[free]
         free_names = [k for k, f in zip(names, free) if f]
-        accepted = small = rejected = False
+        accepted = small = rejected = expired = False
         while lam < 1e12:
+            if rejected and out_of_time():
+                expired = True
+                break
             a = np.vstack([r_mat[:, free], np.sqrt(lam) * np.diag(d)])
             delta = np.zeros(n_par)
             delta[free] = _core.lstsq(a, np.concatenate([qtr, np.zeros(d.size)]), free_names)[0]
@@ -334,6 +420,8 @@ def _descend(
                 break
             rejected = True
             lam *= 4.0
+        if expired:
+            break
         if not accepted and anchor is not theta:
             # no damped step from a factor folded elsewhere: fold here and try again
             r_aug, cost = problem.oe_factor(theta)
@@ -449,11 +537,17 @@ def _projected(
         if _gain(r22, q2, free, n_names) <= negligible:
             converged = True
             break
+        if out_of_time():  # the time budget: the best point so far, not converged
+            break
         scale = np.maximum(scale, np.linalg.norm(r22, axis=0))  # Marquardt's D of the projected J
         d = np.where(scale > 0, scale, 1.0)[free]
         free_names = [k for k, f in zip(n_names, free) if f]
-        accepted = small = False
+        accepted = small = expired = tried = False
         while lam < 1e12:
+            if tried and out_of_time():
+                expired = True
+                break
+            tried = True
             a = np.vstack([r22[:, free], np.sqrt(lam) * np.diag(d)])
             delta = np.zeros(theta_n.size)
             delta[free] = _core.lstsq(a, np.concatenate([q2, np.zeros(d.size)]), free_names)[0]
@@ -475,6 +569,8 @@ def _projected(
                 # record such a climb to lam = 1e12 took 25 folds), so fold at c* at once
                 break
             lam *= 4.0
+        if expired:
+            break
         if not accepted and not point.refolded:  # no step from a factor folded off c*: fold at c*
             point = _project(problem, point.theta, lin, refolded=True) or dataclasses.replace(point, refolded=True)
             continue

@@ -13,6 +13,7 @@
 
 use crate::effects::{AnyEffect, Sample, Stage};
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::model::backlash::{check_memory, GeneralBacklash};
 use crate::model::cascade::{CascadeModel, CascadeState};
 use crate::model::linear::{LinearBlock, LinearState};
@@ -90,9 +91,9 @@ pub fn simulate_augmented(
         }
     }
     let n = u.len();
-    let mut u_eff = vec![0.0; n];
-    let mut x = vec![0.0; n];
-    let mut y = vec![0.0; n];
+    let mut u_eff = guard::filled(n, 0.0, "u_eff")?;
+    let mut x = guard::filled(n, 0.0, "x")?;
+    let mut y = guard::filled(n, 0.0, "y")?;
     let mut y_prev = state.y_prev;
     let mut x_prev = x0;
     let free = drive.iter().any(|e| e.needs_free());

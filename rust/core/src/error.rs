@@ -14,12 +14,22 @@ pub enum Error {
     /// regressor column that is never excited, a rank-deficient regressor.
     /// (`NotIdentifiableError`)
     NotIdentifiable(String),
+    /// A buffer proportional to the record could not be allocated (`guard::buffer`).
+    /// (`MemoryError`)
+    OutOfMemory(String),
+    /// The caller asked the work to stop (`guard::check`). (`KeyboardInterrupt`, or what the
+    /// caller's signal handler raised)
+    Interrupted,
 }
 
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Error::Data(msg) | Error::Model(msg) | Error::NotIdentifiable(msg) => f.write_str(msg),
+            Error::Data(msg)
+            | Error::Model(msg)
+            | Error::NotIdentifiable(msg)
+            | Error::OutOfMemory(msg) => f.write_str(msg),
+            Error::Interrupted => f.write_str("interrupted"),
         }
     }
 }

@@ -12,13 +12,15 @@
 //!   gradient;
 //! - `linalg`: least squares by QR and the streaming triangular factor;
 //! - `effects`: the diagnosis catalogue's effects, one module each over the `Effect` trait;
-//! - `augmented`: the cascade with those effects, simulated in one fused pass.
+//! - `augmented`: the cascade with those effects, simulated in one fused pass;
+//! - `guard`: fallible allocation of record-sized buffers and the interruption check.
 //!
 //! The items below are the API the Python binding and the benches use.
 
 pub mod augmented;
 pub mod effects;
 pub mod error;
+pub mod guard;
 pub mod identify;
 pub mod linalg;
 pub mod model;

@@ -8,7 +8,9 @@
 use backlashid_core as core;
 use pyo3::prelude::*;
 
-use crate::convert::{factor_out, signal, vec_f64, FactorOut, MatrixOut, SignalIn, SignalOut};
+use crate::convert::{
+    factor_out, owned_signal, vec_f64, FactorOut, MatrixOut, SignalIn, SignalOut,
+};
 use crate::errors::run;
 use crate::problem::{warmup_of, whole};
 use numpy::{IntoPyArray, PyArrayMethods};
@@ -48,7 +50,7 @@ impl PyAugmentedProblem {
             whole(nb, "nb", 0)?,
             whole(degree, "degree", 1)?,
         );
-        let (u, y) = (signal("u", &u)?.into_owned(), signal("y", &y)?.into_owned());
+        let (u, y) = (owned_signal("u", &u)?, owned_signal("y", &y)?);
         let warmup = match warmup {
             Some(w) => warmup_of(w, u.len())?,
             None => 0,

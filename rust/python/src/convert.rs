@@ -9,7 +9,7 @@ use numpy::{
 };
 use pyo3::prelude::*;
 
-use crate::errors::DataError;
+use crate::errors::{CoreError, DataError};
 
 /// A signal argument: any float64 array (checked to be 1-D by `signal`).
 pub(crate) type SignalIn<'py> = PyReadonlyArrayDyn<'py, f64>;
@@ -32,7 +32,20 @@ pub(crate) fn signal<'a>(name: &str, arr: &'a SignalIn<'_>) -> PyResult<Cow<'a, 
     }
     Ok(match arr.as_slice() {
         Ok(s) => Cow::Borrowed(s),
-        Err(_) => Cow::Owned(arr.as_array().iter().copied().collect()),
+        Err(_) => {
+            let mut v = core::guard::buffer(arr.len(), name).map_err(CoreError)?;
+            v.extend(arr.as_array().iter().copied());
+            Cow::Owned(v)
+        }
+    })
+}
+
+/// A signal the core keeps (a compiled problem's record): `signal`, copied into memory the
+/// core owns (MemoryError where it cannot be allocated).
+pub(crate) fn owned_signal(name: &str, arr: &SignalIn<'_>) -> PyResult<Vec<f64>> {
+    Ok(match signal(name, arr)? {
+        Cow::Borrowed(s) => core::guard::copied(s, name).map_err(CoreError)?,
+        Cow::Owned(v) => v,
     })
 }
 
@@ -44,6 +57,9 @@ pub(crate) fn matrix(name: &str, arr: &SignalIn<'_>) -> PyResult<(Vec<f64>, usiz
     }
 }
 
+/// The vector as a NumPy array that wraps its buffer (rust-numpy's `into_pyarray`: only a
+/// small owner object and the array header are allocated, nothing proportional to the
+/// record, which the core allocated fallibly, `core::guard`).
 pub(crate) fn vec_f64(py: Python<'_>, v: Vec<f64>) -> SignalOut<'_> {
     v.into_pyarray(py)
 }

@@ -20,6 +20,7 @@ use pyo3::prelude::*;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    errors::remember_main_thread(m.py())?;
     m.add_class::<models::PyLinearBlock>()?;
     m.add_class::<models::PyGeneralBacklash>()?;
     m.add_class::<models::PyCascadeModel>()?;

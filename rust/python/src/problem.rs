@@ -8,7 +8,9 @@ use backlashid_core as core;
 use pyo3::prelude::*;
 use pyo3::types::PyBool;
 
-use crate::convert::{factor_out, ls_out, signal, vec_f64, FactorOut, LsOut, SignalIn, SignalOut};
+use crate::convert::{
+    factor_out, ls_out, owned_signal, vec_f64, FactorOut, LsOut, SignalIn, SignalOut,
+};
 use crate::errors::{run, DataError};
 
 /// A whole number >= `least` (an order, a degree, a warm-up), else a DataError with the
@@ -101,7 +103,7 @@ impl PyProblem {
     ) -> PyResult<Self> {
         let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?
             .with_initial_state(initial_state);
-        let (u, y) = (signal("u", &u)?.into_owned(), signal("y", &y)?.into_owned());
+        let (u, y) = (owned_signal("u", &u)?, owned_signal("y", &y)?);
         let warmup = match warmup {
             Some(w) => warmup_of(w, u.len())?,
             None => 0,
@@ -148,8 +150,8 @@ impl PyProblem {
         };
         let mut records = Vec::with_capacity(u.len());
         for (i, (ui, yi)) in u.iter().zip(&y).enumerate() {
-            let ui = signal(&format!("u[{i}]"), ui)?.into_owned();
-            let yi = signal(&format!("y[{i}]"), yi)?.into_owned();
+            let ui = owned_signal(&format!("u[{i}]"), ui)?;
+            let yi = owned_signal(&format!("y[{i}]"), yi)?;
             records.push((ui, yi, warmup));
         }
         let inner = run(py, || core::Problem::several(s, records))?;

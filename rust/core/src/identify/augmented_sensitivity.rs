@@ -24,6 +24,7 @@
 use crate::augmented::{branch, diverged, free_gain, free_response};
 use crate::effects::{AnyEffect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::identify::gradient::OeGradient;
 use crate::identify::problem::Layout;
 use crate::identify::sensitivity::{branch_degree, finish, overflowed, Move, Sensitivity};
@@ -219,7 +220,10 @@ pub(crate) fn walk_augmented(
         ));
     }
     let len = u.len();
-    let (mut u_eff, mut x) = (vec![0.0; len], vec![0.0; len]);
+    let (mut u_eff, mut x) = (
+        guard::filled(len, 0.0, "u_eff")?,
+        guard::filled(len, 0.0, "x")?,
+    );
     // tangents: of u_eff over na lags, of x over max(nb, 1) lags (x(t-1) for friction)
     let mut du = Ring::new(na, p, &[]);
     let mut dxr = Ring::new(nb.max(1), p, if nb > 0 { start.dx_past } else { &dx0 });
@@ -426,8 +430,8 @@ pub(crate) fn augmented_sensitivity(
     p: usize,
 ) -> Result<Sensitivity> {
     let mut out = Sensitivity {
-        output: Vec::with_capacity(u.len()),
-        jacobian: Vec::with_capacity(u.len() * p),
+        output: guard::buffer(u.len(), "the simulated output")?,
+        jacobian: guard::buffer(u.len().saturating_mul(p), "the Jacobian")?,
         cols: p,
     };
     walk_augmented(

@@ -19,6 +19,7 @@
 //! `sensitivity::walk_sandwich` instead.
 
 use crate::error::Result;
+use crate::guard;
 use crate::identify::initial::{simulate_from, start_cols, Start};
 use crate::identify::sensitivity::{
     branch_degree, cascade_cols, check_pair, overflowed, sandwich_cols, walk_sandwich,
@@ -138,6 +139,7 @@ fn gradient_from_threads(
         if let Some(out) = split {
             return out.finished();
         }
+        guard::check()?;
         // not split (orders beyond the kernel's, slow poles) or the simulation overflowed:
         // the one-thread pass (which reports the overflow)
     }
@@ -218,6 +220,10 @@ fn split_gradient(
         let mut finite = true;
         let mut y_prev = y0;
         for (k, uk) in u.chunks(FORWARD_BLOCK).enumerate() {
+            // interrupted: give up (the caller checks again and returns the interruption)
+            if k % (guard::CHUNK / FORWARD_BLOCK) == 0 && guard::interrupted() {
+                return false;
+            }
             let at = k * FORWARD_BLOCK;
             let xs = &mut x[at..at + uk.len()];
             rec.run_block(uk, xs);
@@ -233,7 +239,12 @@ fn split_gradient(
         }
         finite
     };
-    let (mut x_head, mut y_head, mut case_head) = (vec![0.0; m], vec![0.0; m], vec![0u8; m]);
+    // not allocated: the one-thread pass (which reports the memory it cannot have)
+    let (mut x_head, mut y_head, mut case_head) = (
+        guard::filled(m, 0.0, "x").ok()?,
+        guard::filled(m, 0.0, "y").ok()?,
+        guard::filled(m, 0u8, "the cases").ok()?,
+    );
     if !forward(
         &mut rec,
         &u[..m],
@@ -281,8 +292,11 @@ fn split_gradient(
         // the first thread: the rest of the simulation, then the reverse pass over t >= M on
         // the record from M - FIXED (the kernel's lags)
         let rest = len - m + FIXED;
-        let (mut x_tail, mut y_tail, mut case_tail) =
-            (vec![0.0; rest], vec![0.0; rest], vec![0u8; rest]);
+        let (mut x_tail, mut y_tail, mut case_tail) = (
+            guard::filled(rest, 0.0, "x").ok()?,
+            guard::filled(rest, 0.0, "y").ok()?,
+            guard::filled(rest, 0u8, "the cases").ok()?,
+        );
         x_tail[..FIXED].copy_from_slice(&x_head[m - FIXED..]);
         y_tail[..FIXED].copy_from_slice(&y_head[m - FIXED..]);
         case_tail[..FIXED].copy_from_slice(&case_head[m - FIXED..]);

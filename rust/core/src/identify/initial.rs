@@ -46,6 +46,7 @@
 //! belong in the warm-up.
 
 use crate::error::Result;
+use crate::guard;
 use crate::model::linear::{check_no_overflow, LinearBlock, LinearState};
 
 /// The initial-state values of a parameter vector: the input block's x0 (n values), the
@@ -96,8 +97,11 @@ pub(crate) fn simulate_named(
     name: &str,
 ) -> Result<Vec<f64>> {
     let rest = block.rest_state();
-    let mut x = Vec::with_capacity(u.len());
+    let mut x = guard::buffer(u.len(), name)?;
     for t in 0..u.len() {
+        if t % guard::CHUNK == 0 {
+            guard::check()?;
+        }
         let v = block.output_at(u, &x, t, &rest) + x0.get(t).copied().unwrap_or(0.0);
         x.push(v);
     }

@@ -20,6 +20,7 @@
 //! record is not checked again.
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::identify::gradient::OeGradient;
 use crate::identify::gradient::{cascade_oe_gradient_from, sandwich_oe_gradient_from};
 use crate::identify::initial::{self, InitialState, Start};
@@ -30,7 +31,7 @@ use crate::identify::{CascadeRegression, SandwichRegression};
 use crate::linalg::{LeastSquares, TriangularFactor};
 use crate::model::backlash::GeneralBacklash;
 use crate::model::cascade::CascadeModel;
-use crate::model::linear::{blame_feeding_block, LinearBlock};
+use crate::model::linear::{blame_feeding_block, LinearBlock, MAX_ORDER};
 use crate::model::sandwich::SandwichModel;
 use crate::model::signal::{check_same_length, check_signal};
 
@@ -115,6 +116,22 @@ impl Structure {
     ) -> Result<Self> {
         whole("na", na, 1)?;
         whole("degree", degree, 1)?;
+        // before anything proportional to them (the names, the layout) is built
+        for (name, value) in [
+            ("na", na),
+            ("nb", nb),
+            ("degree", degree),
+            ("nr", nr),
+            ("ns", ns),
+        ] {
+            if value > MAX_ORDER {
+                return Err(Error::Model(format!(
+                    "{name} = {value}: orders and the degree are at most {MAX_ORDER} (a linear \
+                     block's poles are the eigenvalues of its companion matrix, O(order^3), and \
+                     no record identifies that many parameters)"
+                )));
+            }
+        }
         if output_feedthrough && nr == 0 {
             return Err(Error::Data(
                 "output_feedthrough is for the sandwich's output block: a cascade has none".into(),
@@ -494,7 +511,7 @@ impl Problem {
     /// Free-run output of the estimate theta, from rest or from theta's initial state(s);
     /// several records' outputs concatenated in order.
     pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
-        let mut out = Vec::with_capacity(self.samples());
+        let mut out = guard::buffer(self.samples(), "the simulated output")?;
         for ((blocks, _), rec) in self.unpack_all(theta)?.into_iter().zip(&self.records) {
             out.extend(Self::simulate_blocks(blocks, &rec.u)?);
         }

@@ -364,7 +364,7 @@ impl<'a> SandwichRegression<'a> {
         check_same_length(u, w, "w")?;
         let mut part = BacklashColumns::new(input_linear, backlash, u)?;
         let y = backlash.simulate(&part.x, 0.0)?; // eq (35)
-        (part.f1, part.f2) = crate::model::cascade::switching_flags(backlash, &part.x, &y, 0.0);
+        (part.f1, part.f2) = crate::model::cascade::switching_flags(backlash, &part.x, &y, 0.0)?;
         Ok(RowRegression(SandwichRows {
             part,
             w,

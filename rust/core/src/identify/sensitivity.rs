@@ -12,6 +12,7 @@
 //! until the first move, dw(t)/dw0_k = [t = k] + the recursion.
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::identify::initial::{simulate_from, start_cols, Start};
 use crate::identify::problem::Layout;
 use crate::linalg::streaming::{default_threads, fold_stream, fold_stream_parts, TriangularFactor};
@@ -67,8 +68,8 @@ pub fn cascade_sensitivity(
     check_signal("u", u)?;
     let cols = cascade_cols(linear, backlash);
     let mut out = Sensitivity {
-        output: Vec::with_capacity(u.len()),
-        jacobian: Vec::with_capacity(u.len() * cols),
+        output: guard::buffer(u.len(), "the simulated output")?,
+        jacobian: guard::buffer(u.len().saturating_mul(cols), "the Jacobian")?,
         cols,
     };
     walk_cascade(linear, backlash, None, u, |_, yt, _, row| {
@@ -89,8 +90,8 @@ pub fn sandwich_sensitivity(
     check_signal("u", u)?;
     let cols = sandwich_cols(input_linear, backlash, output_linear);
     let mut out = Sensitivity {
-        output: Vec::with_capacity(u.len()),
-        jacobian: Vec::with_capacity(u.len() * cols),
+        output: guard::buffer(u.len(), "the simulated output")?,
+        jacobian: guard::buffer(u.len().saturating_mul(cols), "the Jacobian")?,
         cols,
     };
     walk_sandwich(

@@ -19,6 +19,7 @@
 //! Each row is streamed into the triangular factor (no N x p Jacobian).
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::identify::gradient::OeGradient;
 use crate::identify::output_error_cost;
 use crate::identify::sensitivity::{oe_threads, overflowed};
@@ -337,7 +338,7 @@ impl WienerHammersteinProblem {
         let full = self.expand(theta)?;
         let p = self.structure.parts(&full)?;
         let d1 = self.structure.d1();
-        let mut x = vec![0.0; self.u.len()];
+        let mut x = guard::filled(self.u.len(), 0.0, "x")?;
         for t in 0..self.u.len() {
             let v = filter_step(t, d1, p.a, p.b, &self.u, &x);
             if !v.is_finite() {
@@ -355,7 +356,7 @@ impl WienerHammersteinProblem {
         let x = self.internal(theta)?;
         let d2 = self.structure.d2();
         let n = self.u.len();
-        let mut f = vec![0.0; n];
+        let mut f = guard::filled(n, 0.0, "f")?;
         let (mut tb, mut dtb) = (vec![0.0; p.c.len()], vec![0.0; p.c.len()]);
         for t in 0..n {
             // the same basis and summation order as `walk`, so both give the same bits
@@ -366,7 +367,7 @@ impl WienerHammersteinProblem {
             }
             f[t] = v;
         }
-        let mut w = vec![0.0; n];
+        let mut w = guard::filled(n, 0.0, "w")?;
         for t in 0..n {
             let v = filter_step(t, d2, p.r, p.s, &f, &w);
             if !v.is_finite() {
@@ -461,13 +462,13 @@ impl WienerHammersteinProblem {
         let len = self.u.len();
         let u = &self.u;
         // full-length signals (a few vectors of N)
-        let mut x = vec![0.0; len];
-        let mut wu = vec![0.0; len];
-        let mut wx = vec![0.0; len];
-        let mut f = vec![0.0; len];
-        let mut w = vec![0.0; len];
-        let mut wf = vec![0.0; len];
-        let mut ww = vec![0.0; len];
+        let mut x = guard::filled(len, 0.0, "x")?;
+        let mut wu = guard::filled(len, 0.0, "wu")?;
+        let mut wx = guard::filled(len, 0.0, "wx")?;
+        let mut f = guard::filled(len, 0.0, "f")?;
+        let mut w = guard::filled(len, 0.0, "w")?;
+        let mut wf = guard::filled(len, 0.0, "wf")?;
+        let mut ww = guard::filled(len, 0.0, "ww")?;
         // rings of df and dw rows (G1's and f's columns) over ns + 1 samples
         let ring = ns + 1;
         let mut df_ring = vec![0.0; ring * inner];

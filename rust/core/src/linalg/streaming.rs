@@ -9,6 +9,7 @@
 //! step); two partial factors merge by folding the rows of one into the other.
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::linalg::lstsq::{solve_triangular, LeastSquares};
 
 /// Rows folded per Householder sweep: the stacked [R_aug; block] (p+1 columns) stays in the
@@ -353,6 +354,10 @@ pub fn fold_parallel(
         let mut b = vec![0.0; BLOCK_ROWS];
         let mut t = lo;
         while t < hi {
+            // interrupted: stop early (the caller discards the partial factor)
+            if (t - lo) % guard::CHUNK == 0 && guard::interrupted() {
+                break;
+            }
             let k = (hi - t).min(BLOCK_ROWS);
             for i in 0..k {
                 b[i] = fill(t + i, &mut a[i * p..(i + 1) * p]);
@@ -384,11 +389,18 @@ fn in_chunks<T: Send>(
     let bounds: Vec<(usize, usize)> = (0..threads)
         .map(|c| (rows * c / threads, rows * (c + 1) / threads))
         .collect();
+    let stop = guard::scope();
     std::thread::scope(|scope| {
         let work = &work;
         let handles: Vec<_> = bounds[1..]
             .iter()
-            .map(|&(lo, hi)| scope.spawn(move || work(lo, hi)))
+            .map(|&(lo, hi)| {
+                let stop = stop.clone();
+                scope.spawn(move || {
+                    guard::adopt(stop); // the caller's interruption reaches this thread
+                    work(lo, hi)
+                })
+            })
             .collect();
         let mut parts = vec![work(bounds[0].0, bounds[0].1)];
         for h in handles {
@@ -485,8 +497,14 @@ pub fn fold_parallel_split(
     let threads = threads.clamp(1, rows.div_ceil(BLOCK_ROWS).max(1));
     let fold_range = |lo: usize, hi: usize| {
         let mut split = SplitRows::new(widths);
-        for t in lo..hi {
-            fill(t, &mut split);
+        for chunk in (lo..hi).step_by(guard::CHUNK) {
+            // interrupted: stop early (the caller discards the partial factors)
+            if guard::interrupted() {
+                break;
+            }
+            for t in chunk..(chunk + guard::CHUNK).min(hi) {
+                fill(t, &mut split);
+            }
         }
         split.finish()
     };
@@ -649,6 +667,7 @@ impl RowSink {
         if self.b[part].is_empty() {
             return Ok(());
         }
+        guard::check()?; // a batch of rows between two interruption checks
         match &mut self.target {
             SinkTarget::Local(factors) => {
                 factors[part].fold(&self.a[part], &self.b[part])?;

@@ -3,6 +3,7 @@
 //! and the output moves along L or R, or holds y(t-1) inside the dead band (eq 1).
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::model::signal::{check_coefficients, check_signal};
 
 /// One branch: value(x) = sum_{i>=1} m_i (x + shift)^i, so shift = c_L for L and -c_R for R.
@@ -165,8 +166,8 @@ impl GeneralBacklash {
         check_signal("x", x)?;
         check_memory(y0)?;
         let y = match self.padded_step() {
-            Some(padded) => run_steps(x, y0, padded),
-            None => run_steps(x, y0, self),
+            Some(padded) => run_steps(x, y0, padded)?,
+            None => run_steps(x, y0, self)?,
         };
         check_output_overflow(x, &y)?;
         Ok(y)
@@ -188,9 +189,13 @@ impl GeneralBacklash {
         check_memory(y0)?;
         let x_lo = x.iter().cloned().fold(f64::INFINITY, f64::min);
         let x_hi = x.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-        let mut y = Vec::with_capacity(x.len());
+        let mut y = guard::buffer(x.len(), "y")?;
         let mut y_prev = y0;
-        for &xt in x {
+        for (t, &xt) in x.iter().enumerate() {
+            // a root search per sample: checked more often than the fast loops
+            if t % (guard::CHUNK >> 8) == 0 {
+                guard::check()?;
+            }
             let (z_l, z_r) = self.breakpoints(y_prev, x_lo, x_hi);
             y_prev = if xt <= z_l {
                 self.left.value(xt)
@@ -223,14 +228,17 @@ impl GeneralBacklash {
 }
 
 /// y(t) = step(x(t), y(t-1)) along x from y(0) = `y0`.
-fn run_steps(x: &[f64], y0: f64, step: impl Step) -> Vec<f64> {
+fn run_steps(x: &[f64], y0: f64, step: impl Step) -> Result<Vec<f64>> {
     let mut y_prev = y0;
-    x.iter()
-        .map(|&xt| {
+    let mut y = guard::buffer(x.len(), "y")?;
+    for chunk in x.chunks(guard::CHUNK) {
+        guard::check()?;
+        y.extend(chunk.iter().map(|&xt| {
             y_prev = step.step(xt, y_prev);
             y_prev
-        })
-        .collect()
+        }));
+    }
+    Ok(y)
 }
 
 /// Eq (1)'s case order given L(x) and R(x), written as two selects (no branch to mispredict).

@@ -1,6 +1,7 @@
 //! The cascade of Section 3 (Fig. 2): the linear block (16) followed by a general backlash (1).
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::model::backlash::{check_memory, GeneralBacklash, Step};
 use crate::model::linear::{
     blame_feeding_block, LinearBlock, LinearState, Recursion, RecursionUser,
@@ -57,7 +58,7 @@ impl CascadeModel {
             u,
             y0: state.y_prev,
         };
-        match self.linear.with_recursion(&state.linear, run) {
+        match self.linear.with_recursion(&state.linear, run)? {
             (y, true) if u.last().is_some_and(|v| v.is_finite()) => Ok(y),
             _ => {
                 let x = self.linear.simulate(u, &state.linear)?;
@@ -79,7 +80,7 @@ impl CascadeModel {
             .backlash
             .simulate(&x, state.y_prev)
             .map_err(|e| blame_feeding_block(e, &self.linear, "input"))?;
-        let (f1, f2) = switching_flags(&self.backlash, &x, &y, state.y_prev);
+        let (f1, f2) = switching_flags(&self.backlash, &x, &y, state.y_prev)?;
         let final_state = CascadeState {
             linear: self.linear.state_after(&state.linear, u, &x),
             y_prev: *y.last().unwrap_or(&state.y_prev),
@@ -117,7 +118,7 @@ impl CascadeModel {
             y0: state.y_prev,
             warmup,
         };
-        match self.linear.with_recursion(&state.linear, count) {
+        match self.linear.with_recursion(&state.linear, count)? {
             (moving, true) if u.last().is_some_and(|v| v.is_finite()) => Ok(moving),
             // the simulation names what failed
             _ => self.simulate(u, state).and_then(|_| unreachable_error()),
@@ -134,7 +135,7 @@ struct CascadeCount<'a> {
 }
 
 impl RecursionUser for CascadeCount<'_> {
-    type Output = (usize, bool);
+    type Output = Result<(usize, bool)>;
 
     fn run<R: Recursion>(self, linear: R) -> Self::Output {
         match self.backlash.padded_step() {
@@ -145,21 +146,31 @@ impl RecursionUser for CascadeCount<'_> {
 }
 
 impl CascadeCount<'_> {
-    fn count_with<R: Recursion, S: Step>(&self, mut linear: R, backlash: S) -> (usize, bool) {
+    fn count_with<R: Recursion, S: Step>(
+        &self,
+        mut linear: R,
+        backlash: S,
+    ) -> Result<(usize, bool)> {
         let (mut finite, mut y_prev, mut moving) = (true, self.y0, 0);
         let (head, counted) = self.u.split_at(self.warmup.min(self.u.len()));
-        for &ut in head {
-            let xt = linear.next(ut);
-            y_prev = backlash.step(xt, y_prev);
-            finite &= xt.is_finite() & y_prev.is_finite();
+        for chunk in head.chunks(guard::CHUNK) {
+            guard::check()?;
+            for &ut in chunk {
+                let xt = linear.next(ut);
+                y_prev = backlash.step(xt, y_prev);
+                finite &= xt.is_finite() & y_prev.is_finite();
+            }
         }
-        for &ut in counted {
-            let xt = linear.next(ut);
-            moving += backlash.moves(xt, y_prev) as usize;
-            y_prev = backlash.step(xt, y_prev);
-            finite &= xt.is_finite() & y_prev.is_finite();
+        for chunk in counted.chunks(guard::CHUNK) {
+            guard::check()?;
+            for &ut in chunk {
+                let xt = linear.next(ut);
+                moving += backlash.moves(xt, y_prev) as usize;
+                y_prev = backlash.step(xt, y_prev);
+                finite &= xt.is_finite() & y_prev.is_finite();
+            }
         }
-        (moving, finite)
+        Ok((moving, finite))
     }
 }
 
@@ -171,7 +182,7 @@ struct CascadeRun<'a> {
 }
 
 impl RecursionUser for CascadeRun<'_> {
-    type Output = (Vec<f64>, bool);
+    type Output = Result<(Vec<f64>, bool)>;
 
     fn run<R: Recursion>(self, linear: R) -> Self::Output {
         match self.backlash.padded_step() {
@@ -185,20 +196,26 @@ impl CascadeRun<'_> {
     /// `collect` on a slice's `map` writes into one exact allocation without capacity checks
     /// (`push` has them, and its rarely taken call makes the compiler spill the recursion's
     /// registers). So no early exit: a non-finite x only clears the `finite` flag.
-    fn run_with<R: Recursion, S: Step>(&self, mut linear: R, backlash: S) -> (Vec<f64>, bool) {
+    /// (`extend` from a slice's `map` is the same exact write, a chunk of samples at a time
+    /// between the interruption checks.)
+    fn run_with<R: Recursion, S: Step>(
+        &self,
+        mut linear: R,
+        backlash: S,
+    ) -> Result<(Vec<f64>, bool)> {
         let mut finite = true;
         let mut y_prev = self.y0;
-        let y = self
-            .u
-            .iter()
-            .map(|&ut| {
+        let mut y = guard::buffer(self.u.len(), "y")?;
+        for chunk in self.u.chunks(guard::CHUNK) {
+            guard::check()?;
+            y.extend(chunk.iter().map(|&ut| {
                 let xt = linear.next(ut);
                 y_prev = backlash.step(xt, y_prev);
                 finite &= xt.is_finite() & y_prev.is_finite();
                 y_prev
-            })
-            .collect();
-        (y, finite)
+            }));
+        }
+        Ok((y, finite))
     }
 }
 
@@ -216,12 +233,16 @@ pub(crate) fn switching_flags(
     x: &[f64],
     y: &[f64],
     y0: f64,
-) -> (Vec<bool>, Vec<bool>) {
+) -> Result<(Vec<bool>, Vec<bool>)> {
     // the padded branches (the same bits, a fixed number of Horner steps) where they apply
+    let mut flags = (guard::buffer(x.len(), "f1")?, guard::buffer(x.len(), "f2")?);
     match backlash.padded_step() {
-        Some(padded) => flags_along(x, y, y0, move |xt, yp| padded.switching(xt, yp)).unzip(),
-        None => flags_along(x, y, y0, |xt, yp| switching(backlash, xt, yp)).unzip(),
+        Some(padded) => flags.extend(flags_along(x, y, y0, move |xt, yp| {
+            padded.switching(xt, yp)
+        })),
+        None => flags.extend(flags_along(x, y, y0, |xt, yp| switching(backlash, xt, yp))),
     }
+    Ok(flags)
 }
 
 /// The number of t >= warmup with f1(t) or f2(t) along a simulated record (`switching_flags`

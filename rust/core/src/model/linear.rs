@@ -5,6 +5,7 @@
 //! feedthrough r_0) is the same block.
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::model::polynomial::{monic_roots, Root};
 use crate::model::signal::check_coefficients;
 
@@ -24,11 +25,28 @@ pub struct LinearState {
     pub x_past: Vec<f64>,
 }
 
+/// The largest order of a block's denominator (nb), and of every order and the degree of an
+/// identification's `Structure`. The poles, which `poles()` and every stability check
+/// compute, are the eigenvalues of the nb x nb companion matrix: O(nb^3) time, 0.03 s at
+/// nb = 200 but about 30 s at 2000 (2026-11-24), and with it an identification's p x p
+/// algebra; orders that high are far beyond what a record identifies.
+pub const MAX_ORDER: usize = 200;
+
 impl LinearBlock {
-    /// `a` (at least one coefficient) and `b` (possibly none: an FIR block), all finite.
+    /// `a` (at least one coefficient) and `b` (possibly none: an FIR block, at most
+    /// `MAX_ORDER`), all finite.
     pub fn new(a: Vec<f64>, b: Vec<f64>) -> Result<Self> {
         check_coefficients("a", &a, false)?;
         check_coefficients("b", &b, true)?;
+        if b.len() > MAX_ORDER {
+            return Err(Error::Model(format!(
+                "b has {} coefficients: the denominator's order nb is at most {MAX_ORDER} (its \
+                 poles, which poles() and every stability check compute, are the eigenvalues \
+                 of an nb x nb companion matrix: O(nb^3) time, 0.03 s at nb = 200, about 30 s \
+                 at 2000)",
+                b.len()
+            )));
+        }
         Ok(LinearBlock { a, b, a0: None })
     }
 
@@ -149,7 +167,7 @@ impl LinearBlock {
     pub fn simulate(&self, u: &[f64], state: &LinearState) -> Result<Vec<f64>> {
         crate::model::signal::check_signal("u", u)?;
         self.check_state(state, "state")?;
-        let x = self.with_recursion(state, Outputs(u));
+        let x = self.with_recursion(state, Outputs(u))?;
         check_no_overflow(self, &x, "x")?;
         Ok(x)
     }
@@ -219,9 +237,14 @@ impl RecursionUser for Boxed {
 pub(crate) struct Outputs<'a>(pub(crate) &'a [f64]);
 
 impl RecursionUser for Outputs<'_> {
-    type Output = Vec<f64>;
-    fn run<R: Recursion>(self, mut rec: R) -> Vec<f64> {
-        self.0.iter().map(|&ut| rec.next(ut)).collect()
+    type Output = Result<Vec<f64>>;
+    fn run<R: Recursion>(self, mut rec: R) -> Result<Vec<f64>> {
+        let mut x = guard::buffer(self.0.len(), "x")?;
+        for chunk in self.0.chunks(guard::CHUNK) {
+            guard::check()?;
+            x.extend(chunk.iter().map(|&ut| rec.next(ut)));
+        }
+        Ok(x)
     }
 }
 
@@ -381,6 +404,17 @@ mod tests {
                 assert!((v - whole[cut + k]).abs() < 1e-14);
             }
         }
+    }
+
+    #[test]
+    fn denominator_orders_above_the_cap_are_refused() {
+        assert!(LinearBlock::new(vec![1.0], vec![1e-3; MAX_ORDER]).is_ok());
+        let err = LinearBlock::new(vec![1.0], vec![1e-3; 2000]).unwrap_err();
+        assert!(matches!(err, Error::Model(ref m) if m.contains("at most 200")));
+        // a long numerator has no poles to compute
+        assert!(LinearBlock::new(vec![1e-3; 2000], vec![0.5]).is_ok());
+        let s = crate::identify::Structure::new(1_000_000_000, 2, 3, 0, 0, false, false);
+        assert!(matches!(s, Err(Error::Model(ref m)) if m.starts_with("na = 1000000000")));
     }
 
     #[test]

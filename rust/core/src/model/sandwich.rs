@@ -2,6 +2,7 @@
 //! output block (29): w(t) = sum_{i=1}^{nr} r_i y(t-i) - sum_{j=1}^{ns} s_j w(t-j).
 
 use crate::error::{Error, Result};
+use crate::guard;
 use crate::model::backlash::{GeneralBacklash, Step};
 use crate::model::cascade::{moving_count, switching_flags, unreachable_error};
 use crate::model::linear::{
@@ -79,7 +80,7 @@ impl SandwichModel {
             .map_err(|e| blame_feeding_block(e, &self.input_linear, "input"))?;
         let w = self
             .output_linear
-            .with_recursion(&state.output, Outputs(&y));
+            .with_recursion(&state.output, Outputs(&y))?;
         check_no_overflow(&self.output_linear, &w, "w")?;
         Ok((x, y, w))
     }
@@ -102,10 +103,13 @@ impl SandwichModel {
         };
         let mut x_then_y = self.input_linear.with_recursion(&state.input, first_two);
         let mut output = self.output_linear.with_recursion(&state.output, Boxed);
-        let mut w = Vec::with_capacity(u.len());
+        let mut w = guard::buffer(u.len(), "w")?;
         let (mut x_block, mut y_block, mut w_block) = ([0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK]);
         let mut finite = true;
-        for u_block in u.chunks(BLOCK) {
+        for (i, u_block) in u.chunks(BLOCK).enumerate() {
+            if i % (guard::CHUNK / BLOCK) == 0 {
+                guard::check()?;
+            }
             let x_block = &mut x_block[..u_block.len()];
             let y_block = &mut y_block[..u_block.len()];
             let w_block = &mut w_block[..u_block.len()];
@@ -133,7 +137,7 @@ impl SandwichModel {
         state: &SandwichState,
     ) -> Result<SandwichSimulation> {
         let (x, y, w) = self.run(u, state)?;
-        let (f1, f2) = switching_flags(&self.backlash, &x, &y, state.output.u_past[0]);
+        let (f1, f2) = switching_flags(&self.backlash, &x, &y, state.output.u_past[0])?;
         let final_state = SandwichState {
             input: self.input_linear.state_after(&state.input, u, &x),
             output: self.output_linear.state_after(&state.output, &y, &w),

@@ -7,6 +7,7 @@
 //! order of eq (1): f1 wins, so f2 := f2 and not f1 (NOTES.md, item 2).
 
 use crate::error::Result;
+use crate::guard;
 use crate::model::backlash::{check_memory, GeneralBacklash};
 use crate::model::signal::check_signal;
 
@@ -56,14 +57,17 @@ pub fn switching_form(backlash: &GeneralBacklash, x: &[f64], y0: f64) -> Result<
     );
     let n = x.len();
     let mut out = SwitchingSignals {
-        xi1: Vec::with_capacity(n),
-        xi2: Vec::with_capacity(n),
-        f1: Vec::with_capacity(n),
-        f2: Vec::with_capacity(n),
-        y: Vec::with_capacity(n),
+        xi1: guard::buffer(n, "xi1")?,
+        xi2: guard::buffer(n, "xi2")?,
+        f1: guard::buffer(n, "f1")?,
+        f2: guard::buffer(n, "f2")?,
+        y: guard::buffer(n, "y")?,
     };
     let mut y_prev = y0;
-    for &xt in x {
+    for (t, &xt) in x.iter().enumerate() {
+        if t % guard::CHUNK == 0 {
+            guard::check()?;
+        }
         let (f1, f2) = switching(backlash, xt, y_prev);
         let (xi1, xi2) = (xt + c_l, xt - c_r);
         let (g1, g2) = (f1 as u8 as f64, f2 as u8 as f64);
