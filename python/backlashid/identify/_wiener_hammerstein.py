@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._docstrings import AXES, fill
-from .._validation import as_signal, check_whole, identification_record
+from .._validation import as_coefficients, as_signal, check_whole, identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError
 from ..models import GeneralBacklash, LinearBlock, SandwichModel, model_from_dict
 from ._refine import OutputErrorFit, levenberg_marquardt
@@ -106,7 +106,7 @@ def wiener_hammerstein_model(
     >>> model.backlash.c_left, model.simulate([1.0, 0.0, 0.0]).tolist()
     (0.0, [0.0, 0.0, 0.475])
     """
-    m_list = [float(v) for v in np.atleast_1d(np.asarray(m, dtype=np.float64))]
+    m_list = as_coefficients(m, "m")
     return SandwichModel(
         LinearBlock(a, b, feedthrough=feedthrough),
         GeneralBacklash(0.0, 0.0, m_list, m_list),

@@ -77,8 +77,10 @@ def _parse_json(text: str) -> dict[str, Any]:
         raise ModelError(f"expected JSON text, got {type(text).__name__}: pass the string from to_json()")
     try:
         data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ModelError(f"not valid JSON ({exc})") from None
+    except RecursionError:
+        raise ModelError("JSON nested too deeply to be a backlashid model description: pass the text of to_json()") from None
+    except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError of bytes, an int of > 4300 digits
+        raise ModelError(f"not valid JSON ({type(exc).__name__}: {str(exc)[:120]})") from None
     if not isinstance(data, dict):
         raise ModelError("not a backlashid model description: expected a JSON object")
     return data
