@@ -25,6 +25,7 @@ import dataclasses
 import faulthandler
 import json
 import math
+import os
 from typing import Any, Callable
 
 import numpy as np
@@ -35,11 +36,9 @@ from hypothesis import strategies as st
 import backlashid as bid
 from backlashid import BacklashIdError
 
-import os
-
 SCALE = float(os.environ.get("BACKLASHID_FUZZ_SCALE", "1"))  # < 1 for a quicker local run
-HARD_LIMIT = 120.0
-pytestmark = pytest.mark.filterwarnings("ignore::backlashid.FitWarning")  # s: a call that has not returned by then is a hang (the process ends)
+HARD_LIMIT = 120.0  # s: a call that has not returned by then is a hang (the process ends)
+pytestmark = pytest.mark.filterwarnings("ignore::backlashid.FitWarning")  # suspicious fits of junk are expected
 
 
 def fuzz(examples: int, deadline_ms: int = 5000) -> Callable[[Any], Any]:
@@ -394,7 +393,7 @@ def mutated_model_dicts(draw: Any) -> Any:
                 paths.append(path + (key,))
                 walk(value, path + (key,))
         elif isinstance(node, list):
-            for i, value in enumerate(node):
+            for i in range(len(node)):
                 paths.append(path + (i,))
 
     walk(data, ())

@@ -17,7 +17,6 @@ from numpy.typing import NDArray
 
 from .errors import DataError, ModelError
 
-
 _CONVERSION_ERRORS = (TypeError, ValueError, OverflowError)  # wrong type, ragged, a 400-digit int
 
 

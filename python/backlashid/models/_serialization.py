@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Any, Union
 
+from .._validation import is_real
 from ..errors import ModelError
 from ._backlash import GeneralBacklash
 from ._cascade import CascadeModel
-from .._validation import is_real
 from ._chain import FORMAT_VERSION, _parse_json
 from ._linear import LinearBlock
 from ._sandwich import SandwichModel
