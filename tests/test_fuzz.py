@@ -560,7 +560,10 @@ def test_fit_sandwich(n, seed, spoil_w, orders, degree, output_feedthrough, opti
 
 @fuzz(300, 60000)
 @given(
-    function=st.sampled_from(["select_structure", "fit_hammerstein_backlash", "fit_wiener_hammerstein", "fit_effect", "wiener_hammerstein_model", "shared_data_folder"]),
+    function=st.sampled_from([
+        "select_structure", "select_structure options", "fit_hammerstein_backlash", "fit_wiener_hammerstein",
+        "fit_wiener_hammerstein options", "fit_effect", "wiener_hammerstein_model", "shared_data_folder", "to_json",
+    ]),
     args=st.lists(JUNK, min_size=1, max_size=5),
 )
 def test_other_entry_points_refuse_junk(function, args):
@@ -573,6 +576,14 @@ def test_other_entry_points_refuse_junk(function, args):
         "fit_effect": lambda: bid.fit_effect(args[0], bid.example1(), u, u),
         "wiener_hammerstein_model": lambda: bid.wiener_hammerstein_model(*(args + [[1.0]] * 5)[:5]),
         "shared_data_folder": lambda: bid.shared_data_folder(args[0]),
+        "select_structure options": lambda: bid.select_structure(
+            u, u, na=1, nb=1, degree=1, **dict(zip(("validation", "tolerance", "refit", "warmup"), args))
+        ),
+        "fit_wiener_hammerstein options": lambda: bid.fit_wiener_hammerstein(
+            u, u + 0.1 * u**2, nb=1, ns=1, degree=2, warmup=10,
+            **dict(zip(("max_iter", "split_samples", "split_degree", "split_iter", "feedthrough"), args)),
+        ),
+        "to_json": lambda: bid.example1().to_json(indent=args[0]),
     }
     check_call(calls[function], finite=None, repeat=False)
 

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docstrings import fill
-from .._validation import as_scalar, as_signal, check_warmup
+from .._validation import as_scalar, as_signal, check_int, check_warmup
 from ..errors import DataError, ModelError
 
 FORMAT_VERSION = 1
@@ -180,6 +180,11 @@ class _ModelIO(ABC):
         str
             ``json.dumps(to_dict())``.
 
+        Raises
+        ------
+        DataError
+            If ``json.dumps`` refuses a keyword argument, or ``indent`` is above 64.
+
         Examples
         --------
         >>> import backlashid as bid
@@ -187,7 +192,13 @@ class _ModelIO(ABC):
         >>> bid.CascadeModel.from_json(text) == bid.example1()
         True
         """
-        return json.dumps(self.to_dict(), **kwargs)
+        indent = kwargs.get("indent")
+        if isinstance(indent, (int, np.integer)) and not isinstance(indent, bool):
+            check_int(indent, "indent", 0, 64)  # json.dumps would build a string of indent spaces per level
+        try:
+            return json.dumps(self.to_dict(), **kwargs)
+        except (TypeError, ValueError, OverflowError) as exc:  # a keyword json.dumps refuses
+            raise DataError(f"to_json's keywords are json.dumps's; it refused {kwargs} ({type(exc).__name__}: {exc})") from None
 
     @classmethod
     @fill(loaded=_LOADED_DOC.format(what="``data`` describes"))
