@@ -1,6 +1,11 @@
-"""Conversion of user inputs (array-likes, coefficient lists) to what the Rust core takes.
+"""Conversion and checks of user inputs: the ONE place where public functions validate their
+arguments (issue 21) before anything reaches NumPy or the Rust core.
 
-The caller's objects are never modified: the core only reads, and results are new arrays.
+Every check raises :class:`~backlashid.DataError` (data and settings) or
+:class:`~backlashid.ModelError` (model parameters) naming the argument, what it got and what
+it expects; no Python internal (``TypeError``, ``OverflowError``, a NumPy casting or broadcast
+error) escapes for a wrong type. The caller's objects are never modified: the core only reads,
+and results are new arrays.
 """
 
 from __future__ import annotations
@@ -12,18 +17,35 @@ from numpy.typing import NDArray
 
 from .errors import DataError, ModelError
 
+_CONVERSION_ERRORS = (TypeError, ValueError, OverflowError)  # wrong type, ragged, a 400-digit int
+
+
+def shown(value: Any) -> str:
+    """``repr`` of a value, cut to a readable length (a message must not print a whole record)."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def is_real(value: Any) -> bool:
+    """Whether ``value`` is a real number (int or float, Python or NumPy; not bool)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
 
 def as_signal(values: Any, name: str) -> NDArray[np.float64]:
     """A float64 numpy array of a real-valued array-like (dimensions are checked by the core)."""
+    if values is None or isinstance(values, (str, bytes, dict)):
+        raise DataError(f"{name} is a {type(values).__name__}: pass an array of numbers")
     try:
         arr = np.asarray(values)
-    except (TypeError, ValueError) as exc:  # ragged lists and the like
+    except _CONVERSION_ERRORS as exc:  # ragged lists and the like
         raise DataError(f"{name} is not an array of numbers ({exc}): pass a 1-D array of reals") from None
     if arr.dtype.kind == "c":
         raise DataError(f"{name} is complex: pass the real-valued signal (e.g. {name}.real)")
     if arr.dtype.kind == "O":  # e.g. a list mixing numbers and None, or Decimals
         try:
             arr = arr.astype(np.float64)
+        except OverflowError:
+            raise DataError(f"{name} holds an integer too large for a float (above 1.8e308): give values in range") from None
         except (TypeError, ValueError):
             raise DataError(f"{name} holds values that are not numbers: convert it to a float array first") from None
     elif arr.dtype.kind not in "biuf":  # text, dates, durations, records
@@ -32,11 +54,20 @@ def as_signal(values: Any, name: str) -> NDArray[np.float64]:
 
 
 def as_coefficients(values: Any, name: str, *, allow_empty: bool = False) -> list[float]:
-    """A list of floats from a scalar or 1-D sequence of model coefficients."""
+    """A list of floats from a scalar or 1-D sequence of model coefficients (real numbers only:
+    no text, booleans or complex numbers)."""
+    if isinstance(values, (str, bytes, dict)) or values is None:
+        raise ModelError(f"{name} must be a list of real numbers, got {shown(values)}")
     try:
-        arr = np.atleast_1d(np.asarray(values, dtype=np.float64))
-    except (TypeError, ValueError):
-        raise ModelError(f"{name} must be a list of real numbers, got {values!r}") from None
+        raw = np.asarray(values)
+    except _CONVERSION_ERRORS:
+        raise ModelError(f"{name} must be a flat list of real numbers, got {shown(values)}") from None
+    if raw.dtype.kind not in "iuf" and not (raw.dtype.kind == "O" and all(is_real(v) for v in raw.ravel())):
+        raise ModelError(f"{name} must be a list of real numbers, got {shown(values)} (dtype {raw.dtype})")
+    try:
+        arr = np.atleast_1d(raw.astype(np.float64))
+    except _CONVERSION_ERRORS:
+        raise ModelError(f"{name} must be a list of real numbers within the float range, got {shown(values)}") from None
     if arr.ndim != 1:
         raise ModelError(f"{name} must be a flat list of coefficients, got shape {arr.shape}")
     if arr.size == 0 and not allow_empty:
@@ -45,11 +76,80 @@ def as_coefficients(values: Any, name: str, *, allow_empty: bool = False) -> lis
 
 
 def as_scalar(value: Any, name: str, error: type[Exception] = ModelError) -> float:
-    """A real scalar parameter."""
+    """A real scalar parameter (an int or float, Python or NumPy; not text or a bool)."""
+    if not is_real(value):
+        raise error(f"{name} must be a real number, got {shown(value)} ({type(value).__name__})")
     try:
         return float(value)
-    except (TypeError, ValueError):
-        raise error(f"{name} must be a real number, got {value!r}") from None
+    except OverflowError:
+        raise error(f"{name} = {shown(value)} is too large for a float (above 1.8e308): give a value in range") from None
+
+
+def check_real(
+    value: Any,
+    name: str,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    error: type[Exception] = DataError,
+) -> float:
+    """A finite real number inside [low, high] (an end is excluded when ``*_open``), as a float."""
+    x = as_scalar(value, name, error)
+    below = low is not None and (x <= low if low_open else x < low)
+    above = high is not None and (x >= high if high_open else x > high)
+    if not np.isfinite(x) or below or above:
+        lo = "-inf" if low is None else f"{low:g}"
+        hi = "inf" if high is None else f"{high:g}"
+        span = f"{'(' if low is None or low_open else '['}{lo}, {hi}{')' if high is None or high_open else ']'}"
+        raise error(f"{name} = {shown(value)}: give a finite number in {span}")
+    return x
+
+
+def check_int(value: Any, name: str, least: int = 0, most: int | None = None, error: type[Exception] = DataError) -> int:
+    """A whole number (int or NumPy integer, not bool) in [least, most], as an int."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least or (most is not None and value > most):
+        upto = f" and <= {most}" if most is not None else ""
+        raise error(f"{name} = {shown(value)}: give a whole number >= {least}{upto}")
+    return int(value)
+
+
+def check_flag(value: Any, name: str, error: type[Exception] = DataError) -> bool:
+    """True or False (also NumPy's bool), not a truthy string or number."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise error(f"{name} must be True or False, got {shown(value)}")
+    return bool(value)
+
+
+def check_choice(value: Any, name: str, choices: tuple[str, ...], error: type[Exception] = DataError) -> str:
+    """One of the strings ``choices``."""
+    if not isinstance(value, str) or value not in choices:
+        raise error(f"{name} = {shown(value)}: use {' or '.join(repr(c) for c in choices)}")
+    return value
+
+
+NOISE_RANGE = (1e-100, 1e100)  # a noise std whose square neither underflows to 0 nor overflows
+
+
+def check_noise_std(value: Any, name: str = "noise_std") -> float:
+    """A noise standard deviation: a positive finite number (within 1e-100..1e100, so that its
+    square, which divides the costs, is a normal float)."""
+    return check_real(value, name, low=NOISE_RANGE[0], high=NOISE_RANGE[1])
+
+
+def check_seed(value: Any, name: str = "seed") -> int:
+    """A random seed: a whole number >= 0."""
+    return check_int(value, name, 0)
+
+
+def check_model(value: Any, name: str = "model") -> Any:
+    """A CascadeModel or SandwichModel (the models layer sits above: imported when called)."""
+    from .models import CascadeModel, SandwichModel
+
+    if not isinstance(value, (CascadeModel, SandwichModel)):
+        raise DataError(f"{name} must be a CascadeModel or SandwichModel, got {type(value).__name__}")
+    return value
 
 
 def frozen(values: list[float]) -> NDArray[np.float64]:
@@ -74,15 +174,13 @@ def check_instance(value: Any, cls: type, name: str, error: type[Exception] = Mo
 
 def check_whole(value: Any, name: str, least: int) -> int:
     """A whole number >= ``least`` (an order, a degree), as an int."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-        raise DataError(f"{name} = {value!r}: give a whole number >= {least}")
-    return int(value)
+    return check_int(value, name, least)
 
 
 def check_warmup(warmup: Any, n: int) -> int:
     """The samples left out at the start of a record of ``n``: a whole number, 0 <= warmup < n."""
     if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or not 0 <= warmup < n:
-        raise DataError(f"warmup = {warmup!r}: give a whole number of samples, 0 <= warmup < {n} (the record length)")
+        raise DataError(f"warmup = {shown(warmup)}: give a whole number of samples, 0 <= warmup < {n} (the record length)")
     return int(warmup)
 
 

@@ -185,7 +185,7 @@ def test_malformed_records_fail_in_their_slots_without_a_cluster(monkeypatch):
 def test_missing_dask_says_how_to_install(records, monkeypatch):
     monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
     with pytest.raises(BacklashIdError, match=r"pip install 'backlashid\[dask\]'"):
-        fit_many(records[:2])
+        fit_many(records[:2], scheduler="dask")  # (small work runs in process without Dask)
 
 
 def test_errors_cross_the_process_boundary_with_their_attributes(monkeypatch):
@@ -229,3 +229,94 @@ def test_diagnose_many_matches_one_by_one(client):
         assert report.noise_std == want.noise_std
     with pytest.raises(DataError, match="unknown option"):
         diagnose_many(cases[:1], client=client, noise=0.1)
+
+
+# -- nothing lost: foreign exceptions, dead workers (issue 21) ------------------------------------
+
+
+class Raises:
+    """An input whose conversion raises an exception that is no BacklashIdError (a bug's)."""
+
+    def __len__(self):
+        return 400
+
+    def __array__(self, *args, **kwargs):
+        raise ZeroDivisionError("a foreign error of this record")
+
+
+class Dies:
+    """An input that ends the worker process converting it (as a crash of the core would)."""
+
+    def __init__(self):
+        self.parent = os.getpid()
+
+    def __len__(self):
+        return 400
+
+    def __array__(self, *args, **kwargs):
+        if os.getpid() != self.parent:
+            os._exit(1)
+        raise AssertionError("converted in the calling process, not on a worker")
+
+
+FOREIGN_SLOT, DEAD_SLOT = 3, 11
+
+
+def test_foreign_exception_and_dead_worker_keep_every_other_result(records, expected):
+    """One record raises ZeroDivisionError, one kills its worker process: every other record's
+    result comes back, bit for bit; the first holds its exception, the second an error naming
+    its index (its batch was retried record by record, then the record alone again)."""
+    datasets = list(records[:40])
+    datasets[FOREIGN_SLOT] = (Raises(), records[FOREIGN_SLOT][1])
+    datasets[DEAD_SLOT] = (Dies(), records[DEAD_SLOT][1])
+    results = fit_many(datasets, n_workers=2, progress=False, **OPTIONS)
+    assert len(results) == 40
+    for i, (got, want) in enumerate(zip(results, expected[:40])):
+        if i == FOREIGN_SLOT:
+            assert type(got) is ZeroDivisionError and "foreign error" in str(got)
+        elif i == DEAD_SLOT:
+            assert isinstance(got, BacklashIdError) and f"record {DEAD_SLOT}" in str(got), got
+        else:
+            assert_same(got, want)
+
+
+def test_foreign_exception_stays_in_its_slot_inline(records, expected, monkeypatch):
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(distributed, "LocalCluster", no_cluster)
+    datasets = list(records[:6])
+    datasets[2] = (Raises(), records[2][1])
+    results = fit_many(datasets, progress=False, scheduler="inline", **OPTIONS)
+    assert type(results[2]) is ZeroDivisionError
+    for i in (0, 1, 3, 4, 5):
+        assert_same(results[i], expected[i])
+
+
+def test_small_work_runs_in_process_and_large_on_the_cluster(records, expected, monkeypatch):
+    """scheduler="auto": below the threshold of samples no cluster is started (same results);
+    at or above it, or with scheduler="dask", the embedded cluster runs it."""
+    started = []
+
+    class Counted(distributed.LocalCluster):
+        def __init__(self, *args, **kwargs):
+            started.append(kwargs)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(distributed, "LocalCluster", Counted)
+    monkeypatch.setattr(parallel, "_cores", lambda: 2)
+    results = fit_many(records[:30], progress=False, **OPTIONS)  # about 10,000 samples
+    assert not started
+    for got, want in zip(results, expected[:30]):
+        assert_same(got, want)
+    monkeypatch.setitem(parallel.INLINE_SAMPLES, "fit", 5_000)
+    results = fit_many(records[:30], progress=False, **OPTIONS)
+    assert len(started) == 1
+    for got, want in zip(results, expected[:30]):
+        assert_same(got, want)
+    fit_many(records[:2], progress=False, scheduler="dask", **OPTIONS)
+    assert len(started) == 2
+    with pytest.raises(DataError, match="scheduler = 'cluster'"):
+        fit_many(records[:2], scheduler="cluster")
+    with pytest.raises(DataError, match="inline"):
+        fit_many(records[:2], scheduler="inline", n_workers=2)

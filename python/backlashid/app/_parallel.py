@@ -5,10 +5,13 @@ every record on Dask distributed: an embedded ``LocalCluster`` (one single-threa
 process per core) unless a scheduler ``address`` or a ``client`` is given. Consecutive records
 are grouped into up to 8 tasks per worker thread (a task costs the scheduler about as much as a
 small fit), and scattered (they go from the client straight to the workers, not through the
-scheduler); results come back in input order. A record the
-identification rejects comes back as the :class:`~backlashid.BacklashIdError` it raised, in
-its slot, so one bad record does not lose the fleet's results. The fits are deterministic, so
-each result equals (bit for bit) the one of a call on that record alone.
+scheduler); results come back in input order. Work too small to pay for starting a cluster
+runs in this process instead (``scheduler="auto"``; ``"inline"`` / ``"dask"`` force either).
+Whatever a record's fit raises (the :class:`~backlashid.BacklashIdError` of a record the
+identification rejects, or any other exception) comes back in its slot, so one bad record
+does not lose the fleet's results; a batch whose worker process died is retried record by
+record, and a record that still fails holds a BacklashIdError naming its index. The fits are
+deterministic, so each result equals (bit for bit) the one of a call on that record alone.
 
 :func:`diagnose_many` does the same for :func:`~backlashid.diagnose` over many (model,
 estimation, validation) cases.
@@ -21,18 +24,21 @@ from __future__ import annotations
 import inspect
 import logging
 import os
+import pickle
 import uuid
 from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
 from typing import Any, Callable, Literal
 
 from .._docstrings import fill
+from .._validation import check_choice
 from ..errors import BacklashIdError, DataError
 from ..identify import FitResult, fit_cascade, fit_sandwich
 
 __all__ = ["fit_many", "diagnose_many"]
 
 Kind = Literal["cascade", "sandwich"]
+Where = Literal["auto", "dask", "inline"]
 _FITS: dict[str, Callable[..., FitResult]] = {"cascade": fit_cascade, "sandwich": fit_sandwich}
 _CLUSTER_DOC = """client : distributed.Client, optional
     A client of a running cluster (used, not closed).
@@ -41,7 +47,13 @@ address : str, optional
 n_workers : int, optional
     Worker processes of the embedded cluster [default: one per core, at most one per record].
 progress : bool, default True
-    Show a progress bar (tqdm) on stderr."""
+    Show a progress bar (tqdm) on stderr.
+scheduler : {"auto", "dask", "inline"}, default "auto"
+    ``"inline"`` runs every record one after the other in this process (no Dask needed);
+    ``"dask"`` on Dask as above; ``"auto"`` on Dask when ``client``, ``address`` or
+    ``n_workers`` is given, else in this process when the machine has one core or the work is
+    too small to pay for starting a cluster (fewer than 300,000 samples in all for fits,
+    30,000 for diagnoses; starting the embedded cluster costs about 7 s), else on Dask."""
 _INSTALL = "pip install 'backlashid[dask]'"
 _TASKS_PER_THREAD = 8  # records are grouped into at most this many tasks per worker thread
 
@@ -80,18 +92,31 @@ def _record(item: Any, index: int) -> tuple[Any, Any]:
 # -- the tasks ------------------------------------------------------------------------------------
 
 
-def _fit_one(record: tuple[Any, Any], kind: str, options: dict[str, Any]) -> FitResult | BacklashIdError:
-    """One fit on a worker; an identification error is returned, not raised, so that it
-    reaches the caller in its dataset's slot (results and errors pickle)."""
+def _portable(exc: Exception) -> Exception:
+    """``exc`` if it survives pickling (the trip back from a worker), else a RuntimeError
+    holding its type and message."""
+    try:
+        pickle.loads(pickle.dumps(exc))
+    except Exception:
+        return RuntimeError(f"{type(exc).__name__}: {exc}")
+    return exc
+
+
+def _fit_one(record: tuple[Any, Any], kind: str, options: dict[str, Any]) -> Any:
+    """One fit on a worker. Whatever it raises is returned, not raised, so that it reaches the
+    caller in its dataset's slot and the other records' results are kept (results and
+    errors pickle)."""
     u, y = record
     try:
         return _FITS[kind](u, y, **options)
     except BacklashIdError as exc:
         return exc
+    except Exception as exc:  # a bug or a foreign error (e.g. OverflowError): this record's only
+        return _portable(exc)
 
 
 def _diagnose_one(case: tuple[Any, Any, Any], options: dict[str, Any]) -> Any:
-    """One diagnosis on a worker; an error of the diagnosis is returned, as in :func:`_fit_one`."""
+    """One diagnosis on a worker; what it raises is returned, as in :func:`_fit_one`."""
     from ..diagnosis import diagnose
 
     model, estimation, validation = case
@@ -99,6 +124,8 @@ def _diagnose_one(case: tuple[Any, Any, Any], options: dict[str, Any]) -> Any:
         return diagnose(model, estimation, validation, **options)
     except BacklashIdError as exc:
         return exc
+    except Exception as exc:
+        return _portable(exc)
 
 
 def _batch(records: list[Any], job: str, options: dict[str, Any]) -> list[Any]:
@@ -129,8 +156,9 @@ def fit_many(
     address: str | None = None,
     n_workers: int | None = None,
     progress: bool = True,
+    scheduler: Where = "auto",
     **fit_options: Any,
-) -> list[FitResult | BacklashIdError]:
+) -> list[FitResult | Exception]:
     """Identify every record of ``datasets`` on Dask distributed; results in input order.
 
     Where it runs: ``client`` (used, not closed); else the scheduler at ``address``; else an
@@ -152,19 +180,20 @@ def fit_many(
 
     Returns
     -------
-    list of FitResult or BacklashIdError
-        One per record, in input order. A record whose fit raises a
-        :class:`~backlashid.BacklashIdError` (bad data, not identifiable, not converged) holds
-        that exception instead of a :class:`~backlashid.FitResult`; other exceptions (bugs)
-        are raised.
+    list of FitResult or Exception
+        One per record, in input order. A record whose fit raises holds that exception
+        instead of a :class:`~backlashid.FitResult`: a :class:`~backlashid.BacklashIdError`
+        (bad data, not identifiable, not converged), any other exception it raised (a bug,
+        reported for that record only), or a BacklashIdError naming the record when its worker
+        process died on it twice.
 
     Raises
     ------
     DataError
-        If ``kind`` or an option is unknown, or ``client``, ``address`` and ``n_workers``
-        contradict each other.
+        If ``kind``, ``scheduler`` or an option is unknown, or ``client``, ``address``,
+        ``n_workers`` and ``scheduler`` contradict each other.
     BacklashIdError
-        If Dask distributed is not installed (the ``dask`` extra).
+        If the work runs on Dask and Dask distributed is not installed (the ``dask`` extra).
 
     Examples
     --------
@@ -181,17 +210,18 @@ def fit_many(
     if fit is None:
         raise DataError(f"kind = {kind!r}: use 'cascade' (fit_cascade) or 'sandwich' (fit_sandwich)")
     _check_options(fit, fit_options)
-    _check_where(client, address, n_workers)
-    return _run_all(datasets, _record, kind, fit_options, client, address, n_workers, progress)
+    _check_where(client, address, n_workers, scheduler)
+    return _run_all(datasets, _record, kind, fit_options, client, address, n_workers, progress, scheduler)
 
 
 def _run_all(
     items: Sequence[Any], parse: Callable[[Any, int], Any], job: str, options: dict[str, Any],
-    client: Any, address: str | None, n_workers: int | None, progress: bool,
+    client: Any, address: str | None, n_workers: int | None, progress: bool, scheduler: str = "auto",
 ) -> list[Any]:
     """Parse every item (a malformed one gets its DataError in its slot) and run ``job`` on
-    the others, on the given client, the scheduler at ``address`` or an embedded cluster."""
-    distributed = _distributed()
+    the others: in this process when ``scheduler`` says so (or, for "auto", when the work is
+    too small to pay for starting a cluster), else on the given client, the scheduler at
+    ``address`` or an embedded cluster."""
     items = list(items)
     results: list[Any] = [None] * len(items)
     todo: list[tuple[int, Any]] = []
@@ -202,13 +232,65 @@ def _run_all(
             results[i] = exc
     if not todo:
         return results
+    if _inline(scheduler, job, todo, client, address, n_workers):
+        _run_inline(todo, job, options, progress, results)
+        return results
+    distributed = _distributed()
     with ExitStack() as stack:
         client = _client(stack, distributed, client, address, n_workers, len(todo))
         _run(distributed, client, todo, job, options, progress, results)
     return results
 
 
-def _check_where(client: Any, address: str | None, n_workers: int | None) -> None:
+# In-process below this much work, when no cluster is given: starting the embedded cluster
+# costs about 7 s (measured: the README's 200 x 400-sample fleet took 10.6-15.3 s on the
+# cluster, 3.2-4.0 s in a plain loop), more than a two-core machine saves on this little work.
+# A cascade fit of the default options costs about 45 us per sample; a diagnosis far more.
+INLINE_SAMPLES = {"fit": 300_000, "diagnose": 30_000}
+
+
+def _samples(job: str, record: Any) -> int:
+    """Samples of one parsed record (its u, or the estimation and validation inputs)."""
+    try:
+        if job == "diagnose":
+            _, estimation, validation = record
+            return sum(len(part[0]) for part in (estimation, validation))
+        return len(record[0])
+    except Exception:  # not sized: the fit's own check will say so, in the record's slot
+        return 0
+
+
+def _inline(scheduler: str, job: str, todo: list[tuple[int, Any]], client: Any, address: str | None, n_workers: int | None) -> bool:
+    """Whether to run in this process: asked for ("inline"), or "auto" with no cluster given
+    or sized and either one core or too little work to pay for starting a cluster."""
+    if scheduler != "auto":
+        return scheduler == "inline"
+    if client is not None or address is not None or n_workers is not None:
+        return False
+    if _cores() < 2:
+        return True
+    total = sum(_samples(job, record) for _, record in todo)
+    return total < INLINE_SAMPLES["diagnose" if job == "diagnose" else "fit"]
+
+
+def _run_inline(todo: list[tuple[int, Any]], job: str, options: dict[str, Any], progress: bool, results: list[Any]) -> None:
+    """Every record one after the other in this process (the same task function as on a worker)."""
+    label = "diagnose" if job == "diagnose" else f"fit_{job}"
+    bar = _progress_bar(label, progress, len(todo))
+    try:
+        for i, record in todo:
+            results[i] = _batch([record], job, options)[0]
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _check_where(client: Any, address: str | None, n_workers: int | None, scheduler: Any) -> None:
+    check_choice(scheduler, "scheduler", ("auto", "dask", "inline"))
+    if scheduler == "inline" and (client is not None or address is not None or n_workers is not None):
+        raise DataError("scheduler='inline' runs in this process: leave out client=, address= and n_workers=")
     if client is not None and address is not None:
         raise DataError("give client= or address=, not both")
     if n_workers is not None:
@@ -232,6 +314,9 @@ def _client(stack: ExitStack, distributed: Any, client: Any, address: str | None
             processes=True,
             dashboard_address=None,
             silence_logs=logging.ERROR,
+            # a task whose worker dies is tried on one more worker, then reported lost (and
+            # retried here, record by record: _run): not four workers killed per bad record
+            scheduler_kwargs={"allowed_failures": 1},
         )
     )
     return stack.enter_context(distributed.Client(cluster, set_as_default=False))
@@ -257,6 +342,7 @@ def diagnose_many(
     address: str | None = None,
     n_workers: int | None = None,
     progress: bool = True,
+    scheduler: Where = "auto",
     **options: Any,
 ) -> list[Any]:
     """Diagnose every case on Dask distributed, as :func:`fit_many` fits.
@@ -276,18 +362,17 @@ def diagnose_many(
 
     Returns
     -------
-    list of DiagnosisReport or BacklashIdError
-        One per case, in input order; a case whose diagnosis raises a
-        :class:`~backlashid.BacklashIdError` holds that exception instead of a
-        :class:`~backlashid.DiagnosisReport`.
+    list of DiagnosisReport or Exception
+        One per case, in input order; a case whose diagnosis raises holds that exception
+        instead of a :class:`~backlashid.DiagnosisReport` (as in :func:`fit_many`).
 
     Raises
     ------
     DataError
-        If an option is unknown, or ``client``, ``address`` and ``n_workers`` contradict each
-        other.
+        If ``scheduler`` or an option is unknown, or ``client``, ``address``, ``n_workers``
+        and ``scheduler`` contradict each other.
     BacklashIdError
-        If Dask distributed is not installed (the ``dask`` extra).
+        If the work runs on Dask and Dask distributed is not installed (the ``dask`` extra).
 
     Examples
     --------
@@ -301,8 +386,8 @@ def diagnose_many(
     unknown = sorted(set(options) - set(allowed))
     if unknown:
         raise DataError(f"unknown option(s) {', '.join(unknown)} for diagnose: use {', '.join(allowed)}")
-    _check_where(client, address, n_workers)
-    return _run_all(cases, _case, "diagnose", options, client, address, n_workers, progress)
+    _check_where(client, address, n_workers, scheduler)
+    return _run_all(cases, _case, "diagnose", options, client, address, n_workers, progress, scheduler)
 
 
 def _run(
@@ -315,7 +400,12 @@ def _run(
     results: list[Any],
 ) -> None:
     """Run ``job`` ("cascade" or "sandwich" fits, or "diagnose") on every record of ``todo``
-    in batches, writing each outcome into its slot of ``results``."""
+    in batches, writing each outcome into its slot of ``results``.
+
+    A batch that does not come back (its worker died, or the worker holding its scattered
+    records did) is retried record by record, one at a time, each record sent with its task
+    and with Dask's ``retries``; a record that still fails gets a
+    :class:`~backlashid.BacklashIdError` naming its index in its slot."""
     label = "diagnose" if job == "diagnose" else f"fit_{job}"
     threads = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
     threads = max(threads, 4)  # a cluster still scaling up reports few workers
@@ -323,45 +413,100 @@ def _run(
     bounds = [len(todo) * k // n_tasks for k in range(n_tasks + 1)]
     batches = [todo[lo:hi] for lo, hi in zip(bounds, bounds[1:])]
     run = uuid.uuid4().hex[:8]
-    # One scatter: the records go from here straight to the workers (spread over them), and
-    # each task runs where its records are.
-    data = client.scatter([[record for _, record in batch] for batch in batches], hash=False)
-    futures = client.map(
-        _batch, data, job=job, options=options, pure=False,
-        key=[f"backlashid-{label}-{batch[0][0]}-{batch[-1][0]}-{run}" for batch in batches],
-    )
-    slots = {future.key: [i for i, _ in batch] for future, batch in zip(futures, batches)}
+    bar = _progress_bar(label, progress, len(todo))
+    try:
+        # One scatter: the records go from here straight to the workers (spread over them), and
+        # each task runs where its records are.
+        data = client.scatter([[record for _, record in batch] for batch in batches], hash=False)
+        futures = client.map(
+            _batch, data, job=job, options=options, pure=False,
+            key=[f"backlashid-{label}-{batch[0][0]}-{batch[-1][0]}-{run}" for batch in batches],
+        )
+        del data  # the tasks hold the records now; each is released when its task is done
+        if progress and bar is None:  # no tqdm: Dask's own text bar; it returns when everything is done
+            distributed.progress(futures)
+        failed = _collect(distributed, client, futures, batches, results, bar)
+        # The records of lost batches again, one at a time, each sent with its task (not
+        # scattered) and retried by Dask: a record that kills its worker takes no other
+        # record's task with it (workers die rarely: the fleet's speed matters less here). A
+        # record lost again is reported in its slot, with its index.
+        for i, record in (item for batch in failed for item in batch):
+            (future,) = client.map(
+                _batch, [[record]], job=job, options=options, pure=False, retries=_RETRIES,
+                key=[f"backlashid-{label}-alone-{i}-{run}"],
+            )
+            for _, reason in _collect(distributed, client, [future], [[(i, record)]], results, bar, why=True):
+                results[i] = BacklashIdError(
+                    f"record {i}: its worker process died or its task was lost, also when run again alone "
+                    f"({reason}); the record may crash the worker (out of memory?): run it alone to see"
+                )
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+_RETRIES = 1  # Dask retries of a record run alone after its batch was lost (a lost task's own retry)
+
+
+def _collect(
+    distributed: Any, client: Any, futures: list[Any], batches: list[Any], results: list[Any], bar: Any, why: bool = False,
+) -> list[Any]:
+    """Wait for ``futures`` (one per batch), write each finished batch's outcomes into
+    ``results`` and return the batches that did not finish (with the reason when ``why``)."""
+    slots = {future.key: batch for future, batch in zip(futures, batches)}
     remaining = set(slots)
-    del data  # the tasks hold the records now; each is released when its task is done
-    bar = _progress_bar(distributed, futures, label, progress, len(todo))
+    failed: list[Any] = []
     try:
         # Results are fetched in batches of what has finished (one round trip per batch).
         for done in distributed.as_completed(futures, loop=client.loop).batches():
+            finished = [f for f in done if f.status == "finished"]
             for future in done:
-                if future.status == "error":
-                    exc = future.exception()
-                    if hasattr(exc, "add_note"):
-                        exc.add_note(f"(in {label}, one of the records {slots[future.key]})")
-                    raise exc
-            for future, payloads in zip(done, client.gather(done)):
-                for i, outcome in zip(slots[future.key], payloads):
+                if future.status != "finished":  # erred (KilledWorker) or cancelled (data lost)
+                    remaining.discard(future.key)
+                    failed.append((slots[future.key], _reason(future)) if why else slots[future.key])
+            for future, payloads in _gathered(client, finished, failed, slots, why):
+                for (i, _), outcome in zip(slots[future.key], payloads):
                     results[i] = outcome
                 remaining.discard(future.key)
                 if bar is not None:
                     bar.update(len(payloads))
     finally:
-        if bar is not None:
-            bar.close()
-        if remaining:  # an error, or an interrupt: stop what is left
+        if remaining:  # an interrupt: stop what is left
             client.cancel([f for f in futures if f.key in remaining])
+    return failed
 
 
-def _progress_bar(distributed: Any, futures: list[Any], label: str, progress: bool, total: int) -> Any:
+def _gathered(client: Any, finished: list[Any], failed: list[Any], slots: dict[Any, Any], why: bool) -> list[tuple[Any, Any]]:
+    """(future, payloads) of the finished futures, in one round trip; a future whose result is
+    lost before it is fetched goes to ``failed`` instead."""
+    if not finished:
+        return []
+    try:
+        return list(zip(finished, client.gather(finished)))
+    except Exception:  # one was lost meanwhile: fetch them one by one
+        out = []
+        for future in finished:
+            try:
+                out.append((future, future.result()))
+            except Exception as exc:
+                failed.append((slots[future.key], f"{type(exc).__name__}: {exc}") if why else slots[future.key])
+        return out
+
+
+def _reason(future: Any) -> str:
+    try:
+        exc = future.exception(timeout=5)
+    except Exception as lost:  # cancelled: no exception to fetch
+        exc = lost
+    return f"{type(exc).__name__}: {exc}" if exc is not None else future.status
+
+
+def _progress_bar(label: str, progress: bool, total: int) -> Any:
+    """A tqdm bar on stderr, or None (no progress asked, or tqdm missing)."""
     if not progress:
         return None
     try:
         from tqdm.auto import tqdm
-    except ImportError:  # Dask's own text bar; it returns when everything is done
-        distributed.progress(futures)
+    except ImportError:
         return None
     return tqdm(total=total, desc=label, unit="record")

@@ -15,6 +15,7 @@ from typing import Union
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import check_int, check_model, check_real, check_seed
 from ..errors import DataError
 from ..models import CascadeModel, GeneralBacklash, LinearBlock, SandwichModel
 
@@ -62,6 +63,8 @@ def shared_data_folder(start: str | Path | None = None) -> Path:
         if not folder.is_dir():
             raise DataError(f"{DATA_VARIABLE}={folder} is not a folder: point it at the folder holding the benchmark records")
         return folder
+    if start is not None and not isinstance(start, (str, os.PathLike)):
+        raise DataError(f"start = {start!r}: give a folder (str or Path) to search upwards from, or None for the working directory")
     here = Path(start if start is not None else Path.cwd()).resolve()
     for parent in [here, *here.parents]:
         if (parent / "shared" / "data").is_dir():
@@ -145,6 +148,9 @@ class ExampleData:
     model: Union[CascadeModel, SandwichModel]
 
 
+_MAX_SAMPLES = 2**40  # n of example_data: beyond any memory; a size check before allocating
+
+
 def example_data(
     model: CascadeModel | SandwichModel,
     n: int = 1500,
@@ -180,7 +186,8 @@ def example_data(
     Raises
     ------
     DataError
-        If n < 1 or snr is not positive.
+        If ``model`` is not a model, n is not a whole number >= 1, snr is not a positive number
+        (or None), amplitude is not a finite number >= 0 or seed not a whole number >= 0.
 
     Examples
     --------
@@ -188,11 +195,12 @@ def example_data(
     >>> d.u.shape, round(float(np.std(d.clean) / d.noise_std), 6)
     ((1500,), 25.0)
     """
-    if n < 1:
-        raise DataError(f"n = {n}: ask for at least one sample")
-    if snr is not None and not snr > 0:
-        raise DataError(f"snr = {snr}: give a positive signal-to-noise ratio, or None for clean data")
-    rng = np.random.default_rng(seed)
+    check_model(model)
+    n = check_int(n, "n", 1, _MAX_SAMPLES)
+    if snr is not None:
+        snr = check_real(snr, "snr", low=0.0, low_open=True)
+    amplitude = check_real(amplitude, "amplitude", low=0.0)
+    rng = np.random.default_rng(check_seed(seed))
     u = rng.uniform(-amplitude, amplitude, n)
     clean = model.simulate(u)
     noise_std = float(np.std(clean) / snr) if snr is not None else 0.0

@@ -56,7 +56,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._numerics import lstsq, minimize_bounded
-from .._validation import check_signals
+from .._validation import check_flag, check_noise_std, check_seed, check_signals, shown
 from ..errors import DataError, ModelError
 from ..models import CascadeModel, CascadeState, LinearBlock
 from ._report import Candidate, DiagnosisDetails, DiagnosisReport
@@ -468,19 +468,23 @@ def diagnose(
     else:
         if isinstance(candidates, str):
             candidates = (candidates,)
-        unknown = [c for c in candidates if c not in EFFECTS]
+        if not isinstance(candidates, (list, tuple)):
+            raise DataError(f"candidates = {shown(candidates)}: give a list of effect names from {', '.join(EFFECTS)}")
+        unknown = [c for c in candidates if not isinstance(c, str) or c not in EFFECTS]
         if unknown or not candidates:
             raise DataError(f"unknown candidate effects {unknown}: choose from {', '.join(EFFECTS)}")
     candidates = tuple(dict.fromkeys(candidates))
-    if initial_state not in INITIAL_STATES:
-        raise DataError(f"initial_state = {initial_state!r}: choose one of {', '.join(map(repr, INITIAL_STATES))}")
-    if noise_std is not None and not (np.isfinite(noise_std) and noise_std > 0):
-        raise DataError(f"noise_std = {noise_std!r}: give the noise standard deviation (> 0) or None to estimate it")
+    if not isinstance(initial_state, str) or initial_state not in INITIAL_STATES:
+        raise DataError(f"initial_state = {shown(initial_state)}: choose one of {', '.join(map(repr, INITIAL_STATES))}")
+    if noise_std is not None:
+        check_noise_std(noise_std, "noise_std (the noise standard deviation, or None to estimate it)")
+    check_seed(seed)
+    check_flag(nominal_converged, "nominal_converged")
     n_min = min(u_e.size, u_v.size)
     warmup_given = warmup is not None
     if warmup is None:
         warmup = default_warmup(model, n_min)
-    elif not isinstance(warmup, (int, np.integer)) or not 0 <= warmup <= n_min - 200:
+    elif isinstance(warmup, (bool, np.bool_)) or not isinstance(warmup, (int, np.integer)) or not 0 <= warmup <= n_min - 200:
         raise DataError(f"warmup = {warmup!r}: give a whole number >= 0 that leaves at least 200 samples of each record")
     warmup = int(warmup)
     if n_min - warmup < 200:

@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._docstrings import AXES, fill
-from .._validation import identification_record
+from .._validation import check_choice, check_flag, check_int, check_real, check_seed, identification_record, is_real, shown
 from ..errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
 from ..models import Model
 from . import _records
@@ -44,6 +44,7 @@ Switching = Literal["measured", "simulated"]
 # local minimum.
 RESTARTS = 4
 RESTARTS_UP_TO = 20_000
+MAX_RESTARTS = 100  # more seeded restarts than this are refused (each costs a fit)
 # Coarse to fine (``coarse``): the iterations and LM candidates on a segment of
 # max(COARSE_MIN, COARSE_PER_PARAMETER p) samples, on records COARSE_RECORDS times as long.
 # Over 20 seeds each of Examples 1 and 2 at N = 5e4 and 1e5 it ends within 0.02 standard
@@ -664,6 +665,41 @@ def _search(
     return run, k, refined
 
 
+def _start(value: Any, name: str) -> None:
+    """A start (m_R1, c_L, c_R): three finite numbers."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != 3:
+        raise DataError(f"{name} = {shown(value)}: give a start (m_R1, c_L, c_R) of three numbers")
+    for symbol, v in zip(("m_R1", "c_L", "c_R"), value):
+        check_real(v, f"{name}'s {symbol}")
+
+
+def _check_options(arguments: dict[str, Any]) -> None:
+    """The types and ranges of the shared options of the fits (issue 21: a DataError naming
+    the option, never a Python internal from deep inside the search)."""
+    a = arguments
+    check_choice(a["initial_state"], "initial_state", ("rest", "estimate"))
+    check_choice(a["switching"], "switching", ("measured", "simulated"))
+    for name in ("refine", "paper"):
+        check_flag(a[name], name)
+    if not is_real(a["step"]):
+        raise DataError(f"step = {shown(a['step'])}: give a step factor in (0, 1]")
+    check_int(a["max_iter"], "max_iter", 0)
+    check_real(a["tol"], "tol", low=0.0)
+    check_real(a["min_moving"], "min_moving", low=0.0, high=1.0)
+    check_real(a["perturbation"], "perturbation", low=0.0)
+    check_seed(a["seed"])
+    if a["restarts"] is not None:
+        check_int(a["restarts"], "restarts", 0, MAX_RESTARTS)
+    if a["coarse"] is not None:
+        check_int(a["coarse"], "coarse", 0)
+    _start(a["initial"], "initial")
+    if a["starts"] is not None:
+        if isinstance(a["starts"], (str, bytes)) or not isinstance(a["starts"], Sequence):
+            raise DataError(f"starts = {shown(a['starts'])}: give a list of starts (m_R1, c_L, c_R)")
+        for k, start in enumerate(a["starts"]):
+            _start(start, f"starts[{k}]")
+
+
 def _fit(
     structure: Structure,
     u: ArrayLike,
@@ -688,6 +724,7 @@ def _fit(
     time_budget: float | None = None,
 ) -> FitResult:
     arguments = dict(locals())  # the call, for a fit of lower degree (_lower_degree_fallback)
+    _check_options(arguments)
     if initial_state not in ("rest", "estimate"):
         raise DataError(f"initial_state = {initial_state!r}: use 'rest' or 'estimate'")
     if initial_state == "estimate" and (paper or not refine):

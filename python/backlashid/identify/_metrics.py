@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docstrings import AXES, fill
-from .._validation import as_signal, check_warmup, check_whole, one_record
+from .._validation import as_signal, check_finite, check_model, check_warmup, check_whole, one_record
 from ..errors import DataError
 from ..models import CascadeModel, Model, SandwichModel
 from ._state import simulate_from_samples
@@ -165,7 +165,8 @@ def one_step_prediction(model: Model, u: ArrayLike, y: ArrayLike) -> NDArray[np.
     True
     """
     u_arr, y_arr = one_record(u, y, flatten=True)
-    past = lambda s, k: np.concatenate([np.zeros(k), s[:-k]]) if k else s  # noqa: E731
+    # s delayed by k samples, zeros before the record (also for lags longer than the record)
+    past = lambda s, k: np.concatenate([np.zeros(min(k, s.size)), s[: max(s.size - k, 0)]]) if k else s  # noqa: E731
     if isinstance(model, CascadeModel):
         x = model.linear.simulate(u_arr)
         left, right = model.backlash.left(x), model.backlash.right(x)
@@ -300,7 +301,8 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
     Raises
     ------
     DataError
-        If the record cannot be used, or ``warmup`` or ``init_samples`` is not inside it.
+        If ``model`` is not a model, the record cannot be used (not finite, of two lengths),
+        ``warmup`` or ``init_samples`` is not inside it, or the errors exceed the float range.
 
     Examples
     --------
@@ -312,8 +314,13 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
     >>> bid.evaluate(truth, data.u[700:], data.noisy[700:], init_samples=50).simulation_rmse < 1e-8
     True
     """
-    u_arr, y_arr = as_signal(u, "u").ravel(), as_signal(y, "y").ravel()
+    check_model(model)
+    u_arr, y_arr = one_record(u, y, flatten=True)
+    check_finite(u_arr, "u")
+    check_finite(y_arr, "y")
     init = check_whole(init_samples, "init_samples", 0)
+    if init == 0:
+        check_warmup(warmup, y_arr.size)
     if init == 0:
         simulated = model.simulate(u_arr)
     else:
@@ -322,7 +329,7 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
         simulated = simulate_from_samples(model, u_arr, y_arr, init)
         warmup = max(check_warmup(warmup, y_arr.size), init)
     predicted = one_step_prediction(model, u_arr, y_arr)
-    return Metrics(
+    metrics = Metrics(
         simulation_rmse=rmse(y_arr, simulated, warmup=warmup),
         simulation_nrmse=nrmse(y_arr, simulated, warmup=warmup),
         simulation_fit_percent=fit_percent(y_arr, simulated, warmup=warmup),
@@ -330,3 +337,7 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
         samples=y_arr.size - warmup,
         warmup=warmup,
     )
+    overflow = [name for name, value in asdict(metrics).items() if not np.isfinite(value)]
+    if overflow:  # finite data whose errors square beyond the float range (|y| near 1e154)
+        raise DataError(f"{overflow[0]} exceeds the float range: the record's values are too large; rescale u and y (e.g. to SI units)")
+    return metrics

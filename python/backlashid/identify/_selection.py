@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike
 
 from .._docstrings import AXES, fill
 from .._json import jsonable
-from .._validation import check_finite, check_warmup, check_whole, one_record
+from .._validation import check_finite, check_flag, check_warmup, check_whole, one_record, shown
 from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ._fit import FitResult, fit_cascade, fit_sandwich
 from ._structure import Structure
@@ -339,8 +339,9 @@ def select_structure(
     grid_r, grid_s = (_grid(nr, "nr", 1), _grid(ns, "ns", 0)) if "sandwich" in kinds else ([0], [0])
     if isinstance(validation, bool) or not isinstance(validation, (int, float)) or not 0.0 < validation < 1.0:
         raise DataError(f"validation = {validation!r}: give the held-out fraction of the record, in (0, 1)")
-    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not 0.0 <= tolerance < math.inf:
-        raise DataError(f"tolerance = {tolerance!r}: give a relative band width >= 0 (e.g. 0.02)")
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not 0.0 <= tolerance < 1e300:
+        raise DataError(f"tolerance = {shown(tolerance)}: give a relative band width >= 0 (e.g. 0.02)")
+    check_flag(refit, "refit")
     u_arr, y_arr = one_record(u, y, ("u", "y"))
     check_finite(u_arr, "u")
     check_finite(y_arr, "y")

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docstrings import fill
-from .._validation import check_whole, one_record
+from .._validation import check_noise_std, check_whole, one_record
 from ..errors import BacklashIdError, DataError, ModelError, NotIdentifiableError
 from ..models import CascadeModel, CascadeState, LinearBlock, Model, SandwichModel, SandwichSimulation, SandwichState
 from ._refine import levenberg_marquardt
@@ -532,15 +532,7 @@ def _dependent(prob: Any, theta: NDArray[np.float64], p0: int) -> list[int]:
 
 
 def _noise_std(noise_std: Any) -> float | None:
-    if noise_std is None:
-        return None
-    try:
-        value = float(noise_std)
-    except (TypeError, ValueError):
-        raise DataError(f"noise_std must be a positive number, got {noise_std!r}") from None
-    if not (np.isfinite(value) and value > 0.0):
-        raise DataError(f"noise_std must be a positive finite number, got {noise_std!r}")
-    return value
+    return None if noise_std is None else check_noise_std(noise_std)
 
 
 def _samples(init_samples: Any, n: int, name: str) -> int:

@@ -34,9 +34,11 @@ from numpy.typing import NDArray
 
 from .. import _core
 from .._docstrings import fill
-from .._validation import check_whole
+from .._validation import check_flag, check_int
 from ..errors import DataError
 from ..models import CascadeModel, GeneralBacklash, LinearBlock, Model, SandwichModel
+
+MAX_ORDER = 1000  # orders and degrees above this are refused up front (a record would need 10 samples per parameter)
 
 _THETA_DOC = """Parameters
 ----------
@@ -140,8 +142,10 @@ class Structure:
     initial_state: bool = False
 
     def __post_init__(self) -> None:
-        for name, value, least in (("na", self.na, 1), ("nb", self.nb, 0), ("degree", self.degree, 1)):
-            check_whole(value, name, least)
+        for name, value, least in (("na", self.na, 1), ("nb", self.nb, 0), ("degree", self.degree, 1), ("nr", self.nr, 0), ("ns", self.ns, 0)):
+            check_int(value, name, least, MAX_ORDER)  # before anything proportional to it is built
+        for name in ("feedthrough", "output_feedthrough", "initial_state"):
+            check_flag(getattr(self, name), name)
         if self.is_sandwich and (self.nr < 1 or self.ns < 0):
             raise DataError(f"nr = {self.nr}, ns = {self.ns}: the output block needs nr >= 1, ns >= 0")
         if self.output_feedthrough and not self.is_sandwich:

@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._docstrings import AXES, fill
-from .._validation import as_signal, check_whole, identification_record
+from .._validation import as_coefficients, as_signal, check_flag, check_whole, identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError
 from ..models import GeneralBacklash, LinearBlock, SandwichModel, model_from_dict
 from ._refine import OutputErrorFit, levenberg_marquardt
@@ -115,7 +115,7 @@ def wiener_hammerstein_model(
     >>> model.backlash.c_left, model.simulate([1.0, 0.0, 0.0]).tolist()
     (0.0, [0.0, 0.0, 0.475])
     """
-    m_list = [float(v) for v in np.atleast_1d(np.asarray(m, dtype=np.float64))]
+    m_list = as_coefficients(m, "m")
     return SandwichModel(
         LinearBlock(a, b, feedthrough=feedthrough),
         GeneralBacklash(0.0, 0.0, m_list, m_list),
@@ -742,6 +742,11 @@ def fit_wiener_hammerstein(
     (True, 1, 1)
     """
     degree, nb, ns = check_whole(degree, "degree", 1), check_whole(nb, "nb", 1), check_whole(ns, "ns", 1)
+    max_iter, split_samples = check_whole(max_iter, "max_iter", 0), check_whole(split_samples, "split_samples", 1)
+    split_degree, split_iter = check_whole(split_degree, "split_degree", 1), check_whole(split_iter, "split_iter", 0)
+    feedthrough = check_flag(feedthrough, "feedthrough")
+    if output_feedthrough is not None:
+        output_feedthrough = check_flag(output_feedthrough, "output_feedthrough")
     # a constant input has always been a DataError here (NotIdentifiableError in the iterative fits)
     u_arr, y_arr = identification_record(u, y, y_name="y", warmup=warmup, parameters=2 * (nb + ns) + degree, constant_input=DataError)
     output_feedthrough = feedthrough if output_feedthrough is None else bool(output_feedthrough)

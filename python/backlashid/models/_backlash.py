@@ -10,8 +10,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._docstrings import fill
-from .._validation import as_coefficients, as_scalar, as_signal, format_list, frozen
-from ..errors import DataError
+from .._validation import as_coefficients, as_scalar, as_signal, check_int, format_list, frozen, shown
+from ..errors import DataError, ModelError
 
 __all__ = ["GeneralBacklash", "BranchCheck", "SwitchingSignals"]
 
@@ -30,6 +30,21 @@ Returns
 -------
 numpy.ndarray
     {branch} at each value."""
+
+
+_MAX_GRID = 10**7  # points of characteristic(): a plot needs far fewer
+_RESCALE = "rescale x (e.g. to units where the dead band is about 1 wide) or use a lower degree"
+
+
+def _finite_result(values: Any, what: str, x: NDArray[np.float64] | None = None) -> Any:
+    """``values`` if every number in it is finite; else ModelError saying where the branch
+    polynomials left the float range (results are never silently inf or NaN)."""
+    arr = np.asarray(values, dtype=np.float64)
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        where = f" at x[{bad[0]}] = {x.ravel()[bad[0]]:.6g}" if x is not None and x.size == arr.size else ""
+        raise ModelError(f"{what} is not finite{where}: the branch polynomials exceed the float range there; {_RESCALE}")
+    return values
 
 
 def _finite_range(lo: Any, hi: Any) -> tuple[float, float]:
@@ -148,7 +163,8 @@ class GeneralBacklash:
     Raises
     ------
     ModelError
-        If a width is negative or a branch does not increase across the dead band.
+        If a width is negative or a branch does not increase across the dead band, or the
+        branches exceed the float range across it (extreme widths or degrees: rescale x).
 
     Examples
     --------
@@ -166,8 +182,24 @@ class GeneralBacklash:
         m_l = as_coefficients(m_left, "m_left")
         m_r = as_coefficients(m_right, "m_right")
         self._native = _core.GeneralBacklash(c_l, c_r, m_l, m_r)  # validates, raises ModelError
+        self._check_range(c_l, c_r, max(len(m_l), len(m_r)))
         self._c_left, self._c_right = c_l, c_r
         self._m_left, self._m_right = frozen(m_l), frozen(m_r)
+
+    def _check_range(self, c_l: float, c_r: float, degree: int) -> None:
+        """ModelError unless both branches, and the jump between them, are finite across the
+        dead band and one unit beyond it (extreme widths or degrees overflow there)."""
+        if not np.isfinite(c_l + c_r):
+            raise ModelError(f"c_left + c_right = {c_l + c_r}: the dead band exceeds the float range; {_RESCALE}")
+        x = np.linspace(-c_l - 1.0, c_r + 1.0, 33)
+        if not np.all(np.isfinite(x)):
+            raise ModelError(f"the dead band [-{c_l:.6g}, {c_r:.6g}] exceeds the float range; {_RESCALE}")
+        left, right = self._native.left(x), self._native.right(x)
+        if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right)) and np.all(np.isfinite(left - right))):
+            raise ModelError(
+                f"the branches of degree {degree} with widths "
+                f"c_L = {c_l:.6g}, c_R = {c_r:.6g} overflow the float range across the dead band; {_RESCALE}"
+            )
 
     # -- parameters, under the paper's symbols too ------------------------------------------
     @property
@@ -207,7 +239,8 @@ class GeneralBacklash:
 
         {x}
         """
-        return self._native.left(np.atleast_1d(as_signal(x, "x")))
+        x_arr = np.atleast_1d(as_signal(x, "x"))
+        return _finite_result(self._native.left(x_arr), "L(x)", x_arr)
 
     @fill(x=_X_DOC.format(branch="R(x)"))
     def right(self, x: ArrayLike) -> NDArray[np.float64]:
@@ -215,7 +248,8 @@ class GeneralBacklash:
 
         {x}
         """
-        return self._native.right(np.atleast_1d(as_signal(x, "x")))
+        x_arr = np.atleast_1d(as_signal(x, "x"))
+        return _finite_result(self._native.right(x_arr), "R(x)", x_arr)
 
     @fill(signal=_SIGNAL_DOC)
     def simulate(
@@ -238,9 +272,10 @@ class GeneralBacklash:
         DataError
             If x or y0 is not finite, or ``form`` is unknown.
         """
-        if form not in ("eq1", "breakpoints"):
-            raise DataError(f"form = {form!r}: use 'eq1' or 'breakpoints'")
-        return self._native.simulate(as_signal(x, "x"), as_scalar(y0, "y0", DataError), form)
+        if not isinstance(form, str) or form not in ("eq1", "breakpoints"):
+            raise DataError(f"form = {shown(form)}: use 'eq1' or 'breakpoints'")
+        x_arr = as_signal(x, "x")
+        return _finite_result(self._native.simulate(x_arr, as_scalar(y0, "y0", DataError), form), "the output y", x_arr)
 
     @fill(signal=_SIGNAL_DOC)
     def switching(self, x: ArrayLike, *, y0: float = 0.0) -> SwitchingSignals:
@@ -260,7 +295,9 @@ class GeneralBacklash:
         >>> signals.f2.tolist(), signals.y.tolist()
         ([True, False], [0.5, 0.5])
         """
-        xi1, xi2, f1, f2, y = self._native.switching(as_signal(x, "x"), as_scalar(y0, "y0", DataError))
+        x_arr = as_signal(x, "x")
+        xi1, xi2, f1, f2, y = self._native.switching(x_arr, as_scalar(y0, "y0", DataError))
+        _finite_result(np.concatenate([np.ravel(xi1), np.ravel(xi2), np.ravel(y)]), "a switching signal (xi1, xi2 or y)")
         return SwitchingSignals(xi1=xi1, xi2=xi2, f1=f1, f2=f2, y=y)
 
     def breakpoints(self, y_prev: float, x_range: tuple[float, float]) -> tuple[float, float]:
@@ -289,11 +326,16 @@ class GeneralBacklash:
         >>> GeneralBacklash(0.5, 0.5, [1.0], [1.0]).breakpoints(0.0, (-2.0, 2.0))
         (-0.5, 0.5)
         """
+        if not isinstance(x_range, (tuple, list, np.ndarray)) or len(x_range) != 2:
+            raise DataError(f"x_range = {shown(x_range)}: give the pair (x_min, x_max)")
         lo, hi = _finite_range(x_range[0], x_range[1])
         y = as_scalar(y_prev, "y_prev", DataError)
         if not np.isfinite(y):
             raise DataError(f"y_prev = {y}: give a finite value")
-        return self._native.breakpoints(y, lo, hi)
+        z_left, z_right = self._native.breakpoints(y, lo, hi)
+        if np.isnan(z_left) or np.isnan(z_right):
+            raise ModelError(f"the breakpoints for y_prev = {y:.6g} are not defined: the branches overflow on [{lo:.6g}, {hi:.6g}]; {_RESCALE}")
+        return z_left, z_right
 
     def check_branches(self, x_min: float, x_max: float) -> BranchCheck:
         """Check on [x_min, x_max] that both branches increase and do not cross.
@@ -315,7 +357,10 @@ class GeneralBacklash:
         DataError
             If the range is not finite.
         """
-        d: Any = self._native.check_branches(*_finite_range(x_min, x_max))
+        lo, hi = _finite_range(x_min, x_max)
+        ends = np.array([lo, hi])
+        _finite_result([self._native.left(ends), self._native.right(ends)], f"a branch at the ends of [{lo:.6g}, {hi:.6g}]")
+        d: Any = self._native.check_branches(lo, hi)
         return BranchCheck(**d)
 
     def characteristic(self, x_min: float, x_max: float, num: int = 400) -> tuple[NDArray[np.float64], ...]:
@@ -334,8 +379,16 @@ class GeneralBacklash:
         -------
         tuple of numpy.ndarray
             x, L(x) and R(x).
+
+        Raises
+        ------
+        DataError
+            If the range is not finite or ``num`` is not a whole number in [2, 10**7].
+        ModelError
+            If a branch exceeds the float range on the grid.
         """
-        x = np.linspace(x_min, x_max, num)
+        lo, hi = _finite_range(x_min, x_max)
+        x = np.linspace(lo, hi, check_int(num, "num", 2, _MAX_GRID))
         return x, self.left(x), self.right(x)
 
     # -- serialisation -------------------------------------------------------------------------
@@ -368,7 +421,10 @@ class GeneralBacklash:
         GeneralBacklash
             The backlash (validated).
         """
-        return cls(data["c_left"], data["c_right"], data["m_left"], data["m_right"])
+        keys = ("c_left", "c_right", "m_left", "m_right")
+        if not isinstance(data, dict) or any(k not in data for k in keys):
+            raise ModelError(f"a backlash's dict has the keys {', '.join(keys)}, got {shown(data)}")
+        return cls(*(data[k] for k in keys))
 
     def __reduce__(self) -> tuple[Any, ...]:
         # rebuilt (and revalidated) from its parameters: the Rust object does not pickle

@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._docstrings import fill
-from .._validation import as_signal, check_instance
+from .._validation import as_signal, check_flag, check_instance
 from ..errors import DataError
 from ._backlash import GeneralBacklash
 from ._chain import DOCS, FORMAT_VERSION, _ModelIO, _moving_fraction, _Simulation, _State
@@ -147,7 +147,7 @@ class CascadeModel(_ModelIO):
         s = initial_state if initial_state is not None else self.rest_state()
         check_instance(s, CascadeState, "initial_state", DataError)
         u = as_signal(u, "u")
-        if not internals:
+        if not check_flag(internals, "internals"):
             return self._native.simulate(u, list(s.u_past), list(s.x_past), s.y_prev)
         x, y, f1, f2, (u_past, x_past, y_prev) = self._native.simulate_internals(
             u, list(s.u_past), list(s.x_past), s.y_prev

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docstrings import fill
-from .._validation import as_scalar, as_signal, check_warmup
+from .._validation import as_scalar, as_signal, check_int, check_warmup
 from ..errors import DataError, ModelError
 
 FORMAT_VERSION = 1
@@ -77,8 +77,10 @@ def _parse_json(text: str) -> dict[str, Any]:
         raise ModelError(f"expected JSON text, got {type(text).__name__}: pass the string from to_json()")
     try:
         data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ModelError(f"not valid JSON ({exc})") from None
+    except RecursionError:
+        raise ModelError("JSON nested too deeply to be a backlashid model description: pass the text of to_json()") from None
+    except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError of bytes, an int of > 4300 digits
+        raise ModelError(f"not valid JSON ({type(exc).__name__}: {str(exc)[:120]})") from None
     if not isinstance(data, dict):
         raise ModelError("not a backlashid model description: expected a JSON object")
     return data
@@ -178,6 +180,11 @@ class _ModelIO(ABC):
         str
             ``json.dumps(to_dict())``.
 
+        Raises
+        ------
+        DataError
+            If ``json.dumps`` refuses a keyword argument, or ``indent`` is above 64.
+
         Examples
         --------
         >>> import backlashid as bid
@@ -185,7 +192,13 @@ class _ModelIO(ABC):
         >>> bid.CascadeModel.from_json(text) == bid.example1()
         True
         """
-        return json.dumps(self.to_dict(), **kwargs)
+        indent = kwargs.get("indent")
+        if isinstance(indent, (int, np.integer)) and not isinstance(indent, bool):
+            check_int(indent, "indent", 0, 64)  # json.dumps would build a string of indent spaces per level
+        try:
+            return json.dumps(self.to_dict(), **kwargs)
+        except (TypeError, ValueError, OverflowError) as exc:  # a keyword json.dumps refuses
+            raise DataError(f"to_json's keywords are json.dumps's; it refused {kwargs} ({type(exc).__name__}: {exc})") from None
 
     @classmethod
     @fill(loaded=_LOADED_DOC.format(what="``data`` describes"))

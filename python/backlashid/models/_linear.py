@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
-from .._validation import as_coefficients, as_signal, format_list, frozen
+from .._validation import as_coefficients, as_signal, check_flag, format_list, frozen, shown
 from ..errors import DataError, ModelError
 
 __all__ = ["LinearBlock"]
@@ -54,8 +54,7 @@ class LinearBlock:
     def __init__(self, a: ArrayLike, b: ArrayLike = (), *, feedthrough: bool = False) -> None:
         a_list = as_coefficients(a, "a")
         b_list = as_coefficients(b, "b", allow_empty=True)
-        if not isinstance(feedthrough, (bool, np.bool_)):
-            raise ModelError(f"feedthrough must be True or False, got {feedthrough!r}")
+        feedthrough = check_flag(feedthrough, "feedthrough", ModelError)
         if feedthrough:
             if len(a_list) < 2:
                 raise ModelError(
@@ -269,7 +268,9 @@ class LinearBlock:
         LinearBlock
             The block.
         """
-        return cls(data["a"], data.get("b", ()), feedthrough=bool(data.get("feedthrough", False)))
+        if not isinstance(data, dict) or "a" not in data:
+            raise ModelError(f"a linear block's dict has the keys a, b and feedthrough, got {shown(data)}")
+        return cls(data["a"], data.get("b", ()), feedthrough=check_flag(data.get("feedthrough", False), "feedthrough", ModelError))
 
     def __reduce__(self) -> tuple[Any, ...]:
         # rebuilt from its coefficients: the Rust object behind it does not pickle

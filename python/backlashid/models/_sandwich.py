@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._docstrings import fill
-from .._validation import as_signal, check_instance, format_list
+from .._validation import as_signal, check_flag, check_instance, format_list
 from ..errors import DataError
 from ._backlash import GeneralBacklash
 from ._chain import DOCS, FORMAT_VERSION, _ModelIO, _moving_fraction, _Simulation, _State
@@ -167,7 +167,7 @@ class SandwichModel(_ModelIO):
         check_instance(s, SandwichState, "initial_state", DataError)
         u = as_signal(u, "u")
         args = (list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past))
-        if not internals:
+        if not check_flag(internals, "internals"):
             return self._native.simulate(u, *args)
         x, y, w, f1, f2, final = self._native.simulate_internals(u, *args)
         return SandwichSimulation(w, x, y, f1, f2, SandwichState(*final))

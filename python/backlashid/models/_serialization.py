@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from typing import Any, Union
 
+from .._validation import is_real
 from ..errors import ModelError
 from ._backlash import GeneralBacklash
 from ._cascade import CascadeModel
-from ._chain import _parse_json
+from ._chain import FORMAT_VERSION, _parse_json
 from ._linear import LinearBlock
 from ._sandwich import SandwichModel
 
@@ -41,19 +42,63 @@ def model_from_dict(data: dict[str, Any]) -> Model:
     >>> bid.model_from_dict(bid.example2().to_dict()) == bid.example2()
     True
     """
-    try:
-        kind = data["model"]
-        if kind == "cascade":
-            return CascadeModel(LinearBlock.from_dict(data["linear"]), GeneralBacklash.from_dict(data["backlash"]))
-        if kind == "sandwich":
-            return SandwichModel(
-                LinearBlock.from_dict(data["input_linear"]),
-                GeneralBacklash.from_dict(data["backlash"]),
-                LinearBlock.from_dict(data["output_linear"]),
-            )
-    except (KeyError, TypeError) as exc:
-        raise ModelError(f"not a backlashid model description (missing {exc}): use a dict from to_dict()") from None
-    raise ModelError(f"unknown model kind {kind!r}: expected 'cascade' or 'sandwich'")
+    blocks = _BLOCKS.get(_kind(data))
+    if blocks is None:
+        raise ModelError(f"unknown model kind {data['model']!r}: expected 'cascade' or 'sandwich'")
+    extra = sorted(map(str, set(data) - {"model", "format_version", *blocks}))
+    if extra:
+        raise ModelError(f"unknown key(s) {', '.join(extra)} in a {data['model']} model description: use a dict from to_dict()")
+    version = data.get("format_version", FORMAT_VERSION)
+    if not is_real(version) or version != FORMAT_VERSION:
+        raise ModelError(f"format_version = {version!r}: this version of backlashid reads format {FORMAT_VERSION}")
+    parts = {key: _block(data, key, kind) for key, kind in blocks.items()}
+    if data["model"] == "cascade":
+        return CascadeModel(LinearBlock.from_dict(parts["linear"]), GeneralBacklash.from_dict(parts["backlash"]))
+    return SandwichModel(
+        LinearBlock.from_dict(parts["input_linear"]),
+        GeneralBacklash.from_dict(parts["backlash"]),
+        LinearBlock.from_dict(parts["output_linear"]),
+    )
+
+
+# The blocks of each model kind and the keys each block's dict may hold (strict: a key of
+# another type or name is refused, so that e.g. "feedthrough": "false" cannot load as True).
+_LINEAR_KEYS = {"a": True, "b": False, "feedthrough": False}  # key: required
+_BACKLASH_KEYS = {"c_left": True, "c_right": True, "m_left": True, "m_right": True}
+_BLOCKS = {
+    "cascade": {"linear": _LINEAR_KEYS, "backlash": _BACKLASH_KEYS},
+    "sandwich": {"input_linear": _LINEAR_KEYS, "backlash": _BACKLASH_KEYS, "output_linear": _LINEAR_KEYS},
+}
+
+
+def _kind(data: Any) -> str | None:
+    if not isinstance(data, dict):
+        raise ModelError(f"a model description is a dict (from to_dict()), got {type(data).__name__}")
+    if "model" not in data:
+        raise ModelError("not a backlashid model description (no key 'model'): use a dict from to_dict()")
+    kind = data["model"]
+    return kind if isinstance(kind, str) else None
+
+
+def _block(data: dict[str, Any], key: str, keys: dict[str, bool]) -> dict[str, Any]:
+    """The dict of one block, with its keys checked: present when required, no others, and a
+    feedthrough flag that is a JSON boolean."""
+    if key not in data:
+        raise ModelError(f"not a backlashid {data['model']} description (missing {key!r}): use a dict from to_dict()")
+    block = data[key]
+    if not isinstance(block, dict):
+        raise ModelError(f"{key} must be a dict of the block's parameters, got {type(block).__name__}")
+    missing = [k for k, required in keys.items() if required and k not in block]
+    extra = sorted(map(str, set(block) - set(keys)))
+    if missing or extra:
+        wrong = f"missing {', '.join(missing)}" if missing else f"unknown {', '.join(extra)}"
+        raise ModelError(f"{key}: {wrong}; a block's dict holds {', '.join(keys)}")
+    if "feedthrough" in block and not isinstance(block["feedthrough"], bool):
+        raise ModelError(f"{key}.feedthrough must be true or false, got {block['feedthrough']!r}")
+    for name, value in block.items():
+        if name != "feedthrough" and not (is_real(value) or isinstance(value, list)):
+            raise ModelError(f"{key}.{name} must be a number or a list of numbers, got {type(value).__name__}")
+    return block
 
 
 def model_from_json(text: str) -> Model:

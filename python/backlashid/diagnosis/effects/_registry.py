@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..._numerics import lstsq
-from ..._validation import check_signals
+from ..._validation import check_int, check_real, check_seed, check_signals, shown
 from ...errors import DataError, ModelError
 from ...identify import Structure
 from ...models import CascadeModel
@@ -69,8 +69,7 @@ def _check(model: CascadeModel, u_est: ArrayLike, y_est: ArrayLike, warmup: int)
         raise ModelError(
             f"effects augment a CascadeModel (linear block -> backlash), got {type(model).__name__}: fit the nominal model with fit_cascade"
         )
-    if not isinstance(warmup, (int, np.integer)) or warmup < 0:
-        raise DataError(f"warmup = {warmup!r}: give a whole number of samples >= 0")
+    warmup = check_int(warmup, "warmup (samples)", 0)
     u, y = check_signals(("u_est", u_est), ("y_est", y_est), min_length=int(warmup) + 50, what=f"a warm-up of {warmup} plus a refit")
     return u, y
 
@@ -122,9 +121,11 @@ def fit_effect(
     >>> round(fit.params["o_0"], 3)
     0.2
     """
-    if effect not in REGISTRY:
-        raise DataError(f"unknown effect {effect!r}: choose one of {', '.join(EFFECTS)}")
+    if not isinstance(effect, str) or effect not in REGISTRY:
+        raise DataError(f"unknown effect {shown(effect)}: choose one of {', '.join(EFFECTS)}")
     u, y = _check(model, u_est, y_est, warmup)
+    t0 = check_real(t0, "t0")
+    check_seed(seed)
     structure = _structure_of(model)
     theta0 = structure.pack(model)
     prob = Problem(structure, u, y, int(warmup), float(t0))
