@@ -25,6 +25,8 @@ __all__ = [
     "simulate_augmented",
 ]
 
+MAX_ORDER: int  # largest order or degree of a model (the core's limit)
+
 _F = NDArray[np.float64]
 _B = NDArray[np.bool_]
 
