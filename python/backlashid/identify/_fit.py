@@ -32,7 +32,7 @@ from ._refine import OutputErrorFit, levenberg_marquardt, spectral_radius
 from ._starts import linear_start, pole_restarts, scale_starts
 from ._state import lm_holding_vanishing
 from ._structure import Structure
-from ._valid import ValidOnly, acceptable_motion, why_not_acceptable
+from ._valid import ValidOnly, acceptable_motion, record_motion, why_not_acceptable
 
 __all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
 
@@ -808,10 +808,17 @@ def _fit(
         failure = "the identification diverged: the estimate simulates to no finite output"
     if failure is None and invalid is not None:
         failure = f"the final estimate is not a valid model ({invalid}); try a lower branch degree, other orders or other starts"
+    # the moving fraction and x's range (for the branch check) at the end: the check above
+    # found them at this very theta, or the whole record's problem has them from its last
+    # gradient pass there (or simulates once for both)
+    found = record_motion(structure, whole, theta, u_arr, user_warmup) if model is not None else None
+    x_range = found[1] if found is not None else None
     if model is None:
         moving = 0.0
     elif checked is not None and checked[0] is theta and checked[1] is not None:
         moving = checked[1]  # found by the check above at this very theta (a long record's simulation spared)
+    elif found is not None:
+        moving = found[0]
     else:
         moving = _moving(structure, theta, u_arr, user_warmup, model)
     if failure is not None:
@@ -860,7 +867,7 @@ def _fit(
             FitWarning,
             stacklevel=4,
         )
-    warn_if_suspicious(result, u_arr)  # FitWarning: crossed or turning branches, uncertain parameters
+    warn_if_suspicious(result, u_arr, x_range)  # FitWarning: crossed or turning branches, uncertain parameters
     return result
 
 
