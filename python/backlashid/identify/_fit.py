@@ -14,6 +14,7 @@ import functools
 import inspect
 import warnings
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -44,6 +45,9 @@ Switching = Literal["measured", "simulated"]
 # local minimum.
 RESTARTS = 4
 RESTARTS_UP_TO = 20_000
+# LM searches of _search's candidate starts run this many at a time (threads; their Rust
+# passes release the GIL)
+LM_THREADS = 2
 # Coarse to fine (``coarse``): the iterations and LM candidates on a segment of
 # max(COARSE_MIN, COARSE_PER_PARAMETER p) samples, on records COARSE_RECORDS times as long.
 # Over 20 seeds each of Examples 1 and 2 at N = 5e4 and 1e5 it ends within 0.02 standard
@@ -607,15 +611,28 @@ def _search(
         return run, k, None
     starts_lm = [th for r in usable for th in {id(x): x for x in (r.history[r.best()], r.history[0])}.values()]
     candidates, truncated = [], set()
-    for th in starts_lm + scaled:
+
+    def search_from(th: NDArray[np.float64]) -> OutputErrorFit | BacklashIdError:
         # the scale starts begin far away: a short search each, the chosen one then finished
-        short = any(th is x for x in scaled)
         try:
-            candidates.append(levenberg_marquardt(prob, th, max_iter=SCALE_ITER) if short else levenberg_marquardt(prob, th))
-        except BacklashIdError:
+            return levenberg_marquardt(prob, th, max_iter=SCALE_ITER) if any(th is x for x in scaled) else levenberg_marquardt(prob, th)
+        except BacklashIdError as exc:
+            return exc
+
+    # the searches are independent and their passes release the GIL: two at a time on two
+    # threads (each deterministic, kept in the starts' order: the same result as one by one)
+    lm_starts = starts_lm + scaled
+    if len(lm_starts) > 1 and LM_THREADS > 1:
+        with ThreadPoolExecutor(max_workers=LM_THREADS) as pool:
+            found = list(pool.map(search_from, lm_starts))
+    else:
+        found = [search_from(th) for th in lm_starts]
+    for th, fit in zip(lm_starts, found):
+        if isinstance(fit, BacklashIdError):
             continue
-        if short and not candidates[-1].converged:
-            truncated.add(id(candidates[-1]))
+        candidates.append(fit)
+        if any(th is x for x in scaled) and not fit.converged:
+            truncated.add(id(fit))
     if not candidates:
         if run.last_ls is None:  # no iteration and no search could be computed
             raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
