@@ -247,8 +247,14 @@ fn motion_is_the_models_moving_count_and_x_range_with_or_without_a_gradient_pass
     let m2 = SandwichModel::new(lin2, bl2, out2);
     let count2 = m2.moving_count(&u2, &m2.rest_state(), 10).unwrap();
     let got = p2.motion(&theta2).unwrap();
-    assert_eq!((got.moving, got.x_min, got.x_max), motion_by_hand(&x2, count2, 10));
+    assert_eq!(
+        (got.moving, got.x_min, got.x_max),
+        motion_by_hand(&x2, count2, 10)
+    );
     // several records: per record only
     let several = Problem::several(s, vec![(u.clone(), y.clone(), 0), (u, y, 0)]).unwrap();
-    assert!(matches!(several.motion(&EXAMPLE1_THETA), Err(Error::Data(_))));
+    assert!(matches!(
+        several.motion(&EXAMPLE1_THETA),
+        Err(Error::Data(_))
+    ));
 }

@@ -387,13 +387,18 @@ struct MotionCache(std::sync::Mutex<Option<(Vec<f64>, Motion)>>);
 impl MotionCache {
     fn lock(&self) -> std::sync::MutexGuard<'_, Option<(Vec<f64>, Motion)>> {
         // a poisoned cache (a panic while it was held) is only a cache
-        self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
     /// The motion found at exactly this theta (bit for bit), if any.
     fn at(&self, theta: &[f64]) -> Option<Motion> {
         match &*self.lock() {
-            Some((t, m)) if t.len() == theta.len() && t.iter().zip(theta).all(|(a, b)| a.to_bits() == b.to_bits()) => {
+            Some((t, m))
+                if t.len() == theta.len()
+                    && t.iter().zip(theta).all(|(a, b)| a.to_bits() == b.to_bits()) =>
+            {
                 Some(*m)
             }
             _ => None,
@@ -800,7 +805,10 @@ impl Problem {
         }
         let rec = &self.records[0];
         let (x, y0) = match &b.initial {
-            Some(init) => (initial::simulate_from(&b.linear, &rec.u, &init.x0)?, init.y_prev),
+            Some(init) => (
+                initial::simulate_from(&b.linear, &rec.u, &init.x0)?,
+                init.y_prev,
+            ),
             None => (b.linear.simulate(&rec.u, &b.linear.rest_state())?, 0.0),
         };
         let motion = match b.backlash.padded_step() {
