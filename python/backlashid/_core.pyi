@@ -123,6 +123,9 @@ class Problem:
     # (R_aug, cost) with R_aug^T R_aug = [J | r]^T [J | r] over t >= warmup, streamed
     def oe_factor(self, theta: _F) -> tuple[_F, float]: ...
     def gradient(self, theta: _F) -> tuple[_F, float]: ...  # (J^T r, cost), one pass, no factor
+    # (samples moving the backlash, min x, max x) over t >= warmup on simulate's run; from the
+    # last gradient pass (or motion call) at this very theta, else one simulation; one record only
+    def motion(self, theta: _F) -> tuple[int, float, float]: ...
     def cost(self, theta: _F) -> float: ...  # sum (y - y_sim)^2 over t >= warmup, one simulation
     def feasible(self, theta: _F) -> bool: ...  # every linear block stable
     def bounds(self) -> tuple[list[float], list[float]]: ...  # (lower, upper): c_L, c_R >= 0

@@ -94,3 +94,36 @@ def test_the_problem_names_are_the_papers_and_the_fits(case, names):
     shift = structure.shift
     sim = prob.simulate(fit.theta)
     np.testing.assert_allclose(sim[shift:], fit.model.simulate(d.u)[: len(d.u) - shift], atol=1e-12)
+
+
+@pytest.mark.parametrize(("n", "warmup"), [(300, 0), (1000, 25), (210_000, 0), (210_000, 9)])
+def test_motion_is_the_models_moving_fraction_and_x_range_before_and_after_a_gradient_pass(n, warmup):
+    # from 2e5 samples the gradient pass runs on two threads and leaves the motion at its theta
+    model = bid.example1()
+    d = bid.example_data(model, n, seed=2)
+    s = Structure(2, 2, 3)
+    prob = s.problem(d.u, d.noisy, warmup)
+    theta = s.pack(model) + 0.01
+    fitted = s.model(theta)
+    x = np.asarray(fitted.linear.simulate(d.u))[warmup:]
+    want = (fitted.moving_fraction(d.u, warmup=warmup), float(x.min()), float(x.max()))
+    for _ in range(2):  # simulated, then from the cache
+        count, lo, hi = prob.motion(theta)
+        assert (count / (n - warmup), lo, hi) == want
+    prob.gradient(theta + 0.001)
+    prob.gradient(theta)
+    count, lo, hi = prob.motion(theta)
+    assert (count / (n - warmup), lo, hi) == want
+
+
+def test_motion_of_a_sandwich_and_of_several_records():
+    model = bid.example2()
+    d = bid.example_data(model, 600, seed=1)
+    s = Structure(2, 2, 3, nr=2, ns=2)
+    theta = s.pack(model)
+    count, lo, hi = s.problem(d.u, d.noisy, 5).motion(theta)
+    x = np.asarray(model.input_linear.simulate(d.u))[5:]
+    assert (count / 595, lo, hi) == (model.moving_fraction(d.u, warmup=5), x.min(), x.max())
+    several = Structure(2, 2, 3).problem([d.u, d.u], [d.noisy, d.noisy])
+    with pytest.raises(DataError, match="one record only"):
+        several.motion(Structure(2, 2, 3).pack(bid.example1()))

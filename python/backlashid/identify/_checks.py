@@ -23,23 +23,27 @@ def _intervals(found: list[tuple[float, float]]) -> str:
     return ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in found)
 
 
-def branch_problems(model: Any, u: NDArray[np.float64], warmup: int) -> str | None:
+def branch_problems(model: Any, u: NDArray[np.float64], warmup: int, x_range: tuple[float, float] | None = None) -> str | None:
     """What is wrong with the fitted branches on the x range the record visits (after the
-    warm-up), in words, or None when both increase and do not cross there."""
-    # x is the first linear block's output alone (a cascade's ``linear``, a sandwich's
-    # ``input_linear``): no need to simulate the backlash and the blocks after it; several
-    # records: the x range of them all
-    first = model.linear if hasattr(model, "linear") else model.input_linear
-    records = u if isinstance(u, list) else [u]
-    x = np.concatenate([np.asarray(first.simulate(r))[warmup:] for r in records])
-    if x.size == 0:
-        return None
-    lo, hi = float(x.min()), float(x.max())  # both finite: every x is (min and max pass NaN on)
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        x = x[np.isfinite(x)]
+    warm-up), in words, or None when both increase and do not cross there. ``x_range``: that
+    range (finite) where the fit has it already, else x is simulated."""
+    if x_range is not None:
+        lo, hi = x_range
+    else:
+        # x is the first linear block's output alone (a cascade's ``linear``, a sandwich's
+        # ``input_linear``): no need to simulate the backlash and the blocks after it; several
+        # records: the x range of them all
+        first = model.linear if hasattr(model, "linear") else model.input_linear
+        records = u if isinstance(u, list) else [u]
+        x = np.concatenate([np.asarray(first.simulate(r))[warmup:] for r in records])
         if x.size == 0:
             return None
-        lo, hi = float(x.min()), float(x.max())
+        lo, hi = float(x.min()), float(x.max())  # both finite: every x is (min and max pass NaN on)
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            x = x[np.isfinite(x)]
+            if x.size == 0:
+                return None
+            lo, hi = float(x.min()), float(x.max())
     check = model.backlash.check_branches(lo, hi)
     if check.is_valid:
         return None
@@ -70,14 +74,15 @@ def uncertain_parameters(names: list[str], theta: NDArray[np.float64], standard_
     )
 
 
-def warn_if_suspicious(result: Any, u: NDArray[np.float64]) -> None:
+def warn_if_suspicious(result: Any, u: NDArray[np.float64], x_range: tuple[float, float] | None = None) -> None:
     """Issue a :class:`FitWarning` for each problem of a finished fit (``result``, a
-    FitResult, of input ``u``), naming the function that returned it."""
+    FitResult, of input ``u``; ``x_range`` the range of x after the warm-up if known),
+    naming the function that returned it."""
     if result.model is None:
         return
     fit = "fit_sandwich" if result.structure.is_sandwich else "fit_cascade"
     try:
-        branches = branch_problems(result.model, u, result.warmup)
+        branches = branch_problems(result.model, u, result.warmup, x_range)
     except BacklashIdError:  # a model that does not simulate is reported elsewhere
         branches = None
     se = np.sqrt(np.clip(np.diag(result.covariance), 0, None))

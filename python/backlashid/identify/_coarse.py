@@ -15,11 +15,13 @@ N = 1e6: fold, cost, fold, cost, fold, gradient before; gradient, fold, gradient
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import BacklashIdError
-from ._refine import OutputErrorFit, levenberg_marquardt, refine_from_factor
+from ._refine import OutputErrorFit, cost_and_gradient, levenberg_marquardt, refine_from_factor
 from ._structure import Structure
 
 # the first step from a sub-record's factor on records at least FROM_SEGMENTS segments long:
@@ -53,8 +55,15 @@ def refine_whole(
     if rows < FROM_SEGMENTS * segment:
         return levenberg_marquardt(whole, theta)  # type: ignore[arg-type]
     sub = rows // SUB_FRACTION
-    try:
-        factor, _ = structure.problem(u[: warmup + sub], y[: warmup + sub], warmup).oe_factor(theta)
-    except BacklashIdError:
+    # the whole record's gradient at theta (the first step's) on a second thread while the
+    # sub-record is folded: independent passes that release the GIL
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        at_start = pool.submit(cost_and_gradient, whole, theta)  # type: ignore[arg-type]
+        try:
+            factor, _ = structure.problem(u[: warmup + sub], y[: warmup + sub], warmup).oe_factor(theta)
+        except BacklashIdError:
+            factor = None
+        start = at_start.result()
+    if factor is None:
         return levenberg_marquardt(whole, theta)  # type: ignore[arg-type]
-    return refine_from_factor(whole, theta, factor * np.sqrt(rows / sub), near_se=NEAR_SE)  # type: ignore[arg-type]
+    return refine_from_factor(whole, theta, factor * np.sqrt(rows / sub), near_se=NEAR_SE, start=start)  # type: ignore[arg-type]

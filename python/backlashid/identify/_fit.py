@@ -32,7 +32,7 @@ from ._refine import OutputErrorFit, budget_hit, levenberg_marquardt, out_of_tim
 from ._starts import linear_start, pole_restarts, scale_starts
 from ._state import lm_holding_vanishing
 from ._structure import Structure
-from ._valid import ValidOnly, acceptable_motion, why_not_acceptable
+from ._valid import ValidOnly, acceptable_motion, record_motion, why_not_acceptable
 
 __all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
 
@@ -861,10 +861,17 @@ def _fit(
             if time_budget is not None else
             "the fit ran out of the time budget of its caller before it converged: its best estimate so far is in best and best_stable"
         )
+    # the moving fraction and x's range (for the branch check) at the end: the check above
+    # found them at this very theta, or the whole record's problem has them from its last
+    # gradient pass there (or simulates once for both)
+    found = record_motion(structure, whole, theta, u_arr, user_warmup) if model is not None else None
+    x_range = found[1] if found is not None else None
     if model is None:
         moving = 0.0
     elif checked is not None and checked[0] is theta and checked[1] is not None:
         moving = checked[1]  # found by the check above at this very theta (a long record's simulation spared)
+    elif found is not None:
+        moving = found[0]
     else:
         moving = _moving(structure, theta, u_arr, user_warmup, model)
     if failure is not None:
@@ -913,7 +920,7 @@ def _fit(
             FitWarning,
             stacklevel=4,
         )
-    warn_if_suspicious(result, u_arr)  # FitWarning: crossed or turning branches, uncertain parameters
+    warn_if_suspicious(result, u_arr, x_range)  # FitWarning: crossed or turning branches, uncertain parameters
     return result
 
 

@@ -433,6 +433,14 @@ def _descend(
     return OutputErrorFit(theta=theta, cost=cost, r_aug=r_aug, n_residuals=n_res, iterations=steps, converged=converged)
 
 
+def cost_and_gradient(problem: CompiledProblem, theta: NDArray[np.float64]) -> tuple[float, NDArray[np.float64] | None]:
+    """The cost at theta (projected onto the problem's bounds) and g = J^T r there ((inf,
+    None) if unusable), as the first step of :func:`refine_from_factor` evaluates them (its
+    ``start``)."""
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in problem.bounds())
+    return _cost_at(problem, np.clip(np.array(theta, dtype=np.float64), lo, hi), True)
+
+
 def _cost_at(problem: CompiledProblem, theta: NDArray[np.float64], gradient: bool) -> tuple[float, NDArray[np.float64] | None]:
     """The cost at theta (inf if unusable: unstable or diverging), and g = J^T r there if
     ``gradient``."""
@@ -625,6 +633,7 @@ def refine_from_factor(
     se_tol: float = 1e-2,
     xtol: float = 1e-12,
     near_se: float = 1.0,
+    start: tuple[float, NDArray[np.float64] | None] | None = None,
 ) -> OutputErrorFit:
     """:func:`levenberg_marquardt` from theta0 with ``factor``, an approximation of the R of
     [J | r] there (e.g. a sub-record's, scaled), in place of the first fold.
@@ -639,7 +648,9 @@ def refine_from_factor(
     rather than from a new fold: over a few standard errors the Jacobian changes by
     O(1/sqrt(N)), and a step costs one gradient pass instead of a fold and a gradient pass.
     The problem's own bounds apply; the returned ``r_aug`` is the factor folded within
-    ``near_se`` standard errors of ``theta``, with Q^T r at ``theta``.
+    ``near_se`` standard errors of ``theta``, with Q^T r at ``theta``. ``start``: the cost
+    and gradient at theta0 if already evaluated (:func:`cost_and_gradient`), else one
+    gradient pass here.
     """
     names = list(problem.names)
     n_par = len(names)
@@ -647,7 +658,7 @@ def refine_from_factor(
     lo, hi = (np.asarray(b, dtype=np.float64) for b in problem.bounds())
     theta = np.clip(np.array(theta0, dtype=np.float64), lo, hi)
     plain = lambda: levenberg_marquardt(problem, theta, max_iter=max_iter, se_tol=se_tol, xtol=xtol)  # noqa: E731
-    cost, g = _cost_at(problem, theta, True)
+    cost, g = _cost_at(problem, theta, True) if start is None else start
     r_mat = np.asarray(factor, dtype=np.float64)[:n_par, :n_par]
     q = _kept_factor_qtr(r_mat, g)
     if q is None:

@@ -14,11 +14,40 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ModelError
+from ..errors import BacklashIdError, ModelError
 from . import _records
 from ._structure import Structure
 
-__all__ = ["ValidOnly", "acceptable_motion", "why_not_acceptable"]
+__all__ = ["ValidOnly", "acceptable_motion", "record_motion", "why_not_acceptable"]
+
+
+def record_motion(
+    structure: Structure,
+    prob: Any,
+    theta: NDArray[np.float64],
+    u: NDArray[np.float64] | list[NDArray[np.float64]],
+    warmup: int,
+) -> tuple[float, tuple[float, float]] | None:
+    """The moving fraction of the model of ``theta`` on ``u`` after ``warmup`` (from rest) and
+    the range of x there, from the compiled problem ``prob`` of that record: one simulation, or
+    none where its last gradient pass ran at this theta (``Problem.motion``). None where the
+    problem's simulation is not the model's on ``u`` (several records, an initial state, a
+    shifted feedthrough block, another warm-up) or fails: then simulate the model."""
+    if (
+        isinstance(u, list)
+        or structure.shift
+        or not hasattr(prob, "motion")
+        or prob.records != 1
+        or prob.initial_state
+        or prob.warmup != warmup
+        or prob.samples != len(u)
+    ):
+        return None
+    try:
+        count, lo, hi = prob.motion(theta)
+    except BacklashIdError:
+        return None
+    return count / (len(u) - warmup), (lo, hi)
 
 
 def why_not_acceptable(
@@ -50,8 +79,9 @@ def acceptable_motion(
         model = structure.model(theta)
     except ModelError as exc:
         return f"is no valid backlash ({exc})", None
+    found = record_motion(structure, prob, theta, u, warmup)
     try:
-        moving = _records.moving(model, u, warmup)
+        moving = found[0] if found is not None else _records.moving(model, u, warmup)
     except ModelError as exc:
         return f"does not simulate ({exc})", None
     if moving < min_moving:

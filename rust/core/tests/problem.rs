@@ -199,3 +199,62 @@ fn the_record_is_checked_once_on_construction() {
         Err(Error::Data(_))
     ));
 }
+
+/// (moving count, min x, max x) over t >= warmup from the models themselves.
+fn motion_by_hand(x: &[f64], moving: usize, warmup: usize) -> (usize, f64, f64) {
+    let x = &x[warmup..];
+    let lo = x.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = x.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (moving, lo, hi)
+}
+
+#[test]
+fn motion_is_the_models_moving_count_and_x_range_with_or_without_a_gradient_pass() {
+    // 2e5 samples: the gradient pass runs on two threads (where the machine has two) and
+    // leaves its motion for `motion` at the same theta; elsewhere `motion` simulates
+    let s = Structure::new(2, 2, 3, 0, 0, false, false).unwrap();
+    let u = input(200_000);
+    let y = noisy(
+        &example1_model()
+            .simulate(&u, &example1_model().rest_state())
+            .unwrap(),
+        3,
+    );
+    for warmup in [0, 17, 150_000] {
+        let p = Problem::new(s, u.clone(), y.clone(), warmup).unwrap();
+        for theta in [EXAMPLE1_THETA.to_vec(), perturbed(EXAMPLE1_THETA).to_vec()] {
+            let (lin, bl) = cascade_blocks(&theta);
+            let m = CascadeModel::new(lin.clone(), bl);
+            let x = lin.simulate(&u, &lin.rest_state()).unwrap();
+            let count = m.moving_count(&u, &m.rest_state(), warmup).unwrap();
+            let want = motion_by_hand(&x, count, warmup);
+            let fresh = p.motion(&theta).unwrap();
+            assert_eq!((fresh.moving, fresh.x_min, fresh.x_max), want);
+            p.gradient(&theta).unwrap();
+            let after = p.motion(&theta).unwrap();
+            assert_eq!((after.moving, after.x_min, after.x_max), want);
+        }
+    }
+    // the sandwich: the input block's x and the backlash, as SandwichModel counts them
+    let s2 = Structure::new(2, 2, 3, 2, 2, false, false).unwrap();
+    let u2 = input(3000);
+    let m2 = example2_model();
+    let w = noisy(&m2.simulate(&u2, &m2.rest_state()).unwrap(), 5);
+    let p2 = Problem::new(s2, u2.clone(), w, 10).unwrap();
+    let theta2 = perturbed(EXAMPLE2_THETA).to_vec();
+    let (lin2, bl2, out2) = sandwich_from(&theta2);
+    let x2 = lin2.simulate(&u2, &lin2.rest_state()).unwrap();
+    let m2 = SandwichModel::new(lin2, bl2, out2);
+    let count2 = m2.moving_count(&u2, &m2.rest_state(), 10).unwrap();
+    let got = p2.motion(&theta2).unwrap();
+    assert_eq!(
+        (got.moving, got.x_min, got.x_max),
+        motion_by_hand(&x2, count2, 10)
+    );
+    // several records: per record only
+    let several = Problem::several(s, vec![(u.clone(), y.clone(), 0), (u, y, 0)]).unwrap();
+    assert!(matches!(
+        several.motion(&EXAMPLE1_THETA),
+        Err(Error::Data(_))
+    ));
+}

@@ -272,6 +272,15 @@ impl PyProblem {
         factor_out(py, out)
     }
 
+    /// The record's motion at theta over t >= warmup, on the simulation of `simulate`:
+    /// (samples that move the backlash, min x, max x), x the input linear block's output.
+    /// Taken from the last gradient pass (two-thread cascade passes) or motion call when it
+    /// ran at this very theta, else one simulation. One record only (DataError otherwise).
+    fn motion(&self, py: Python<'_>, theta: Vec<f64>) -> PyResult<(usize, f64, f64)> {
+        let m = run(py, || self.inner.motion(&theta))?;
+        Ok((m.moving, m.x_min, m.x_max))
+    }
+
     /// The output-error gradient at theta: (J^T r, cost = sum r^2) over t >= warmup.
     fn gradient<'py>(&self, py: Python<'py>, theta: Vec<f64>) -> PyResult<(SignalOut<'py>, f64)> {
         let g = run(py, || self.inner.gradient(&theta))?;

@@ -55,6 +55,38 @@ impl OeGradient {
     }
 }
 
+/// What a simulation at theta says of the record's motion over t >= warmup: how many
+/// samples move the backlash (f1 or f2 of eq 12-13) and the range of x (the first linear
+/// block's output) they visit. The fit's checks need both at its end (`Problem::motion`);
+/// the cascade's two-thread gradient pass has them from its forward pass.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Motion {
+    pub moving: usize,
+    pub x_min: f64,
+    pub x_max: f64,
+}
+
+impl Motion {
+    /// No sample yet.
+    pub(crate) fn empty() -> Self {
+        Self {
+            moving: 0,
+            x_min: f64::INFINITY,
+            x_max: f64::NEG_INFINITY,
+        }
+    }
+
+    /// Add samples: their x and case (f1 + 2 f2, 0 when holding).
+    #[inline]
+    pub(crate) fn add(&mut self, x: &[f64], case: &[u8]) {
+        for (&xt, &ct) in x.iter().zip(case) {
+            self.moving += usize::from(ct != 0);
+            self.x_min = self.x_min.min(xt);
+            self.x_max = self.x_max.max(xt);
+        }
+    }
+}
+
 /// `OeGradient` of the cascade, by the reverse recursion of the module header.
 pub fn cascade_oe_gradient(
     linear: &LinearBlock,
@@ -77,6 +109,19 @@ pub(crate) fn cascade_oe_gradient_from(
     y: &[f64],
     warmup: usize,
 ) -> Result<OeGradient> {
+    cascade_oe_gradient_motion_from(linear, backlash, start, u, y, warmup).map(|(g, _)| g)
+}
+
+/// `cascade_oe_gradient_from` and, where its pass had them (the two-thread pass), the
+/// `Motion` of the record over t >= warmup at no extra pass.
+pub(crate) fn cascade_oe_gradient_motion_from(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    start: Option<&Start>,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+) -> Result<(OeGradient, Option<Motion>)> {
     gradient_from_threads(
         linear,
         backlash,
@@ -116,11 +161,11 @@ pub fn cascade_oe_gradient_threads(
     threads: usize,
 ) -> Result<OeGradient> {
     check_pair(u, y, "y")?;
-    gradient_from_threads(linear, backlash, None, u, y, warmup, threads)
+    gradient_from_threads(linear, backlash, None, u, y, warmup, threads).map(|(g, _)| g)
 }
 
 /// `cascade_oe_gradient_from` on `threads` threads (two when >= 2 and the record starts
-/// from rest: `split_gradient`).
+/// from rest: `split_gradient`, which also returns the `Motion`).
 fn gradient_from_threads(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
@@ -129,15 +174,15 @@ fn gradient_from_threads(
     y: &[f64],
     warmup: usize,
     threads: usize,
-) -> Result<OeGradient> {
+) -> Result<(OeGradient, Option<Motion>)> {
     branch_degree(backlash)?;
     if threads >= 2 && start.is_none() {
         let split = match backlash.padded_step() {
             Some(padded) => split_gradient(linear, backlash, u, y, warmup, padded),
             None => split_gradient(linear, backlash, u, y, warmup, backlash),
         };
-        if let Some(out) = split {
-            return out.finished();
+        if let Some((out, motion)) = split {
+            return Ok((out.finished()?, Some(motion)));
         }
         guard::check()?;
         // not split (orders beyond the kernel's, slow poles) or the simulation overflowed:
@@ -165,7 +210,7 @@ fn gradient_from_threads(
         Some(padded) => reverse.run(|xt, yp| padded.switching(xt, yp)),
         None => reverse.run(|xt, yp| switching(backlash, xt, yp)),
     };
-    out.finished()
+    Ok((out.finished()?, None))
 }
 
 /// The share of the record whose reverse pass the second thread takes: the first thread
@@ -188,7 +233,8 @@ const DECAYED: f64 = 1e-200;
 /// lambda dies at the first move, nu as the poles of 1/B). g is the sum of the two parts and
 /// of the homogeneous responses weighted by the first thread's state at M. None if the
 /// orders are beyond the fixed-size kernel's, the poles are too slow for the responses to
-/// decay early, or the simulation overflowed.
+/// decay early, or the simulation overflowed. With g, the `Motion` over t >= warmup, from
+/// the forward pass's x and cases (each block's while in cache).
 fn split_gradient(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
@@ -196,7 +242,7 @@ fn split_gradient(
     y: &[f64],
     warmup: usize,
     step: impl Step + Send + Sync,
-) -> Option<OeGradient> {
+) -> Option<(OeGradient, Motion)> {
     let (len, nb) = (u.len(), linear.nb());
     let n = backlash.left().coefficients().len();
     if linear.na() > FIXED || nb > FIXED || !(1..=FIXED).contains(&n) || len < 4 * FIXED {
@@ -211,12 +257,15 @@ fn split_gradient(
     // the forward pass in blocks: x, then y and the case of each sample (f1 + 2 f2) from
     // the step itself, so that the reverse pass reads the case instead of recomputing it
     let mut rec = linear.with_recursion(&linear.rest_state(), Boxed);
+    // `offset`: the record's index of u[0], for the motion's samples t >= warmup
     let forward = |rec: &mut Box<dyn BlockRecursion>,
                    u: &[f64],
                    x: &mut [f64],
                    y: &mut [f64],
                    case: &mut [u8],
-                   y0: f64| {
+                   y0: f64,
+                   offset: usize,
+                   motion: &mut Motion| {
         let mut finite = true;
         let mut y_prev = y0;
         for (k, uk) in u.chunks(FORWARD_BLOCK).enumerate() {
@@ -227,18 +276,18 @@ fn split_gradient(
             let at = k * FORWARD_BLOCK;
             let xs = &mut x[at..at + uk.len()];
             rec.run_block(uk, xs);
-            for ((xt, yt), ct) in xs
-                .iter()
-                .zip(&mut y[at..at + uk.len()])
-                .zip(&mut case[at..at + uk.len()])
-            {
+            let cs = &mut case[at..at + uk.len()];
+            for ((xt, yt), ct) in xs.iter().zip(&mut y[at..at + uk.len()]).zip(cs.iter_mut()) {
                 let (v, c) = step.step_case(*xt, y_prev);
                 (*yt, *ct, y_prev) = (v, c, v);
                 finite &= xt.is_finite() & v.is_finite();
             }
+            let from = warmup.saturating_sub(offset + at).min(uk.len());
+            motion.add(&xs[from..], &cs[from..]);
         }
         finite
     };
+    let mut motion = Motion::empty();
     // not allocated: the one-thread pass (which reports the memory it cannot have)
     let (mut x_head, mut y_head, mut case_head) = (
         guard::filled(m, 0.0, "x").ok()?,
@@ -252,6 +301,8 @@ fn split_gradient(
         &mut y_head,
         &mut case_head,
         0.0,
+        0,
+        &mut motion,
     ) {
         return None;
     }
@@ -307,6 +358,8 @@ fn split_gradient(
             &mut y_tail[FIXED..],
             &mut case_tail[FIXED..],
             y_head[m - 1],
+            m,
+            &mut motion,
         );
         let tail_out = finite.then(|| {
             let tail = Reverse {
@@ -346,7 +399,7 @@ fn split_gradient(
             out.gradient[j] = v;
         }
         out.cost = at_m.cost + cost_head;
-        Some(out)
+        Some((out, motion))
     })
 }
 

@@ -15,7 +15,7 @@ pub mod sensitivity;
 pub mod wiener_hammerstein;
 
 pub use augmented_problem::{AugmentedProblem, RecordStart};
-pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, OeGradient};
+pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, Motion, OeGradient};
 pub use initial::InitialState;
 pub use problem::{Iteration, Problem, Record, Structure};
 pub use regressor::{

@@ -21,15 +21,17 @@
 
 use crate::error::{Error, Result};
 use crate::guard;
-use crate::identify::gradient::OeGradient;
-use crate::identify::gradient::{cascade_oe_gradient_from, sandwich_oe_gradient_from};
+use crate::identify::gradient::{
+    cascade_oe_gradient_from, cascade_oe_gradient_motion_from, sandwich_oe_gradient_from,
+};
+use crate::identify::gradient::{Motion, OeGradient};
 use crate::identify::initial::{self, InitialState, Start};
 use crate::identify::output_error_cost;
 use crate::identify::regressor::solve_factor;
 use crate::identify::sensitivity::{cascade_oe_factor_from, oe_threads, sandwich_oe_factor_from};
 use crate::identify::{CascadeRegression, SandwichRegression};
 use crate::linalg::{LeastSquares, TriangularFactor};
-use crate::model::backlash::GeneralBacklash;
+use crate::model::backlash::{GeneralBacklash, Step};
 use crate::model::cascade::CascadeModel;
 use crate::model::linear::{blame_feeding_block, LinearBlock, MAX_ORDER};
 use crate::model::sandwich::SandwichModel;
@@ -390,6 +392,59 @@ impl Record {
 pub struct Problem {
     structure: Structure,
     records: Vec<Record>,
+    /// The `Motion` of the last gradient pass that had it, with its theta (`motion`).
+    motion: MotionCache,
+}
+
+/// The last (theta, `Motion`) a gradient pass found: the fit asks for the motion at its end,
+/// where its last gradient pass usually ran, and is spared a simulation of the record.
+#[derive(Debug, Default)]
+struct MotionCache(std::sync::Mutex<Option<(Vec<f64>, Motion)>>);
+
+impl MotionCache {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Option<(Vec<f64>, Motion)>> {
+        // a poisoned cache (a panic while it was held) is only a cache
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// The motion found at exactly this theta (bit for bit), if any.
+    fn at(&self, theta: &[f64]) -> Option<Motion> {
+        match &*self.lock() {
+            Some((t, m))
+                if t.len() == theta.len()
+                    && t.iter().zip(theta).all(|(a, b)| a.to_bits() == b.to_bits()) =>
+            {
+                Some(*m)
+            }
+            _ => None,
+        }
+    }
+}
+
+impl Clone for MotionCache {
+    fn clone(&self) -> Self {
+        Self(std::sync::Mutex::new(self.lock().clone()))
+    }
+}
+
+/// The `Motion` over t >= warmup of the backlash driven by x from memory y0; an overflowing
+/// output is the simulation's ModelError.
+fn motion_along(step: impl Step, x: &[f64], y0: f64, warmup: usize) -> Result<Motion> {
+    let mut motion = Motion::empty();
+    let mut y_prev = y0;
+    for (t, &xt) in x.iter().enumerate() {
+        let (v, case) = step.step_case(xt, y_prev);
+        if !v.is_finite() {
+            return Err(crate::model::backlash::output_overflow(t, xt));
+        }
+        if t >= warmup {
+            motion.add(&[xt], &[case]);
+        }
+        y_prev = v;
+    }
+    Ok(motion)
 }
 
 impl Problem {
@@ -398,6 +453,7 @@ impl Problem {
         Ok(Self {
             structure,
             records: vec![Record::new(u, y, warmup, None)?],
+            motion: MotionCache::default(),
         })
     }
 
@@ -417,7 +473,11 @@ impl Problem {
             .enumerate()
             .map(|(i, (u, y, w))| Record::new(u, y, w, Some(i)))
             .collect::<Result<Vec<_>>>()?;
-        Ok(Self { structure, records })
+        Ok(Self {
+            structure,
+            records,
+            motion: MotionCache::default(),
+        })
     }
 
     pub fn structure(&self) -> &Structure {
@@ -714,7 +774,23 @@ impl Problem {
         let all = self.unpack_all(theta)?;
         let p0 = self.structure.model_size();
         if self.records.len() == 1 {
-            return Self::record_gradient(&all[0].0, &self.records[0], p0);
+            let (b, rec) = (&all[0].0, &self.records[0]);
+            if b.output.is_none() {
+                let start = Self::start(b, p0);
+                let (g, motion) = cascade_oe_gradient_motion_from(
+                    &b.linear,
+                    &b.backlash,
+                    start.as_ref(),
+                    &rec.u,
+                    &rec.y,
+                    rec.warmup,
+                )?;
+                if let Some(m) = motion {
+                    *self.motion.lock() = Some((theta.to_vec(), m));
+                }
+                return Ok(g);
+            }
+            return Self::record_gradient(b, rec, p0);
         }
         let mut total = OeGradient {
             gradient: vec![0.0; self.size()],
@@ -728,6 +804,37 @@ impl Problem {
             total.cost += g.cost;
         }
         Ok(total)
+    }
+
+    /// The `Motion` of the record at theta over t >= warmup (the samples that move the
+    /// backlash and the range of x), on the simulation of `simulate` (from rest or from
+    /// theta's initial state): the last gradient pass's (or motion's) if it ran at this very
+    /// theta and had it, else one simulation of x and the backlash. One record only.
+    pub fn motion(&self, theta: &[f64]) -> Result<Motion> {
+        if self.records.len() != 1 {
+            return Err(Error::Data(
+                "motion: a problem of one record only (several: per record)".into(),
+            ));
+        }
+        let b = self.structure.unpack(theta)?;
+        if let Some(m) = self.motion.at(theta) {
+            return Ok(m);
+        }
+        let rec = &self.records[0];
+        let (x, y0) = match &b.initial {
+            Some(init) => (
+                initial::simulate_from(&b.linear, &rec.u, &init.x0)?,
+                init.y_prev,
+            ),
+            None => (b.linear.simulate(&rec.u, &b.linear.rest_state())?, 0.0),
+        };
+        let motion = match b.backlash.padded_step() {
+            Some(padded) => motion_along(padded, &x, y0, rec.warmup),
+            None => motion_along(&b.backlash, &x, y0, rec.warmup),
+        }
+        .map_err(|e| blame_feeding_block(e, &b.linear, "input"))?;
+        *self.motion.lock() = Some((theta.to_vec(), motion));
+        Ok(motion)
     }
 
     fn record_gradient(b: &Blocks, rec: &Record, p0: usize) -> Result<OeGradient> {

@@ -16,7 +16,7 @@ use crate::guard;
 use crate::identify::initial::{simulate_from, start_cols, Start};
 use crate::identify::problem::Layout;
 use crate::linalg::streaming::{default_threads, fold_stream, fold_stream_parts, TriangularFactor};
-use crate::model::backlash::GeneralBacklash;
+use crate::model::backlash::{GeneralBacklash, PaddedSlope, PaddedStep};
 use crate::model::linear::LinearBlock;
 use crate::model::signal::{check_same_length, check_signal};
 
@@ -126,6 +126,11 @@ pub(crate) enum Move {
 /// w_u(t-i), dx(t)/db_j = -w_x(t-j), the same operations as the recursions on dx themselves.
 struct ChainStepper<'a> {
     backlash: &'a GeneralBacklash,
+    /// The branches with a fixed number of Horner steps (the same values), where the degree
+    /// allows: the walk's L(x) and R(x).
+    padded: Option<PaddedStep>,
+    /// Their slopes likewise (the same values as `Branch::slope`).
+    slopes: Option<(PaddedSlope, PaddedSlope)>,
     b: &'a [f64],
     u: &'a [f64],
     x: Vec<f64>,
@@ -167,6 +172,8 @@ impl<'a> ChainStepper<'a> {
         }
         Ok(Self {
             backlash,
+            padded: backlash.padded_step(),
+            slopes: backlash.padded_slopes(),
             b: linear.b(),
             u,
             x,
@@ -195,11 +202,17 @@ impl<'a> ChainStepper<'a> {
         let xt = self.x[t];
         let yp = self.y_prev;
         // eq (1) in its case order, each branch evaluated once (`GeneralBacklash::step`)
-        let lv = bl.left().value(xt);
+        let lv = match &self.padded {
+            Some(p) => p.left_value(xt),
+            None => bl.left().value(xt),
+        };
         let (yt, mv) = if lv <= yp {
             (lv, Move::Left)
         } else {
-            let rv = bl.right().value(xt);
+            let rv = match &self.padded {
+                Some(p) => p.right_value(xt),
+                None => bl.right().value(xt),
+            };
             if rv >= yp {
                 (rv, Move::Right)
             } else {
@@ -224,7 +237,11 @@ impl<'a> ChainStepper<'a> {
                 Move::Left => (bl.left(), xt + bl.c_left()),
                 _ => (bl.right(), xt - bl.c_right()),
             };
-            let slope = branch.slope(xt);
+            let slope = match (&self.slopes, mv) {
+                (Some((left, _)), Move::Left) => left.slope(xt),
+                (Some((_, right)), _) => right.slope(xt),
+                (None, _) => branch.slope(xt),
+            };
             for (k, w) in self.wu[..na].iter().enumerate() {
                 dy[k] = slope * w;
             }

@@ -320,6 +320,47 @@ impl PaddedBranch {
     }
 }
 
+/// A branch's derivative as [n m_n, .., 1 m_1] behind leading zeros (`Branch::slope` with a
+/// fixed number of Horner steps: the same products k m_k, and 0 * xi + 0 = +0 before them,
+/// so the same bits).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PaddedSlope {
+    shift: f64,
+    d: [f64; PADDED],
+}
+
+impl PaddedSlope {
+    fn new(branch: &Branch) -> Option<Self> {
+        let mut d = [0.0; PADDED];
+        let tail = PADDED.checked_sub(branch.m.len())?;
+        for (k, (slot, mi)) in d[tail..].iter_mut().zip(branch.m.iter().rev()).enumerate() {
+            *slot = (branch.m.len() - k) as f64 * mi;
+        }
+        Some(PaddedSlope {
+            shift: branch.shift,
+            d,
+        })
+    }
+
+    /// d value / dx at x, as `Branch::slope`.
+    #[inline(always)]
+    pub(crate) fn slope(&self, x: f64) -> f64 {
+        let xi = x + self.shift;
+        self.d.iter().fold(0.0, |acc, d| acc * xi + d)
+    }
+}
+
+impl GeneralBacklash {
+    /// The slopes of (L, R) with a fixed number of Horner steps; None for a branch of degree
+    /// above `PADDED`.
+    pub(crate) fn padded_slopes(&self) -> Option<(PaddedSlope, PaddedSlope)> {
+        Some((
+            PaddedSlope::new(&self.left)?,
+            PaddedSlope::new(&self.right)?,
+        ))
+    }
+}
+
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct PaddedStep {
     left: PaddedBranch,
@@ -327,6 +368,18 @@ pub(crate) struct PaddedStep {
 }
 
 impl PaddedStep {
+    /// L(x): `Branch::value` of the left branch, the same bits.
+    #[inline(always)]
+    pub(crate) fn left_value(&self, x: f64) -> f64 {
+        self.left.value(x)
+    }
+
+    /// R(x): `Branch::value` of the right branch, the same bits.
+    #[inline(always)]
+    pub(crate) fn right_value(&self, x: f64) -> f64 {
+        self.right.value(x)
+    }
+
     /// `switching::switching` (eq 12-13, case order of eq 1) with the padded branches: the
     /// same bits, a fixed number of Horner steps.
     #[inline(always)]
@@ -455,6 +508,32 @@ mod tests {
     use super::*;
 
     use crate::test_params::example1_backlash as example1;
+
+    #[test]
+    fn padded_branches_and_slopes_are_the_branches_bit_for_bit() {
+        let cubic = example1();
+        let linear = GeneralBacklash::new(0.3, 0.2, vec![1.1], vec![0.9]).unwrap();
+        let quadratic = GeneralBacklash::new(0.3, 0.2, vec![1.0, -0.4], vec![1.2, 0.3]).unwrap();
+        for bl in [cubic, linear, quadratic] {
+            let step = bl.padded_step().unwrap();
+            let (ls, rs) = bl.padded_slopes().unwrap();
+            for k in -400..=400 {
+                let x = f64::from(k) * 0.0123 + 1e-3;
+                assert_eq!(step.left_value(x).to_bits(), bl.left().value(x).to_bits());
+                assert_eq!(step.right_value(x).to_bits(), bl.right().value(x).to_bits());
+                assert_eq!(ls.slope(x).to_bits(), bl.left().slope(x).to_bits());
+                assert_eq!(rs.slope(x).to_bits(), bl.right().slope(x).to_bits());
+            }
+        }
+        let quintic = GeneralBacklash::new(
+            0.6,
+            0.5,
+            vec![1.0, 0.0, 0.2, 0.0, 0.01],
+            vec![1.5, 0.1, 0.2],
+        )
+        .unwrap();
+        assert!(quintic.padded_slopes().is_none());
+    }
 
     #[test]
     fn branches_cross_the_axis_at_minus_c_left_and_c_right() {
