@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 from typing_extensions import Self
 
 __all__ = [
+    "MAX_ORDER",
     "LinearBlock",
     "GeneralBacklash",
     "CascadeModel",
