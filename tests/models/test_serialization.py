@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -85,3 +86,11 @@ def test_repr_uses_the_paper_symbols():
     text = str(bx.example2())
     assert "w(t) = 1 y(t-1) + 0.15 y(t-2) + 0.2 w(t-1) - 0.35 w(t-2)" in text
     assert "x(t) = 0.7 u(t-1) + 0.5 u(t-2) + 0.2 x(t-1) - 0.35 x(t-2)" in str(bx.example1())
+
+
+def test_fit_result_json_is_refused_with_a_pointer_to_its_model_entry():
+    # a fit JSON nests the model under 'model': the message says to load that entry
+    wrapped = {"model": bx.example1().to_dict(), "estimation": {"rmse": 0.1}}
+    with pytest.raises(bx.ModelError, match=r"fit or diagnosis result.*load its 'model' entry"):
+        bx.model_from_dict(wrapped)
+    assert bx.model_from_dict(wrapped["model"]) == bx.example1()

@@ -43,6 +43,11 @@ def model_from_dict(data: dict[str, Any]) -> Model:
     True
     """
     blocks = _BLOCKS.get(_kind(data))
+    if blocks is None and isinstance(data.get("model"), dict):
+        raise ModelError(
+            "this is a fit or diagnosis result (its 'model' entry is a dict), not a model description: "
+            "load its 'model' entry, e.g. model_from_dict(json.load(f)['model'])"
+        )
     if blocks is None:
         raise ModelError(f"unknown model kind {data['model']!r}: expected 'cascade' or 'sandwich'")
     extra = sorted(map(str, set(data) - {"model", "format_version", *blocks}))
