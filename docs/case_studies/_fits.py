@@ -22,3 +22,18 @@ def fit_structure(kind: str, u: np.ndarray | list[np.ndarray], y: np.ndarray | l
         else:
             result = bid.fit_hammerstein_backlash(u, y, initial_state="estimate", warmup=warmup, **kw)
     return result, not any("branches" in str(w.message) for w in caught)
+
+
+def print_candidates(report: bid.DiagnosisReport, nominal: str, scale: float, gap_on: str, rmse_column: str) -> bid.diagnosis.Candidate:
+    """Print the diagnosis ``report``'s candidates as a Markdown table below the ``nominal``
+    model's row (gap closed ``gap_on`` the validation data, p-value, extra parameters, and the
+    validation RMSE in the record's units, model units times ``scale``, headed ``rmse_column``)
+    and return the best augmented candidate: the named one, else the first of the ranking that
+    simulates the output (not colored_noise, a one-step predictor)."""
+    print(f"| candidate | gap closed on {gap_on} | p-value | extra parameters | {rmse_column} |")
+    print("|---|---|---|---|---|")
+    print(f"| (nominal {nominal}) | | | | {scale * report.nominal_validation_rmse:.3f} |")
+    for c in report.ranking:
+        note = " (one-step prediction)" if c.effect == "colored_noise" else ""
+        print(f"| {c.effect}{note} | {100 * c.gap_closed:.0f} % | {c.p_value:.1e} | {c.n_extra} | {scale * c.validation_rmse:.3f} |")
+    return report.best or next(c for c in report.ranking if c.effect != "colored_noise")

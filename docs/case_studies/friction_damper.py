@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _fits import fit_structure  # docs/case_studies/_fits.py, beside this script
+from _fits import fit_structure, print_candidates  # docs/case_studies/_fits.py, beside this script
 
 import backlashid as bid
 from backlashid.app import Record, concatenate, decimate, load_record
@@ -161,13 +161,7 @@ def main() -> None:
     print(report.summary())
     print(f"\ndiagnosis took {time.perf_counter() - t:.2f} s (model units: output / {scaling.output_scale:.4g} kip)\n")
     scale = abs(scaling.output_scale)
-    print("| candidate | gap closed on the validation records | p-value | extra parameters | validation RMSE [kip] |")
-    print("|---|---|---|---|---|")
-    print(f"| (nominal {best_cascade}) | | | | {scale * report.nominal_validation_rmse:.3f} |")
-    for c in report.ranking:
-        note = " (one-step prediction)" if c.effect == "colored_noise" else ""
-        print(f"| {c.effect}{note} | {100 * c.gap_closed:.0f} % | {c.p_value:.1e} | {c.n_extra} | {scale * c.validation_rmse:.3f} |")
-    top = report.best or next(c for c in report.ranking if c.effect != "colored_noise")
+    top = print_candidates(report, best_cascade, scale, "the validation records", "validation RMSE [kip]")
     print(f"\nbest augmented model: {best_cascade} + {top.effect} ({'named' if report.best else 'not named: ' + report.best_effect})\n")
 
     # 3. the earthquake records, scored only now

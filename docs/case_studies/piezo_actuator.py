@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _fits import fit_structure  # docs/case_studies/_fits.py, beside this script
+from _fits import fit_structure, print_candidates  # docs/case_studies/_fits.py, beside this script
 
 import backlashid as bid
 from backlashid.identify import Scaling
@@ -113,13 +113,7 @@ def main() -> None:
     report = bid.diagnose(cascade, estimation=(U, Y), validation=(TU, TY))
     print(report.summary())
     print(f"\ndiagnosis took {time.perf_counter() - t:.2f} s (model units; 1 unit = {um:.4g} µm)\n")
-    print("| candidate | gap closed on the test record | p-value | extra parameters | test RMSE [µm] |")
-    print("|---|---|---|---|---|")
-    print(f"| (nominal {best_cascade[0]}) | | | | {um * report.nominal_validation_rmse:.3f} |")
-    for c in report.ranking:
-        note = " (one-step prediction)" if c.effect == "colored_noise" else ""
-        print(f"| {c.effect}{note} | {100 * c.gap_closed:.0f} % | {c.p_value:.1e} | {c.n_extra} | {um * c.validation_rmse:.3f} |")
-    top = report.best or next(c for c in report.ranking if c.effect != "colored_noise")
+    top = print_candidates(report, best_cascade[0], um, "the test record", "test RMSE [µm]")
     print(f"\nbest augmented model: {best_cascade[0]} + {top.effect} ({'named' if report.best else 'not named: ' + report.best_effect})\n")
 
     # 2b. the same diagnosis with minor loops in the estimation record: test run 1 (its amplitude
@@ -128,13 +122,7 @@ def main() -> None:
     report1 = bid.diagnose(cascade, estimation=(TU[:SPLIT], TY[:SPLIT]), validation=(TU[SPLIT:], TY[SPLIT:]))
     print(report1.summary())
     print(f"\ndiagnosis took {time.perf_counter() - t:.2f} s\n")
-    print("| candidate | gap closed on runs 2 and 3 | p-value | extra parameters | RMSE on runs 2 and 3 [µm] |")
-    print("|---|---|---|---|---|")
-    print(f"| (nominal {best_cascade[0]}) | | | | {um * report1.nominal_validation_rmse:.3f} |")
-    for c in report1.ranking:
-        note = " (one-step prediction)" if c.effect == "colored_noise" else ""
-        print(f"| {c.effect}{note} | {100 * c.gap_closed:.0f} % | {c.p_value:.1e} | {c.n_extra} | {um * c.validation_rmse:.3f} |")
-    top1 = report1.best or next(c for c in report1.ranking if c.effect != "colored_noise")
+    top1 = print_candidates(report1, best_cascade[0], um, "runs 2 and 3", "RMSE on runs 2 and 3 [µm]")
     print(f"\nbest augmented model, estimated on run 1: {top1.effect} ({'named' if report1.best else 'not named: ' + report1.best_effect})\n")
 
     # 3. simulation error per run beside the device's tracking errors
