@@ -1,36 +1,19 @@
 //! Time per sample of the cascade's output-error gradient pass (forward simulation plus the
 //! reverse recursion) beside the forward simulation alone and the streamed factor. Run:
 //! cargo run --release -p backlashid-core --example gradient_speed [N...]
-use std::time::Instant;
-
 use backlashid_core::identify::gradient::cascade_oe_gradient_threads;
 use backlashid_core::identify::sensitivity::cascade_oe_factor_threads;
 use backlashid_core::CascadeModel;
 
 #[path = "../src/test_params.rs"]
 mod test_params;
+#[path = "common/timing.rs"]
+mod timing;
 use test_params::{example1, input};
-
-fn best<T>(reps: usize, n: usize, mut f: impl FnMut() -> T) -> f64 {
-    let mut best = f64::INFINITY;
-    for _ in 0..reps {
-        let t = Instant::now();
-        std::hint::black_box(f());
-        best = best.min(t.elapsed().as_secs_f64());
-    }
-    best / n as f64 * 1e9
-}
+use timing::{best, sizes};
 
 fn main() {
-    let sizes: Vec<usize> = std::env::args()
-        .skip(1)
-        .map(|a| a.parse::<f64>().expect("N") as usize)
-        .collect();
-    let sizes = if sizes.is_empty() {
-        vec![1_000_000]
-    } else {
-        sizes
-    };
+    let sizes = sizes(&[1_000_000]);
     let (lin, bl) = example1();
     println!("ns per sample (best of 9); cascade p = 11 (Example 1)");
     for &n in &sizes {

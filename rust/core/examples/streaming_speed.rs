@@ -1,8 +1,6 @@
 //! Time per sample of the streaming regressions and output-error factor against the dense
 //! path (regressor matrix + QR). Run: cargo run --release -p backlashid-core --example
 //! streaming_speed [N...]
-use std::time::Instant;
-
 use backlashid_core::identify::regressor::{CascadeRegression, SandwichRegression};
 use backlashid_core::identify::sensitivity::{
     cascade_oe_factor_threads, cascade_sensitivity, sandwich_oe_factor_threads,
@@ -11,7 +9,10 @@ use backlashid_core::{CascadeModel, SandwichModel};
 
 #[path = "../src/test_params.rs"]
 mod test_params;
+#[path = "common/timing.rs"]
+mod timing;
 use test_params::{example1, example2, input, names};
+use timing::{best, sizes};
 
 /// The solve before this change: column-scaled N x p matrix, faer QR, explicit residual.
 fn faer_dense(a: &[f64], rows: usize, p: usize, b: &[f64]) -> Vec<f64> {
@@ -29,26 +30,8 @@ fn faer_dense(a: &[f64], rows: usize, p: usize, b: &[f64]) -> Vec<f64> {
     (0..p).map(|j| sol[(j, 0)] / scale[j]).collect()
 }
 
-fn best<T>(reps: usize, n: usize, mut f: impl FnMut() -> T) -> f64 {
-    let mut best = f64::INFINITY;
-    for _ in 0..reps {
-        let t = Instant::now();
-        std::hint::black_box(f());
-        best = best.min(t.elapsed().as_secs_f64());
-    }
-    best / n as f64 * 1e9
-}
-
 fn main() {
-    let sizes: Vec<usize> = std::env::args()
-        .skip(1)
-        .map(|a| a.parse::<f64>().expect("N") as usize)
-        .collect();
-    let sizes = if sizes.is_empty() {
-        vec![1_000_000, 10_000_000]
-    } else {
-        sizes
-    };
+    let sizes = sizes(&[1_000_000, 10_000_000]);
     let (lin, bl) = example1();
     let (l2, b2, o2) = example2();
     let names = names(14);
