@@ -11,7 +11,6 @@ from numpy.typing import NDArray
 from typing_extensions import Self
 
 __all__ = [
-    "MAX_ORDER",
     "LinearBlock",
     "GeneralBacklash",
     "CascadeModel",
@@ -25,8 +24,6 @@ __all__ = [
     "spectral_radius",
     "simulate_augmented",
 ]
-
-MAX_ORDER: int  # largest order or degree of a model (the core's limit)
 
 _F = NDArray[np.float64]
 _B = NDArray[np.bool_]

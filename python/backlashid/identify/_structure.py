@@ -35,10 +35,8 @@ from numpy.typing import NDArray
 from .. import _core
 from .._docstrings import fill
 from .._validation import check_flag, check_int
-from ..errors import DataError, ModelError
+from ..errors import DataError
 from ..models import CascadeModel, GeneralBacklash, LinearBlock, Model, SandwichModel
-
-MAX_ORDER = _core.MAX_ORDER  # orders and degrees above the core's limit are refused before anything is built
 
 _THETA_DOC = """Parameters
 ----------
@@ -143,12 +141,7 @@ class Structure:
 
     def __post_init__(self) -> None:
         for name, value, least in (("na", self.na, 1), ("nb", self.nb, 0), ("degree", self.degree, 1), ("nr", self.nr, 0), ("ns", self.ns, 0)):
-            check_int(value, name, least)  # before anything proportional to it is built
-            if value > MAX_ORDER:
-                raise ModelError(
-                    f"{name} = {value}: orders and the degree are at most {MAX_ORDER} (a linear block's poles are the "
-                    "eigenvalues of its companion matrix, O(order^3), and no record identifies that many parameters)"
-                )
+            check_int(value, name, least)
         for name in ("feedthrough", "output_feedthrough", "initial_state"):
             check_flag(getattr(self, name), name)
         if self.is_sandwich and (self.nr < 1 or self.ns < 0):

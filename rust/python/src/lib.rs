@@ -21,8 +21,6 @@ use pyo3::prelude::*;
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::remember_main_thread(m.py())?;
-    // The largest order or degree a model may have: one home, read by the Python checks too.
-    m.add("MAX_ORDER", backlashid_core::model::linear::MAX_ORDER)?;
     m.add_class::<models::PyLinearBlock>()?;
     m.add_class::<models::PyGeneralBacklash>()?;
     m.add_class::<models::PyCascadeModel>()?;
