@@ -172,11 +172,6 @@ def check_instance(value: Any, cls: type, name: str, error: type[Exception] = Mo
         raise error(f"{name} must be a {cls.__name__}, got {type(value).__name__}")
 
 
-def check_whole(value: Any, name: str, least: int) -> int:
-    """A whole number >= ``least`` (an order, a degree), as an int."""
-    return check_int(value, name, least)
-
-
 def check_warmup(warmup: Any, n: int) -> int:
     """The samples left out at the start of a record of ``n``: a whole number, 0 <= warmup < n."""
     if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or not 0 <= warmup < n:

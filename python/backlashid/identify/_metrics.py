@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docstrings import AXES, fill
-from .._validation import as_signal, check_finite, check_model, check_warmup, check_whole, one_record
+from .._validation import as_signal, check_finite, check_int, check_model, check_warmup, one_record
 from ..errors import DataError
 from ..models import CascadeModel, Model, SandwichModel
 from ._state import simulate_from_samples
@@ -318,7 +318,7 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
     u_arr, y_arr = one_record(u, y, flatten=True)
     check_finite(u_arr, "u")
     check_finite(y_arr, "y")
-    init = check_whole(init_samples, "init_samples", 0)
+    init = check_int(init_samples, "init_samples", 0)
     if init == 0:
         check_warmup(warmup, y_arr.size)
     if init == 0:

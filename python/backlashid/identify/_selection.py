@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike
 
 from .._docstrings import AXES, fill
 from .._json import jsonable
-from .._validation import check_finite, check_flag, check_warmup, check_whole, one_record, shown
+from .._validation import check_finite, check_flag, check_int, check_warmup, one_record, shown
 from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ._fit import FitResult, fit_cascade, fit_sandwich
 from ._structure import Structure
@@ -204,7 +204,7 @@ def _grid(value: Any, name: str, least: int) -> list[int]:
         raise DataError(f"{name} = {value!r}: give a whole number >= {least} or a list of them") from None
     if not values:
         raise DataError(f"{name} = {value!r}: the grid is empty; give at least one value")
-    return sorted({check_whole(v, name, least) for v in values})
+    return sorted({check_int(v, name, least) for v in values})
 
 
 def _error_text(exc: BaseException) -> str:

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docstrings import fill
-from .._validation import check_noise_std, check_whole, one_record
+from .._validation import check_int, check_noise_std, one_record
 from ..errors import BacklashIdError, DataError, ModelError, NotIdentifiableError
 from ..models import CascadeModel, CascadeState, LinearBlock, Model, SandwichModel, SandwichSimulation, SandwichState
 from ._refine import levenberg_marquardt
@@ -536,7 +536,7 @@ def _noise_std(noise_std: Any) -> float | None:
 
 
 def _samples(init_samples: Any, n: int, name: str) -> int:
-    k = check_whole(init_samples, name, 1)
+    k = check_int(init_samples, name, 1)
     if k > n:
         raise DataError(f"{name} = {k}: the record has only {n} samples")
     return k

@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._docstrings import AXES, fill
-from .._validation import as_coefficients, as_signal, check_flag, check_whole, identification_record
+from .._validation import as_coefficients, as_signal, check_flag, check_int, identification_record
 from ..errors import BacklashIdError, DataError, ModelError, NotConvergedError
 from ..models import GeneralBacklash, LinearBlock, SandwichModel, model_from_dict
 from ._refine import OutputErrorFit, levenberg_marquardt
@@ -741,9 +741,9 @@ def fit_wiener_hammerstein(
     >>> bool(fit.simulation_rmse < 1e-6 * np.std(truth.simulate(u))), fit.nb, fit.ns
     (True, 1, 1)
     """
-    degree, nb, ns = check_whole(degree, "degree", 1), check_whole(nb, "nb", 1), check_whole(ns, "ns", 1)
-    max_iter, split_samples = check_whole(max_iter, "max_iter", 0), check_whole(split_samples, "split_samples", 1)
-    split_degree, split_iter = check_whole(split_degree, "split_degree", 1), check_whole(split_iter, "split_iter", 0)
+    degree, nb, ns = check_int(degree, "degree", 1), check_int(nb, "nb", 1), check_int(ns, "ns", 1)
+    max_iter, split_samples = check_int(max_iter, "max_iter", 0), check_int(split_samples, "split_samples", 1)
+    split_degree, split_iter = check_int(split_degree, "split_degree", 1), check_int(split_iter, "split_iter", 0)
     feedthrough = check_flag(feedthrough, "feedthrough")
     if output_feedthrough is not None:
         output_feedthrough = check_flag(output_feedthrough, "output_feedthrough")
