@@ -123,6 +123,28 @@ class Scaling:
         """
         return (as_signal(u, "u") - self.input_offset) / self.input_scale
 
+    def input_from_model(self, u_m: ArrayLike) -> NDArray[np.float64]:
+        """A model input in measured units (e.g. a compensator's input, to apply to the device).
+
+        Parameters
+        ----------
+        u_m : array_like
+            Input in model units.
+
+        Returns
+        -------
+        numpy.ndarray
+            input_offset + input_scale * u_m.
+
+        Examples
+        --------
+        >>> from backlashid.identify import Scaling
+        >>> s = Scaling(1.0, 2.0, 0.0, 1.0)
+        >>> s.input_from_model(s.input_to_model([3.0, 5.0])).tolist()
+        [3.0, 5.0]
+        """
+        return self.input_offset + self.input_scale * as_signal(u_m, "u")
+
     def output_to_model(self, y: ArrayLike) -> NDArray[np.float64]:
         """The measured output in model units.
 
