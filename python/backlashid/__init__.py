@@ -49,6 +49,7 @@ from .identify import (
     wiener_hammerstein_model,
 )
 from .models import (
+    BacklashState,
     BranchCheck,
     CascadeModel,
     CascadeSimulation,
@@ -117,6 +118,7 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "BacklashIdError",
+    "BacklashState",
     "BranchCheck",
     "CascadeModel",
     "CascadeSimulation",
