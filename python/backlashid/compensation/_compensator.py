@@ -74,7 +74,10 @@ def compensate(
     cascade skips the first. A linear block's inverse is a filter of the target D samples
     ahead, D its relative degree (1 for eq 16, 0 with a feedthrough); a block with zeros on
     or outside the unit circle gets the stable approximation (zeros reflected, static gain
-    kept; :attr:`Compensator.approximate` says so), which no longer tracks exactly. The
+    kept; :attr:`Compensator.approximate` says so), which no longer tracks exactly: it
+    follows slow references, but the jump across the dead band at a reversal excites its
+    all-pass error, which the backlash can then hold (the inverse's memory is no longer the
+    plant's) until the reference passes that level. The
     preview is D = d_G for a cascade, d_G + d_H for a sandwich: u[t] targets
     ``reference[t + D]`` (the last D samples target the last reference value), so that
     ``model.simulate(u)`` equals the reference from sample D on (to rounding; the first D
