@@ -39,10 +39,10 @@ def native_chain(model: Any, initial_state: Any, name: str = "model") -> tuple[A
         w = model.rest_state() if initial_state is None else initial_state
         if not isinstance(w, SandwichState):
             raise DataError(f"initial_state must be a SandwichState for a sandwich, got {type(w).__name__}")
-        native = _core.SandwichModel(
+        sandwich = _core.SandwichModel(
             _native_block(model.input_linear), _native_backlash(model.backlash), _native_block(model.output_linear)
         )
-        return native, [list(w.u_past), list(w.x_past), list(w.y_past), list(w.w_past)]
+        return sandwich, [list(w.u_past), list(w.x_past), list(w.y_past), list(w.w_past)]
     raise ModelError(f"{name} must be a CascadeModel or SandwichModel, got {type(model).__name__}")
 
 
