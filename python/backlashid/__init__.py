@@ -8,6 +8,7 @@ The layers, each a subpackage whose ``__init__`` is its public contract:
 
 - :mod:`backlashid.models`: the models and their dict / JSON form;
 - :mod:`backlashid.identify`: fits, refinement, metrics, scaling;
+- :mod:`backlashid.compensation`: feedforward compensation of the backlash, closed-loop simulation;
 - :mod:`backlashid.diagnosis`: the sim-to-real gap diagnosis, its analyses and effect catalogue;
 - :mod:`backlashid.benchmarks`: the paper's examples and the withheld-effect cases;
 - :mod:`backlashid.app`: record files, figures, fleets on Dask and the command line.
@@ -31,6 +32,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from .compensation import ClosedLoopResult, Compensator, closed_loop, compensate
 from .errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
 from .identify import (
     FitResult,
@@ -49,6 +51,7 @@ from .identify import (
     wiener_hammerstein_model,
 )
 from .models import (
+    BacklashState,
     BranchCheck,
     CascadeModel,
     CascadeSimulation,
@@ -86,7 +89,7 @@ _LAZY = {
     "diagnose": "diagnosis",
     "fit_effect": "diagnosis",
 }
-_SUBPACKAGES = ("app", "benchmarks", "diagnosis", "identify", "models")
+_SUBPACKAGES = ("app", "benchmarks", "compensation", "diagnosis", "identify", "models")
 
 
 def _version() -> str:
@@ -117,10 +120,13 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "BacklashIdError",
+    "BacklashState",
     "BranchCheck",
     "CascadeModel",
     "CascadeSimulation",
     "CascadeState",
+    "ClosedLoopResult",
+    "Compensator",
     "DiagnosisReport",
     "EFFECTS",
     "DataError",
@@ -160,4 +166,6 @@ __all__ = [
     "fit_wiener_hammerstein",
     "wiener_hammerstein_model",
     "shared_data_folder",
+    "closed_loop",
+    "compensate",
 ]

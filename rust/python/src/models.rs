@@ -118,6 +118,21 @@ impl PyGeneralBacklash {
         ))
     }
 
+    /// x such that the backlash, from memory y0, outputs y (the inverse of eq 1, from x(0) =
+    /// x0, smoothing `threshold`).
+    fn inverse<'py>(
+        &self,
+        py: Python<'py>,
+        y: SignalIn<'py>,
+        y0: f64,
+        x0: f64,
+        threshold: f64,
+    ) -> PyResult<SignalOut<'py>> {
+        let y = signal("y_desired", &y)?;
+        let x = run(py, || self.0.inverse(&y, y0, x0, threshold))?;
+        Ok(vec_f64(py, x))
+    }
+
     fn breakpoints(&self, y_prev: f64, x_lo: f64, x_hi: f64) -> (f64, f64) {
         self.0.breakpoints(y_prev, x_lo, x_hi)
     }
@@ -140,7 +155,7 @@ impl PyGeneralBacklash {
 }
 
 #[pyclass(frozen, module = "backlashid._core", name = "CascadeModel")]
-pub(crate) struct PyCascadeModel(core::CascadeModel);
+pub(crate) struct PyCascadeModel(pub(crate) core::CascadeModel);
 
 /// The cascade's state as the Python layer passes it.
 fn cascade_state(u_past: Vec<f64>, x_past: Vec<f64>, y_prev: f64) -> core::CascadeState {
@@ -219,7 +234,7 @@ impl PyCascadeModel {
 }
 
 #[pyclass(frozen, module = "backlashid._core", name = "SandwichModel")]
-pub(crate) struct PySandwichModel(core::SandwichModel);
+pub(crate) struct PySandwichModel(pub(crate) core::SandwichModel);
 
 /// The sandwich's state as the Python layer passes it: the input block's pasts, then the
 /// output block's (its input y, its output w).
