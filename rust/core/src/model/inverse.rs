@@ -16,7 +16,12 @@
 //! 2. target > y_prev: x = R^{-1}(target); target < y_prev: x = L^{-1}(target);
 //!    target == y_prev: x = x_prev clamped to [L^{-1}(y_prev), R^{-1}(y_prev)] (the dead band
 //!    at that level: the input moves only if it must).
-//! 3. y_prev := step(x, y_prev) (eq 1, `GeneralBacklash::step`), x_prev := x.
+//! 3. The memory: with (y, case) = eq 1's step from y_prev (`GeneralBacklash::step`, case
+//!    f1 for L, f2 for R), y_prev := target if the step took the branch chosen in 2 (R for
+//!    a rising target, L for a falling one), y_prev := y if it took another case (branches
+//!    that cross: the plant's backlash goes there); a hold leaves y_prev. x_prev := x.
+//!    (Not y_prev := y always: B(B^{-1}(level)) is the level only to a few ulps, and a
+//!    constant target would then read those ulps as reversals and jump across the band.)
 //!
 //! Root of a branch B(x) = p(xi) = sum_{i>=1} m_i xi^i = level (xi = x + shift, shift = c_L
 //! for L and -c_R for R; B and B' evaluated by Horner's rule in xi, `Branch::value` and
@@ -43,7 +48,7 @@
 
 use crate::error::{Error, Result};
 use crate::guard;
-use crate::model::backlash::{check_memory, Branch, GeneralBacklash};
+use crate::model::backlash::{check_memory, Branch, GeneralBacklash, Step};
 use crate::model::signal::check_signal;
 
 /// The per-sample backlash inverse: `step` returns x(t) for the target y_d(t).
@@ -112,17 +117,21 @@ impl BacklashInverse {
             )));
         }
         let target = self.gate(y_d);
-        let x = if target > self.y_prev {
-            self.root(backlash, Side::Right, target)?
+        // the case of eq 1 the root is for: f2 (R) rising, f1 (L) falling, none on a hold
+        let (x, intended) = if target > self.y_prev {
+            (self.root(backlash, Side::Right, target)?, 2)
         } else if target < self.y_prev {
-            self.root(backlash, Side::Left, target)?
+            (self.root(backlash, Side::Left, target)?, 1)
         } else {
             let lo = self.root(backlash, Side::Left, self.y_prev)?;
             let hi = self.root(backlash, Side::Right, self.y_prev)?;
             // lo <= hi for branches that do not cross; otherwise the clamp keeps lo
-            self.x_prev.min(hi).max(lo)
+            (self.x_prev.min(hi).max(lo), 0)
         };
-        self.y_prev = backlash.step(x, self.y_prev);
+        if intended != 0 {
+            let (y, case) = backlash.step_case(x, self.y_prev);
+            self.y_prev = if case == intended { target } else { y };
+        }
         self.x_prev = x;
         self.samples += 1;
         Ok(x)
@@ -298,6 +307,21 @@ mod tests {
     fn rough(n: usize, seed: u64) -> Vec<f64> {
         let mut s = seed;
         (0..n).map(|_| 3.0 * lcg_unit(&mut s) - 1.5).collect()
+    }
+
+    #[test]
+    fn a_constant_target_holds_the_input_still() {
+        // B(B^{-1}(level)) is the level only to a few ulps: read as reversals, those ulps made
+        // x jump across the dead band every sample on a flat reference
+        for bl in [example1_backlash(), example2_backlash()] {
+            for level in [0.37, -0.81, 1e-3, 2.5] {
+                let x = bl.inverse(&[level; 50], -0.01, 0.0, 0.0).unwrap();
+                // still up to the ulp the hold's clamp may take (the band is about 1 wide)
+                assert!(x[1..].iter().all(|&v| (v - x[0]).abs() <= 1e-12), "{level}: {x:?}");
+                let y = bl.simulate(&x, -0.01).unwrap();
+                assert!(y.iter().all(|v| (v - level).abs() <= 1e-12), "{level}: {y:?}");
+            }
+        }
     }
 
     #[test]
