@@ -54,6 +54,10 @@ class CascadeModel:
         self, u: _F, u_past: list[float], x_past: list[float], y_prev: float
     ) -> tuple[_F, _F, _B, _B, tuple[list[float], list[float], float]]: ...  # x, y, f1, f2, final state
     def moving_count(self, u: _F, u_past: list[float], x_past: list[float], y_prev: float, warmup: int) -> int: ...
+    # one sample (rust/core/src/model/state_space.rs): (y(t), next state [u_past.., x_past.., y_prev])
+    @property
+    def state_size(self) -> int: ...
+    def step(self, state: _F, u: float) -> tuple[float, _F]: ...
 
 @final
 class SandwichModel:
@@ -67,6 +71,10 @@ class SandwichModel:
     def moving_count(
         self, u: _F, u_past: list[float], x_past: list[float], y_past: list[float], w_past: list[float], warmup: int
     ) -> int: ...
+    # one sample: (w(t), next state [u_past.., x_past.., y_past.., w_past..])
+    @property
+    def state_size(self) -> int: ...
+    def step(self, state: _F, u: float) -> tuple[float, _F]: ...
 
 # -- identification (one call per iteration; Python drives the iterations) -------------------
 _LS = tuple[_F, float, _F, float]  # theta, rss, (A^T A)^-1, rcond
