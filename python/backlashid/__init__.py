@@ -10,6 +10,7 @@ The layers, each a subpackage whose ``__init__`` is its public contract:
 - :mod:`backlashid.identify`: fits, refinement, metrics, scaling;
 - :mod:`backlashid.diagnosis`: the sim-to-real gap diagnosis, its analyses and effect catalogue;
 - :mod:`backlashid.benchmarks`: the paper's examples and the withheld-effect cases;
+- :mod:`backlashid.export`: the model as a python-control system and as C99;
 - :mod:`backlashid.app`: record files, figures, fleets on Dask and the command line.
 
 The main names of every layer are re-exported here (``import backlashid as bid``); the numerics
@@ -86,7 +87,7 @@ _LAZY = {
     "diagnose": "diagnosis",
     "fit_effect": "diagnosis",
 }
-_SUBPACKAGES = ("app", "benchmarks", "diagnosis", "identify", "models")
+_SUBPACKAGES = ("app", "benchmarks", "diagnosis", "export", "identify", "models")
 
 
 def _version() -> str:

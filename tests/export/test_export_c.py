@@ -1,0 +1,116 @@
+"""The C export: the generated C99, compiled by ``cc -std=c99 -O2 -Wall -Wextra -Werror`` with a
+small driver, steps through random inputs (white and smooth) and gives the Rust simulation's
+outputs to 1e-12 (issue 19), from rest and from a busy state. Skips when no C compiler exists."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from export_cases import busy_state, inputs, models
+
+import backlashid as bid
+from backlashid.export import state_vector, to_c
+
+CC = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler (cc, gcc or clang) on PATH")
+FLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic"]
+MODELS = models()
+
+# Reads the state vector, then inputs, as C99 hexadecimal floats (exact); prints each output.
+DRIVER = """#include <stdio.h>
+#include <stdlib.h>
+#include "{header}"
+
+int main(void)
+{{
+    char word[64];
+    int k;
+    {p}_state state;
+    {p}_init(&state);
+    for (k = 0; k < {P}_NSTATE; ++k) {{
+        if (scanf("%63s", word) != 1) {{
+            return 2;
+        }}
+        state.s[k] = strtod(word, NULL);
+    }}
+    while (scanf("%63s", word) == 1) {{
+        printf("%a\\n", {p}_step(&state, strtod(word, NULL)));
+    }}
+    for (k = 0; k < {P}_NSTATE; ++k) {{
+        printf("%a\\n", state.s[k]);
+    }}
+    return 0;
+}}
+"""
+
+
+def compile_model(model: bid.CascadeModel | bid.SandwichModel, folder: Path, prefix: str = "bl") -> Path:
+    header, source = to_c(model, folder / "plant", prefix=prefix)
+    (folder / "driver.c").write_text(DRIVER.format(header=header.name, p=prefix, P=prefix.upper()))
+    exe = folder / "driver"
+    run = subprocess.run([CC, *FLAGS, "-o", str(exe), str(source), str(folder / "driver.c")], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    return exe
+
+
+def run_c(exe: Path, state: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(outputs, final state vector) of the compiled step."""
+    text = "\n".join(float(v).hex() for v in np.concatenate([state, u]))
+    run = subprocess.run([str(exe)], input=text, capture_output=True, text=True, timeout=120, check=True)
+    values = np.array([float.fromhex(w) for w in run.stdout.split()])
+    return values[: len(u)], values[len(u) :]
+
+
+@needs_cc
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_the_compiled_step_is_the_rust_simulation(name: str, tmp_path: Path) -> None:
+    model = MODELS[name]
+    exe = compile_model(model, tmp_path)
+    for start in (model.rest_state(), busy_state(model)):
+        for seed in range(3):
+            for kind, u in inputs(1500, seed).items():
+                sim = model.simulate(u, initial_state=start, internals=True)
+                out, final = run_c(exe, state_vector(model, start), u)
+                np.testing.assert_allclose(out, sim.output, rtol=0, atol=1e-12, err_msg=f"{kind}, seed {seed}")
+                np.testing.assert_allclose(final, state_vector(model, sim.final_state), rtol=0, atol=1e-12)
+
+
+@needs_cc
+def test_a_directory_gets_prefix_files_and_the_init_is_rest(tmp_path: Path) -> None:
+    model = bid.example2()
+    header, source = model.to_c(tmp_path, prefix="sandwich2")
+    assert (header, source) == (tmp_path / "sandwich2.h", tmp_path / "sandwich2.c")
+    assert "#define SANDWICH2_NSTATE 8" in header.read_text()
+    assert " *   s[4] = y(t-1)" in header.read_text()
+    exe = compile_model(model, tmp_path, prefix="sandwich2")
+    u = inputs(200)["smooth"]
+    out, _ = run_c(exe, np.zeros(8), u)
+    np.testing.assert_allclose(out, model.simulate(u), rtol=0, atol=1e-12)
+
+
+def test_an_extension_is_dropped(tmp_path: Path) -> None:
+    header, source = bid.example1().to_c(tmp_path / "model.h")
+    assert (header.name, source.name) == ("model.h", "model.c")
+    assert '#include "model.h"' in source.read_text()
+    for literal in ("(0x1.6666666666666p-1) * u_past[0]", "(-0x1.999999999999ap-3) * x_past[0]"):  # a_1 = 0.7, b_1 = -0.2, exact
+        assert literal in source.read_text()
+
+
+@pytest.mark.parametrize("prefix", ["1bl", "bl-x", "", "double", "_bl", "a" * 40, None, "bl x"])
+def test_a_prefix_that_is_not_a_c_identifier_is_refused(prefix: object, tmp_path: Path) -> None:
+    with pytest.raises(bid.DataError, match="prefix = "):
+        bid.example1().to_c(tmp_path, prefix=prefix)  # type: ignore[arg-type]
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_missing_folder_is_named(tmp_path: Path) -> None:
+    missing = tmp_path / "no" / "such"
+    with pytest.raises(bid.DataError, match="does not exist") as info:
+        bid.example1().to_c(missing / "plant")
+    assert str(missing) in str(info.value)
+    with pytest.raises(bid.DataError, match="path = "):
+        bid.example1().to_c(3)  # type: ignore[arg-type]
