@@ -80,6 +80,7 @@ API_MODULES = [  # each page opens with the module's own docstring
     "backlashid.diagnosis.analyses",
     "backlashid.diagnosis.effects",
     "backlashid.benchmarks",
+    "backlashid.export",
     "backlashid.app",
     "backlashid.errors",
 ]
