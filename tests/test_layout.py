@@ -26,6 +26,7 @@ ENTRY_POINTS = {"backlashid.__main__"}  # ``python -m backlashid`` runs app._cli
 
 TOP_LEVEL_ALL = [
     "BacklashIdError",
+    "BacklashState",
     "BranchCheck",
     "CascadeModel",
     "CascadeSimulation",

@@ -50,6 +50,7 @@ from .identify import (
     wiener_hammerstein_model,
 )
 from .models import (
+    BacklashState,
     BranchCheck,
     CascadeModel,
     CascadeSimulation,
@@ -118,6 +119,7 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "BacklashIdError",
+    "BacklashState",
     "BranchCheck",
     "CascadeModel",
     "CascadeSimulation",

@@ -7,13 +7,14 @@ Every model is frozen, simulated sample by sample in the Rust core, and round-tr
 
 from __future__ import annotations
 
-from ._backlash import BranchCheck, GeneralBacklash, SwitchingSignals
+from ._backlash import BacklashState, BranchCheck, GeneralBacklash, SwitchingSignals
 from ._cascade import CascadeModel, CascadeSimulation, CascadeState
 from ._linear import LinearBlock
 from ._sandwich import SandwichModel, SandwichSimulation, SandwichState
 from ._serialization import Model, model_from_dict, model_from_json
 
 __all__ = [
+    "BacklashState",
     "BranchCheck",
     "CascadeModel",
     "CascadeSimulation",

@@ -13,7 +13,7 @@ from .._docstrings import fill
 from .._validation import as_coefficients, as_scalar, as_signal, check_int, format_list, frozen, shown
 from ..errors import DataError, ModelError
 
-__all__ = ["GeneralBacklash", "BranchCheck", "SwitchingSignals"]
+__all__ = ["BacklashState", "GeneralBacklash", "BranchCheck", "SwitchingSignals"]
 
 _SIGNAL_DOC = """Parameters
 ----------
@@ -138,6 +138,51 @@ class SwitchingSignals:
     f1: NDArray[np.bool_]
     f2: NDArray[np.bool_]
     y: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class BacklashState:
+    """Where a backlash inverse starts: the memory y(0) and the input x(0).
+
+    The start of :meth:`GeneralBacklash.inverse` (a value that is not a finite number raises
+    DataError). x(0) matters where the first target holds the level y(0): the inverse then
+    keeps x(0) if it lies in the dead band at that level, else moves it to the band's nearer
+    edge.
+
+    Attributes
+    ----------
+    y_prev : float, default 0.0
+        The backlash memory y(0), the level the backlash holds.
+    x_prev : float, default 0.0
+        The backlash input x(0).
+
+    Examples
+    --------
+    >>> from backlashid import BacklashState
+    >>> BacklashState(y_prev=0.2)
+    BacklashState(y_prev=0.2, x_prev=0.0)
+    """
+
+    y_prev: float = 0.0
+    x_prev: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("y_prev", "x_prev"):
+            value = as_scalar(getattr(self, name), name, DataError)
+            if not np.isfinite(value):
+                raise DataError(f"{name} = {value}: give a finite value")
+            object.__setattr__(self, name, value)
+
+
+def _backlash_state(value: Any) -> BacklashState:
+    """A :class:`BacklashState` from None (rest), itself or a (y_prev, x_prev) pair."""
+    if value is None:
+        return BacklashState()
+    if isinstance(value, BacklashState):
+        return value
+    if isinstance(value, (tuple, list)) and len(value) == 2:
+        return BacklashState(*value)
+    raise DataError(f"initial_state = {shown(value)}: give a BacklashState(y_prev, x_prev) or a (y_prev, x_prev) pair")
 
 
 class GeneralBacklash:
@@ -299,6 +344,60 @@ class GeneralBacklash:
         xi1, xi2, f1, f2, y = self._native.switching(x_arr, as_scalar(y0, "y0", DataError))
         _finite_result(np.concatenate([np.ravel(xi1), np.ravel(xi2), np.ravel(y)]), "a switching signal (xi1, xi2 or y)")
         return SwitchingSignals(xi1=xi1, xi2=xi2, f1=f1, f2=f2, y=y)
+
+    def inverse(
+        self, y_desired: ArrayLike, *, initial_state: BacklashState | tuple[float, float] | None = None, threshold: float = 0.0
+    ) -> NDArray[np.float64]:
+        """The backlash input x that makes the output follow ``y_desired`` (the inverse of eq 1).
+
+        Tao and Kokotovic's backlash inverse with the polynomial branches of eq (4)-(5): a
+        rising target is reached on R, x = R^-1(y_d); a falling one on L, x = L^-1(y_d),
+        which crosses the dead band in one sample where the direction reverses; a target
+        equal to the memory holds, x staying where it was if that is inside the dead band at
+        that level. The roots are solved in the Rust core (Newton safeguarded by bisection on
+        a bracket grown from the previous x, so that the root on the branch's increasing part
+        the motion is on is found). The memory is what :meth:`simulate` holds, so
+        ``simulate(inverse(y_d), y0=y(0))`` equals ``y_d`` to rounding.
+
+        Parameters
+        ----------
+        y_desired : array_like
+            The desired output y_d(1), y_d(2), ..., 1-D, finite.
+        initial_state : BacklashState or (float, float), optional
+            The memory y(0) and input x(0), as a :class:`BacklashState` or the pair
+            ``(y_prev, x_prev)``; default both 0 (at rest).
+        threshold : float, default 0.0
+            Smoothing for noisy references: a reversal is followed only once the target has
+            moved more than ``threshold`` back from the extremum reached in the current
+            direction; until then the output holds (the tracking error stays within
+            ``threshold``). 0 is the exact inverse.
+
+        Returns
+        -------
+        numpy.ndarray
+            x(1), x(2), ..., a new array.
+
+        Raises
+        ------
+        DataError
+            If ``y_desired`` is not a finite 1-D signal, the state or ``threshold`` is not
+            finite (or the threshold is negative), or a branch cannot reach a target (it turns
+            or overflows first: the message names the sample and the level).
+
+        Examples
+        --------
+        >>> from backlashid import GeneralBacklash
+        >>> play = GeneralBacklash(0.5, 0.5, [1.0], [1.0])
+        >>> x = play.inverse([0.5, 1.0, 0.8, 0.8])
+        >>> x.tolist()
+        [1.0, 1.5, 0.30000000000000004, 0.30000000000000004]
+        >>> play.simulate(x).round(12).tolist()
+        [0.5, 1.0, 0.8, 0.8]
+        """
+        state = _backlash_state(initial_state)
+        level = as_scalar(threshold, "threshold", DataError)
+        y = as_signal(y_desired, "y_desired")
+        return self._native.inverse(y, state.y_prev, state.x_prev, level)
 
     def breakpoints(self, y_prev: float, x_range: tuple[float, float]) -> tuple[float, float]:
         """The breakpoints z_L, z_R of eq (2)-(3): where L and R reach ``y_prev``.

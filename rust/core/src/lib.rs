@@ -40,7 +40,7 @@ pub use identify::{
 };
 pub use linalg::{fold_parallel, LeastSquares, TriangularFactor};
 pub use model::{
-    spectral_radius, switching, switching_form, Branch, BranchCheck, CascadeModel,
+    spectral_radius, switching, switching_form, BacklashInverse, Branch, BranchCheck, CascadeModel,
     CascadeSimulation, CascadeState, GeneralBacklash, LinearBlock, LinearState, SandwichModel,
     SandwichSimulation, SandwichState, SwitchingSignals,
 };

@@ -118,6 +118,21 @@ impl PyGeneralBacklash {
         ))
     }
 
+    /// x such that the backlash, from memory y0, outputs y (the inverse of eq 1, from x(0) =
+    /// x0, smoothing `threshold`).
+    fn inverse<'py>(
+        &self,
+        py: Python<'py>,
+        y: SignalIn<'py>,
+        y0: f64,
+        x0: f64,
+        threshold: f64,
+    ) -> PyResult<SignalOut<'py>> {
+        let y = signal("y_desired", &y)?;
+        let x = run(py, || self.0.inverse(&y, y0, x0, threshold))?;
+        Ok(vec_f64(py, x))
+    }
+
     fn breakpoints(&self, y_prev: f64, x_lo: f64, x_hi: f64) -> (f64, f64) {
         self.0.breakpoints(y_prev, x_lo, x_hi)
     }

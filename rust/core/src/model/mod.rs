@@ -5,6 +5,7 @@
 
 pub mod backlash;
 pub mod cascade;
+pub mod inverse;
 pub mod linear;
 pub mod polynomial;
 pub mod sandwich;
@@ -14,6 +15,7 @@ pub mod switching;
 
 pub use backlash::{Branch, BranchCheck, GeneralBacklash};
 pub use cascade::{CascadeModel, CascadeSimulation, CascadeState};
+pub use inverse::BacklashInverse;
 pub use linear::{LinearBlock, LinearState};
 pub use polynomial::spectral_radius;
 pub use sandwich::{SandwichModel, SandwichSimulation, SandwichState};
