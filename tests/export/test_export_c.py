@@ -114,3 +114,101 @@ def test_a_missing_folder_is_named(tmp_path: Path) -> None:
     assert str(missing) in str(info.value)
     with pytest.raises(bid.DataError, match="path = "):
         bid.example1().to_c(3)  # type: ignore[arg-type]
+
+
+# Reads y(0), x(0), the threshold, then targets; prints x per target, or "error CODE" and stops.
+INVERSE_DRIVER = """#include <stdio.h>
+#include <stdlib.h>
+#include "{header}"
+
+int main(void)
+{{
+    char word[64];
+    double start[3], x;
+    int k, code;
+    {p}_backlash_inverse inverse;
+    for (k = 0; k < 3; ++k) {{
+        if (scanf("%63s", word) != 1) {{
+            return 2;
+        }}
+        start[k] = strtod(word, NULL);
+    }}
+    if ({p}_backlash_inverse_init(&inverse, start[0], start[1], start[2]) != 0) {{
+        printf("error init\\n");
+        return 0;
+    }}
+    while (scanf("%63s", word) == 1) {{
+        code = {p}_backlash_inverse_step(&inverse, strtod(word, NULL), &x);
+        if (code != 0) {{
+            printf("error %d\\n", code);
+            return 0;
+        }}
+        printf("%a\\n", x);
+    }}
+    return 0;
+}}
+"""
+
+BACKLASHES = {
+    "example1": bid.example1().backlash,
+    "example2": bid.example2().backlash,
+    "quintic": bid.GeneralBacklash(0.6, 0.5, [1.0, 0.0, 0.2, 0.0, 0.01], [1.5, 0.1, 0.2]),
+    "play": bid.GeneralBacklash(0.3, 0.2, [1.1], [0.9]),
+    "mixed_degrees": bid.GeneralBacklash(0.4, 0.25, [0.9], [1.2, 0.1, 0.05]),
+}
+
+
+def compile_inverse(backlash: bid.GeneralBacklash, folder: Path) -> Path:
+    model = bid.CascadeModel(bid.LinearBlock([1.0]), backlash)
+    header, source = to_c(model, folder / "plant", prefix="inv")
+    (folder / "inverse_driver.c").write_text(INVERSE_DRIVER.format(header=header.name, p="inv"))
+    exe = folder / "inverse_driver"
+    run = subprocess.run([CC, *FLAGS, "-o", str(exe), str(source), str(folder / "inverse_driver.c")], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    return exe
+
+
+def run_inverse(exe: Path, start: tuple[float, float], threshold: float, targets: np.ndarray) -> list[str]:
+    text = "\n".join(float(v).hex() for v in [*start, threshold, *targets])
+    return subprocess.run([str(exe)], input=text, capture_output=True, text=True, timeout=120, check=True).stdout.split("\n")[:-1]
+
+
+def targets(n: int, seed: int) -> dict[str, np.ndarray]:
+    """Random targets: white, smooth, smooth with noise (the threshold's case) and held steps."""
+    rng = np.random.default_rng(100 + seed)
+    t = np.arange(n)
+    smooth = 1.2 * np.sin(0.021 * t + seed) + 0.4 * np.sin(0.067 * t + 0.3)
+    return {
+        "white": rng.uniform(-1.5, 1.5, n),
+        "smooth": smooth,
+        "noisy": smooth + 0.02 * rng.standard_normal(n),
+        "steps": np.repeat(rng.uniform(-1.0, 1.0, n // 10 + 1), 10)[:n],
+    }
+
+
+@needs_cc
+@pytest.mark.parametrize("name", sorted(BACKLASHES))
+def test_the_compiled_backlash_inverse_is_the_rust_inverse(name: str, tmp_path: Path) -> None:
+    backlash = BACKLASHES[name]
+    exe = compile_inverse(backlash, tmp_path)
+    for start in [(0.0, 0.0), (0.3, -0.2), (-0.25, 2.0)]:
+        for threshold in (0.0, 0.03):
+            for seed in range(2):
+                for kind, y_d in targets(1000, seed).items():
+                    want = backlash.inverse(y_d, initial_state=start, threshold=threshold)
+                    got = np.array([float.fromhex(w) for w in run_inverse(exe, start, threshold, y_d)])
+                    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12, err_msg=f"{kind}, start {start}, threshold {threshold}")
+                    if threshold == 0.0:  # and it inverts: the backlash follows the targets
+                        np.testing.assert_allclose(backlash.simulate(got, y0=start[0]), y_d, rtol=1e-10, atol=1e-10)
+
+
+@needs_cc
+def test_the_compiled_inverse_reports_what_the_rust_inverse_refuses(tmp_path: Path) -> None:
+    # a level the cubic branches cannot reach before they overflow
+    exe = compile_inverse(bid.example1().backlash, tmp_path)
+    assert run_inverse(exe, (0.0, 0.0), 0.0, np.array([0.2, 1e300]))[-1] == "error 2"
+    with pytest.raises(bid.DataError):
+        bid.example1().backlash.inverse([0.2, 1e300])
+    assert run_inverse(exe, (0.0, 0.0), -1.0, np.array([0.2])) == ["error init"]
+    with pytest.raises(bid.DataError):
+        bid.example1().backlash.inverse([0.2], threshold=-1.0)

@@ -1,4 +1,5 @@
-"""The model as dependency-free C99: a header and a source file with the model's step function.
+"""The model as dependency-free C99: a header and a source file with the model's step function
+and the backlash inverse (its C port is in ``_c_inverse``).
 
 The generated code does, operation for operation, what the Rust core's one-step function
 does (rust/core/src/model/state_space.rs): the linear recursion (eq 16 / 29) as a_0 u(t), then
@@ -20,6 +21,7 @@ from .._files import write_text
 from .._validation import shown
 from ..errors import DataError
 from ..models import CascadeModel, LinearBlock
+from ._c_inverse import backlash_inverse_c
 from ._state import AnyModel, check_model, state_names
 
 _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
@@ -167,7 +169,10 @@ double {p}_step({p}_state *state, double u);
         ["    int k;", f"    for (k = 0; k < {P}_NSTATE; ++k) {{", "        state->s[k] = 0.0;", "    }"],
     )
     function(f"double {p}_step({p}_state *state, double u)", step)
-    c = f'/* The model of {header} (backlashid {__version__}, model.to_c()). */\n#include "{header}"\n\n' + "\n".join(functions)
+    inverse_h, inverse_c = backlash_inverse_c(bl, p)
+    h = h.replace(f"\n#endif /* {guard} */", inverse_h + f"\n#endif /* {guard} */")
+    c = (f'/* The model of {header} (backlashid {__version__}, model.to_c()). */\n#include <stdint.h>\n\n#include "{header}"\n\n'
+         + "\n".join(functions) + "\n" + inverse_c)
     return h, c
 
 
@@ -196,7 +201,11 @@ def to_c(model: AnyModel, path: str | Path, *, prefix: str = "bl") -> tuple[Path
     computed in the core's order (the linear recursion of eq 16 / 29, Horner's rule in
     xi = x + c_L and xi = x - c_R for the branches of eq 4-5, eq 1's case order) with every
     coefficient an exact hexadecimal literal, so that a C99 compiler without fused
-    multiply-adds reproduces the simulation to the last bit.
+    multiply-adds reproduces the simulation to the last bit. The backlash inverse of
+    :meth:`GeneralBacklash.inverse` comes with it, ported step by step from the core
+    (rust/core/src/model/inverse.rs): ``<prefix>_backlash_inverse_init`` and
+    ``int <prefix>_backlash_inverse_step(<prefix>_backlash_inverse *inverse, double y_d,
+    double *x)``, the backlash input x(t) for a desired backlash output y_d(t).
 
     Parameters
     ----------
