@@ -79,6 +79,7 @@ API_MODULES = [  # each page opens with the module's own docstring
     "backlashid.diagnosis",
     "backlashid.diagnosis.analyses",
     "backlashid.diagnosis.effects",
+    "backlashid.compensation",
     "backlashid.benchmarks",
     "backlashid.export",
     "backlashid.app",

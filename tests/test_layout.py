@@ -31,6 +31,8 @@ TOP_LEVEL_ALL = [
     "CascadeModel",
     "CascadeSimulation",
     "CascadeState",
+    "ClosedLoopResult",
+    "Compensator",
     "DataError",
     "DiagnosisReport",
     "EFFECTS",
@@ -51,6 +53,8 @@ TOP_LEVEL_ALL = [
     "SwitchingSignals",
     "WienerHammersteinFit",
     "__version__",
+    "closed_loop",
+    "compensate",
     "diagnose",
     "diagnose_many",
     "estimate_state",
@@ -180,7 +184,7 @@ def test_the_top_level_names_stay() -> None:
 
 
 def test_every_layer_is_there() -> None:
-    assert {"models", "identify", "diagnosis", "benchmarks", "app"} <= layers()
+    assert {"models", "identify", "diagnosis", "benchmarks", "app", "compensation"} <= layers()
     assert {"backlashid.diagnosis.analyses", "backlashid.diagnosis.effects"} <= set(SUBPACKAGES)
 
 

@@ -8,6 +8,7 @@ The layers, each a subpackage whose ``__init__`` is its public contract:
 
 - :mod:`backlashid.models`: the models and their dict / JSON form;
 - :mod:`backlashid.identify`: fits, refinement, metrics, scaling;
+- :mod:`backlashid.compensation`: feedforward compensation of the backlash, closed-loop simulation;
 - :mod:`backlashid.diagnosis`: the sim-to-real gap diagnosis, its analyses and effect catalogue;
 - :mod:`backlashid.benchmarks`: the paper's examples and the withheld-effect cases;
 - :mod:`backlashid.export`: the model as a python-control system and as C99;
@@ -32,6 +33,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from .compensation import ClosedLoopResult, Compensator, closed_loop, compensate
 from .errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
 from .identify import (
     FitResult,
@@ -88,7 +90,7 @@ _LAZY = {
     "diagnose": "diagnosis",
     "fit_effect": "diagnosis",
 }
-_SUBPACKAGES = ("app", "benchmarks", "diagnosis", "export", "identify", "models")
+_SUBPACKAGES = ("app", "benchmarks", "compensation", "diagnosis", "export", "identify", "models")
 
 
 def _version() -> str:
@@ -124,6 +126,8 @@ __all__ = [
     "CascadeModel",
     "CascadeSimulation",
     "CascadeState",
+    "ClosedLoopResult",
+    "Compensator",
     "DiagnosisReport",
     "EFFECTS",
     "DataError",
@@ -163,4 +167,6 @@ __all__ = [
     "fit_wiener_hammerstein",
     "wiener_hammerstein_model",
     "shared_data_folder",
+    "closed_loop",
+    "compensate",
 ]

@@ -1,5 +1,5 @@
 # Type stubs of the Rust extension (rust/python/src: models.rs, problem.rs, identify.rs, augmented.rs,
-# augmented_problem.rs),
+# augmented_problem.rs, compensation.rs),
 # checked against the built module by `python -m mypy.stubtest backlashid._core`.
 # Errors raised are those of backlashid.errors: DataError for bad signals, ModelError for bad
 # parameters or divergence, NotIdentifiableError for a rank-deficient regression.
@@ -23,6 +23,9 @@ __all__ = [
     "arx_records",
     "spectral_radius",
     "simulate_augmented",
+    "Compensator",
+    "compensate",
+    "closed_loop",
 ]
 
 _F = NDArray[np.float64]
@@ -207,3 +210,26 @@ def simulate_augmented(
     u: _F, *, effects: list[tuple[str, list[float]]] = ..., t0: float = 0.0, time_scale: float = ...,
     u_past: list[float] | None = None, x_past: list[float] | None = None, y_prev: float = 0.0,
 ) -> _F: ...
+
+# Compensation (rust/core/src/compensation): model is a CascadeModel or SandwichModel of this
+# module; state is [u_past, x_past, [y_prev]] (cascade) or [u_past, x_past, y_past, w_past].
+_SavedState = tuple[list[float], list[float], list[float], list[float], tuple[float, float, int, float, int], int]
+
+@final
+class Compensator:
+    def __new__(cls, model: CascadeModel | SandwichModel, state: list[list[float]], threshold: float) -> Self: ...
+    @property
+    def delay(self) -> int: ...  # the preview D
+    @property
+    def approximate(self) -> bool: ...  # a linear inverse is the stable approximation
+    def step(self, reference: float) -> float: ...  # u(t) for r(t + D)
+    def run(self, reference: _F) -> _F: ...
+    # (G^-1 pasts in/out, H^-1 pasts in/out, (y_prev, x_prev, direction, extremum, samples), samples)
+    def get_state(self) -> _SavedState: ...
+    def set_state(self, state: _SavedState) -> None: ...
+
+def compensate(model: CascadeModel | SandwichModel, reference: _F, state: list[list[float]], threshold: float) -> _F: ...
+def closed_loop(
+    plant: CascadeModel | SandwichModel, state: list[list[float]], reference: _F, feedforward: _F,
+    kp: float, ki: float, kd: float, saturation: tuple[float, float] | None,
+) -> tuple[_F, _F]: ...  # (u, y)

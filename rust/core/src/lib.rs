@@ -18,6 +18,7 @@
 //! The items below are the API the Python binding and the benches use.
 
 pub mod augmented;
+pub mod compensation;
 pub mod effects;
 pub mod error;
 pub mod guard;
@@ -31,6 +32,7 @@ pub(crate) mod test_params;
 extern crate self as backlashid_core;
 
 pub use augmented::simulate_augmented;
+pub use compensation::{compensate, Chain, ChainState, Compensator};
 pub use effects::{AnyEffect, Effect};
 pub use error::{Error, Result};
 pub use identify::{

@@ -5,6 +5,7 @@
 
 mod augmented;
 mod augmented_problem;
+mod compensation;
 mod convert;
 mod errors;
 mod identify;
@@ -30,5 +31,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<wiener_hammerstein::PyWienerHammersteinProblem>()?;
     identify::register(m)?;
     m.add_function(wrap_pyfunction!(augmented::simulate_augmented, m)?)?;
+    m.add_class::<compensation::PyCompensator>()?;
+    m.add_function(wrap_pyfunction!(compensation::compensate, m)?)?;
+    m.add_function(wrap_pyfunction!(compensation::closed_loop, m)?)?;
     Ok(())
 }

@@ -155,7 +155,7 @@ impl PyGeneralBacklash {
 }
 
 #[pyclass(frozen, module = "backlashid._core", name = "CascadeModel")]
-pub(crate) struct PyCascadeModel(core::CascadeModel);
+pub(crate) struct PyCascadeModel(pub(crate) core::CascadeModel);
 
 /// The cascade's state as the Python layer passes it.
 fn cascade_state(u_past: Vec<f64>, x_past: Vec<f64>, y_prev: f64) -> core::CascadeState {
@@ -252,7 +252,7 @@ impl PyCascadeModel {
 }
 
 #[pyclass(frozen, module = "backlashid._core", name = "SandwichModel")]
-pub(crate) struct PySandwichModel(core::SandwichModel);
+pub(crate) struct PySandwichModel(pub(crate) core::SandwichModel);
 
 /// The sandwich's state as the Python layer passes it: the input block's pasts, then the
 /// output block's (its input y, its output w).
