@@ -26,6 +26,7 @@ __all__ = [
     "Compensator",
     "compensate",
     "closed_loop",
+    "linear_inverse",
 ]
 
 _F = NDArray[np.float64]
@@ -233,3 +234,9 @@ def closed_loop(
     plant: CascadeModel | SandwichModel, state: list[list[float]], reference: _F, feedforward: _F,
     kp: float, ki: float, kd: float, saturation: tuple[float, float] | None,
 ) -> tuple[_F, _F]: ...  # (u, y)
+
+# backlashid.export (rust/python/src/export.rs): (feedthrough, a, b, delay, approximate) of the
+# compensator's inverse filter of the block (a, b, a0) (compensation/linear_inverse.rs)
+def linear_inverse(
+    a: list[float], b: list[float], a0: float | None = None, name: str = "input"
+) -> tuple[float, list[float], list[float], int, bool]: ...

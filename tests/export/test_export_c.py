@@ -212,3 +212,136 @@ def test_the_compiled_inverse_reports_what_the_rust_inverse_refuses(tmp_path: Pa
     assert run_inverse(exe, (0.0, 0.0), -1.0, np.array([0.2])) == ["error init"]
     with pytest.raises(bid.DataError):
         bid.example1().backlash.inverse([0.2], threshold=-1.0)
+
+
+# Loads the compensator's state (flag 1: past values, then y(t-1), x(t-1), direction, extremum and
+# threshold of the backlash inverse) or starts it at rest (flag 0, then the threshold); then
+# prints u for each reference, or "error CODE" and stops.
+COMPENSATOR_DRIVER = """#include <stdio.h>
+#include <stdlib.h>
+#include "{header}"
+
+static double next_value(void)
+{{
+    char word[64];
+    if (scanf("%63s", word) != 1) {{
+        exit(2);
+    }}
+    return strtod(word, NULL);
+}}
+
+int main(void)
+{{
+    char word[64];
+    double u;
+    int k, code;
+    {p}_inverse inverse;
+    if (next_value() != 0.0) {{
+        if ({p}_inverse_init(&inverse, 0.0) != 0) {{
+            return 3;
+        }}
+        for (k = 0; k < {P}_INVERSE_NPAST; ++k) {{
+            inverse.past[k] = next_value();
+        }}
+        inverse.backlash.y_prev = next_value();
+        inverse.backlash.x_prev = next_value();
+        inverse.backlash.direction = (int)next_value();
+        inverse.backlash.extremum = next_value();
+        inverse.backlash.threshold = next_value();
+    }} else if ({p}_inverse_init(&inverse, next_value()) != 0) {{
+        printf("error init\\n");
+        return 0;
+    }}
+    while (scanf("%63s", word) == 1) {{
+        code = {p}_inverse_step(&inverse, strtod(word, NULL), &u);
+        if (code != 0) {{
+            printf("error %d\\n", code);
+            return 0;
+        }}
+        printf("%a\\n", u);
+    }}
+    return 0;
+}}
+"""
+
+
+def compensated_models() -> dict[str, bid.CascadeModel | bid.SandwichModel]:
+    e1, e2 = bid.example1(), bid.example2()
+    return {
+        "example1": e1,
+        "example2": e2,
+        "cascade_feedthrough": bid.CascadeModel(bid.LinearBlock([0.5, 0.3], [-0.4], feedthrough=True), e1.backlash),
+        "cascade_delay2_quintic": bid.CascadeModel(bid.LinearBlock([0.0, 0.6, 0.2], [-0.3]), BACKLASHES["quintic"]),
+        "cascade_nonminimum_phase": bid.CascadeModel(bid.LinearBlock([0.3, 0.9], [-0.5]), e1.backlash),
+        "cascade_fir_play": bid.CascadeModel(bid.LinearBlock([0.5, 0.25]), BACKLASHES["play"]),
+        "sandwich_feedthroughs": MODELS["sandwich_feedthroughs"],
+    }
+
+
+COMPENSATED = compensated_models()
+
+
+def references(n: int, seed: int) -> dict[str, np.ndarray]:
+    """A multisine, a trapezoidal motion profile and smooth random targets."""
+    rng = np.random.default_rng(200 + seed)
+    t = np.arange(n)
+    multisine = 0.8 * np.sin(0.013 * t + seed) + 0.3 * np.sin(0.041 * t + 1.0) + 0.1 * np.cos(0.029 * t)
+    trapezoid = np.interp(t % 400, [0, 80, 200, 280, 400], [-0.7, 0.8, 0.8, -0.7, -0.7])
+    smooth = np.convolve(rng.uniform(-1.0, 1.0, n + 20), np.ones(21) / 21, mode="valid")[:n] * 2.0
+    return {"multisine": multisine, "trapezoid": trapezoid, "smooth_random": smooth}
+
+
+def compile_compensator(model: bid.CascadeModel | bid.SandwichModel, folder: Path) -> Path:
+    header, source = to_c(model, folder / "plant", prefix="comp")
+    (folder / "compensator_driver.c").write_text(COMPENSATOR_DRIVER.format(header=header.name, p="comp", P="COMP"))
+    exe = folder / "compensator_driver"
+    run = subprocess.run([CC, *FLAGS, "-o", str(exe), str(source), str(folder / "compensator_driver.c")], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    return exe
+
+
+def run_compensator(exe: Path, start: list[float], r: np.ndarray) -> list[str]:
+    text = "\n".join(float(v).hex() for v in [*start, *r])
+    return subprocess.run([str(exe)], input=text, capture_output=True, text=True, timeout=120, check=True).stdout.split("\n")[:-1]
+
+
+@needs_cc
+@pytest.mark.parametrize("name", sorted(COMPENSATED))
+def test_the_compiled_compensator_is_the_rust_compensator(name: str, tmp_path: Path) -> None:
+    model = COMPENSATED[name]
+    exe = compile_compensator(model, tmp_path)
+    header = (tmp_path / "plant.h").read_text()
+    for start in (model.rest_state(), busy_state(model)):
+        for threshold in (0.0, 0.02):
+            for seed in range(2):
+                for kind, r in references(1200, seed).items():
+                    comp = bid.Compensator(model, initial_state=start, threshold=threshold)
+                    assert f"#define COMP_INVERSE_DELAY {comp.delay}\n" in header
+                    g_in, g_out, h_in, h_out, (y_prev, x_prev, direction, extremum, _), _ = comp._native.get_state()
+                    loaded = [1.0, *g_in, *g_out, *h_in, *h_out, y_prev, x_prev, float(direction), extremum, threshold]
+                    want = comp.run(r)
+                    got = np.array([float.fromhex(w) for w in run_compensator(exe, loaded, r)])
+                    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12, err_msg=f"{kind}, threshold {threshold}, seed {seed}")
+                    if start == model.rest_state():  # the C init is the compensator of the model at rest
+                        got = np.array([float.fromhex(w) for w in run_compensator(exe, [0.0, threshold], r)])
+                        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
+@needs_cc
+def test_the_compiled_compensator_makes_the_model_follow_the_reference(tmp_path: Path) -> None:
+    model = bid.example2()
+    exe = compile_compensator(model, tmp_path)
+    r = references(1500, 0)["trapezoid"]
+    d = bid.Compensator(model).delay
+    u = np.array([float.fromhex(w) for w in run_compensator(exe, [0.0, 0.0], np.concatenate([r[d:], np.full(d, r[-1])]))])
+    np.testing.assert_allclose(model.simulate(u)[d:], r[d:], rtol=0, atol=1e-9)
+    assert run_compensator(exe, [0.0, -1.0], r[:3]) == ["error init"]
+    assert run_compensator(exe, [0.0, 0.0], np.array([0.2, 1e300]))[-1] == "error 2"
+
+
+def test_a_block_without_a_stable_inverse_leaves_the_compensator_out(tmp_path: Path) -> None:
+    # numerator z + 1: a zero on the unit circle
+    model = bid.CascadeModel(bid.LinearBlock([1.0, 1.0], [-0.5]), bid.example1().backlash)
+    header, source = model.to_c(tmp_path / "plant")
+    assert "No compensator (bl_inverse_step)" in header.read_text() and "unit circle" in header.read_text()
+    assert "bl_inverse_step" not in source.read_text() and "bl_step(" in source.read_text()

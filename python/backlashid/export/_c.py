@@ -1,5 +1,6 @@
-"""The model as dependency-free C99: a header and a source file with the model's step function
-and the backlash inverse (its C port is in ``_c_inverse``).
+"""The model as dependency-free C99: a header and a source file with the model's step function,
+the backlash inverse (its C port is in ``_c_inverse``) and the feedforward compensator
+(``_c_compensator``).
 
 The generated code does, operation for operation, what the Rust core's one-step function
 does (rust/core/src/model/state_space.rs): the linear recursion (eq 16 / 29) as a_0 u(t), then
@@ -19,8 +20,9 @@ from typing import Any
 from .. import __version__
 from .._files import write_text
 from .._validation import shown
-from ..errors import DataError
+from ..errors import DataError, ModelError
 from ..models import CascadeModel, LinearBlock
+from ._c_compensator import compensator_c
 from ._c_inverse import backlash_inverse_c
 from ._state import AnyModel, check_model, state_names
 
@@ -170,9 +172,13 @@ double {p}_step({p}_state *state, double u);
     )
     function(f"double {p}_step({p}_state *state, double u)", step)
     inverse_h, inverse_c = backlash_inverse_c(bl, p)
-    h = h.replace(f"\n#endif /* {guard} */", inverse_h + f"\n#endif /* {guard} */")
+    try:
+        compensator_h, compensator_c_text, _ = compensator_c(model, p)
+    except ModelError as exc:  # a linear block without a stable inverse: the rest is still exported
+        compensator_h, compensator_c_text = f"\n/* No compensator ({p}_inverse_step): {exc} */\n", ""
+    h = h.replace(f"\n#endif /* {guard} */", inverse_h + compensator_h + f"\n#endif /* {guard} */")
     c = (f'/* The model of {header} (backlashid {__version__}, model.to_c()). */\n#include <stdint.h>\n\n#include "{header}"\n\n'
-         + "\n".join(functions) + "\n" + inverse_c)
+         + "\n".join(functions) + "\n" + inverse_c + ("\n" + compensator_c_text if compensator_c_text else ""))
     return h, c
 
 
@@ -193,7 +199,7 @@ def _paths(path: Any, prefix: str) -> tuple[Path, Path]:
 
 
 def to_c(model: AnyModel, path: str | Path, *, prefix: str = "bl") -> tuple[Path, Path]:
-    """Write the model's step function as a dependency-free C99 header and source.
+    """Write the model's step function and its inverses as a dependency-free C99 header and source.
 
     The header declares the state struct ``<prefix>_state`` (the state vector ``s``, laid out
     as :func:`state_vector`), ``<prefix>_init`` (the state at rest) and
@@ -205,7 +211,13 @@ def to_c(model: AnyModel, path: str | Path, *, prefix: str = "bl") -> tuple[Path
     :meth:`GeneralBacklash.inverse` comes with it, ported step by step from the core
     (rust/core/src/model/inverse.rs): ``<prefix>_backlash_inverse_init`` and
     ``int <prefix>_backlash_inverse_step(<prefix>_backlash_inverse *inverse, double y_d,
-    double *x)``, the backlash input x(t) for a desired backlash output y_d(t).
+    double *x)``, the backlash input x(t) for a desired backlash output y_d(t). And the
+    feedforward compensator of :class:`backlashid.Compensator` (rust/core/src/compensation):
+    ``<prefix>_inverse_init`` (the compensator of the model at rest) and
+    ``int <prefix>_inverse_step(<prefix>_inverse *inverse, double reference, double *u)``, the
+    input u(t) for the reference ``<PREFIX>_INVERSE_DELAY`` samples ahead, with the inverse
+    filters' coefficients from the core as exact literals (left out, with the reason in the
+    header, when a linear block has a zero on the unit circle).
 
     Parameters
     ----------

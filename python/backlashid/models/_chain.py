@@ -232,11 +232,13 @@ class _ModelIO(ABC):
         return to_python_control(self, name, dt=dt)  # type: ignore[arg-type]
 
     def to_c(self, path: Any, *, prefix: str = "bl") -> tuple[Any, Any]:
-        """Write the model's step function as a dependency-free C99 header and source.
+        """Write the model's step function and its inverses as a dependency-free C99 header and source.
 
         See :func:`backlashid.export.to_c`: ``<prefix>_state``, ``<prefix>_init`` and
         ``<prefix>_step``, computed in the core's order, so that the C reproduces
-        :meth:`simulate` to the last bit.
+        :meth:`simulate` to the last bit; the backlash inverse
+        (``<prefix>_backlash_inverse_step``) and the feedforward compensator
+        (``<prefix>_inverse_step``), ports of the core's.
 
         Parameters
         ----------
