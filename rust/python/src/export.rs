@@ -8,6 +8,9 @@ use pyo3::prelude::*;
 
 use crate::errors::CoreError;
 
+/// (feedthrough, a, b, delay, approximate): an inverse filter as `linear_inverse` returns it.
+type InverseFilter = (f64, Vec<f64>, Vec<f64>, usize, bool);
+
 /// (feedthrough, a, b, delay, approximate) of the inverse filter of the block (a, b, a0)
 /// (`LinearInverse::new`; its coefficients do not depend on the pasts); `name` names the
 /// block in errors.
@@ -18,14 +21,15 @@ pub(crate) fn linear_inverse(
     b: Vec<f64>,
     a0: Option<f64>,
     name: &str,
-) -> PyResult<(f64, Vec<f64>, Vec<f64>, usize, bool)> {
+) -> PyResult<InverseFilter> {
     let block = match a0 {
         None => core::LinearBlock::new(a, b),
         Some(a0) => core::LinearBlock::with_feedthrough(a0, a, b),
     }
     .map_err(CoreError)?;
     let rest = block.rest_state();
-    let inverse = LinearInverse::new(&block, &rest.x_past, &rest.u_past, name).map_err(CoreError)?;
+    let inverse =
+        LinearInverse::new(&block, &rest.x_past, &rest.u_past, name).map_err(CoreError)?;
     let f = inverse.filter;
     Ok((f.feedthrough, f.a, f.b, inverse.delay, inverse.approximate))
 }
