@@ -62,12 +62,12 @@ def compensator_c(model: CascadeModel | SandwichModel, p: str) -> tuple[str, str
     layout = "\n".join(f" *   past[{offsets[part]}..{offsets[part] + n - 1}]: {what[part]}" for part, n in parts if n) or " *   (none: the filters have no past)"
     header = f"""
 /* The feedforward compensator (rust/core/src/compensation/compensator.rs, backlashid's
- * Compensator): {P}_inverse_step takes the reference r(t + D), D = {P}_INVERSE_DELAY samples
+ * Compensator): {p}_inverse_step takes the reference r(t + D), D = {P}_INVERSE_DELAY samples
  * ahead, and returns the input u(t) that makes the model's output follow it: the inverse
  * filter of the {"output block, the backlash inverse and the input block" if len(blocks) == 2 else "backlash inverse, then the input block's inverse filter"}{" (a stable approximation: the model has zeros outside the unit circle, reflected)" if approximate else ""}.
  * The past values of the inverse filters:
 {layout}
- * {P}_inverse_init starts it as backlashid's Compensator starts from the model at rest. */
+ * {p}_inverse_init starts it as backlashid's Compensator starts from the model at rest. */
 #define {P}_INVERSE_DELAY {delay}
 #define {P}_INVERSE_NPAST {total}
 
