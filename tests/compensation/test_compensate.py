@@ -68,6 +68,7 @@ def test_the_compensator_steps_and_runs_in_blocks_and_pickles_with_its_state() -
     comp = bid.Compensator(model)
     d = comp.delay
     targets = np.concatenate([r[d:], np.full(d, r[-1])])
+    assert comp.run([]).size == 0
     first = comp.run(targets[:100])
     stepped = [comp.step(v) for v in targets[100:110]]
     copy = pickle.loads(pickle.dumps(comp))

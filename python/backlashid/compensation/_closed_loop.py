@@ -174,8 +174,8 @@ def closed_loop(
     """
     native, state = native_chain(plant, initial_state, "plant")
     r = _reference(reference)
-    gains = [check_real(v, name) for v, name in ((kp, "kp"), (ki, "ki"), (kd, "kd"))]
+    k_p, k_i, k_d = (check_real(v, name) for v, name in ((kp, "kp"), (ki, "ki"), (kd, "kd")))
     limits = _saturation(saturation)
     ff = _feedforward(compensator, r, initial_state)
-    u, y = _core.closed_loop(native, state, r, ff, *gains, limits)
+    u, y = _core.closed_loop(native, state, r, ff, k_p, k_i, k_d, limits)
     return ClosedLoopResult(reference=r.copy(), output=y, input=u, feedforward=ff, rmse=float(np.sqrt(np.mean((y - r) ** 2))))

@@ -36,13 +36,13 @@ def native_chain(model: Any, initial_state: Any, name: str = "model") -> tuple[A
         native = _core.CascadeModel(_native_block(model.linear), _native_backlash(model.backlash))
         return native, [list(s.u_past), list(s.x_past), [s.y_prev]]
     if isinstance(model, SandwichModel):
-        s = model.rest_state() if initial_state is None else initial_state
-        if not isinstance(s, SandwichState):
-            raise DataError(f"initial_state must be a SandwichState for a sandwich, got {type(s).__name__}")
-        native = _core.SandwichModel(
+        w = model.rest_state() if initial_state is None else initial_state
+        if not isinstance(w, SandwichState):
+            raise DataError(f"initial_state must be a SandwichState for a sandwich, got {type(w).__name__}")
+        sandwich = _core.SandwichModel(
             _native_block(model.input_linear), _native_backlash(model.backlash), _native_block(model.output_linear)
         )
-        return native, [list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past)]
+        return sandwich, [list(w.u_past), list(w.x_past), list(w.y_past), list(w.w_past)]
     raise ModelError(f"{name} must be a CascadeModel or SandwichModel, got {type(model).__name__}")
 
 
@@ -218,7 +218,7 @@ class Compensator:
         Parameters
         ----------
         reference_block : array_like
-            References r(t + D), r(t + 1 + D), ..., 1-D, finite.
+            References r(t + D), r(t + 1 + D), ..., 1-D, finite (may be empty).
 
         Returns
         -------
@@ -230,7 +230,10 @@ class Compensator:
         DataError
             If the block is not a finite 1-D signal or the backlash cannot reach a sample.
         """
-        return self._native.run(_reference(reference_block))
+        block = as_signal(reference_block, "reference_block")
+        if block.ndim == 1 and block.size == 0:
+            return np.empty(0)  # nothing to step: the state stays
+        return self._native.run(_reference(block))
 
     def __reduce__(self) -> tuple[Any, ...]:
         return (_restore, (self._model, self._threshold, self._native.get_state()))

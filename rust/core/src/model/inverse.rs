@@ -18,22 +18,25 @@
 //!    at that level: the input moves only if it must).
 //! 3. y_prev := step(x, y_prev) (eq 1, `GeneralBacklash::step`), x_prev := x.
 //!
-//! Root of a branch B(x) = p(xi) = sum_{i>=1} m_i xi^i = level (xi = x + c_L for L, x - c_R
-//! for R), searched from s = x_prev (always the x_prev of the sample, also for the two
-//! roots of a hold):
+//! Root of a branch B(x) = p(xi) = sum_{i>=1} m_i xi^i = level (xi = x + shift, shift = c_L
+//! for L and -c_R for R; B and B' evaluated by Horner's rule in xi, `Branch::value` and
+//! `Branch::slope`), searched from s = x_prev (the x_prev of the sample, also for both roots
+//! of a hold); ulp(v) is the gap from abs(v) to the next float up (the least normal for 0):
 //!
-//! - degree 1: xi = level / m_1 (error if not finite), x = xi - shift.
-//! - else f(x) = B(x) - level. If f(s) = 0, x = s. Direction d = +1 if f(s) < 0 else -1;
-//!   h = 1e-3 (1 + abs(s)). Bracket: a = s; repeat b = a + d h, stop if f(b) = 0 (root b)
-//!   or sign f(b) != sign f(a), else a = b, h = 2 h; unreachable (Error::Data) when a
-//!   value is not finite or abs(b + shift) > 1e12 (1 + abs(s)).
-//! - Newton safeguarded by bisection on the bracket [lo, hi] (f(lo) < 0 < f(hi) after
-//!   orienting), starting at the bracket end of smaller abs(f) (a on a tie): at x,
-//!   f(x) = 0 ends with x; f(x) < 0 sets lo = x, else hi = x; the Newton point
-//!   x - f(x) / B'(x) is taken if finite, strictly inside (lo, hi) and its step is at most
-//!   half of the step before the last (rtsafe), else the midpoint. Stop when the bracket
-//!   width <= 4 ulp(max(abs(lo), abs(hi))) (x = the midpoint) or the step taken is <= 1 ulp
-//!   of x (x = the new point); at most 2200 iterations.
+//! - degree 1 (one coefficient): xi = level / m_1 (unreachable if not finite), x = xi - shift.
+//! - else f(x) = B(x) - level. f(s) not finite: unreachable; f(s) = 0: x = s. Direction
+//!   d = +1 if f(s) < 0 else -1; h = 1e-3 (1 + abs(s)). Bracket: a = s; repeat b = a + d h;
+//!   unreachable (Error::Data) if f(b) is not finite or abs(b + shift) > 1e12 (1 + abs(s));
+//!   f(b) = 0: x = b; stop if (f(b) < 0) != (f(a) < 0); else a = b, h = 2 h.
+//! - Newton safeguarded by bisection (rtsafe) on [lo, hi] = the bracket oriented so that
+//!   f(lo) < 0 < f(hi) (lo > hi is allowed), from x = the end of smaller abs(f) (a on a
+//!   tie), with both previous step sizes set to abs(b - a). Per iteration (at most 2200,
+//!   then x): if abs(hi - lo) <= 4 ulp(max(abs(lo), abs(hi))), x = (lo + hi) / 2, done;
+//!   f(x) = 0: done; f(x) < 0 sets lo = x, else hi = x; the Newton point n = x - f(x) / B'(x)
+//!   is the next x if finite, strictly between lo and hi and abs(n - x) <= half the step
+//!   size before the last, else (lo + hi) / 2 is; if that step's size abs(next - x) <=
+//!   ulp(next), x = next, done.
+//! - The hold's clamp: x = max(L^{-1}(y_prev), min(x_prev, R^{-1}(y_prev))).
 //!
 //! Continuity (the bracket grows from x_prev) picks the root on the increasing part that the
 //! motion is on, where identified branches turn outside the data's range.
