@@ -81,6 +81,7 @@ API_MODULES = [  # each page opens with the module's own docstring
     "backlashid.diagnosis.effects",
     "backlashid.compensation",
     "backlashid.benchmarks",
+    "backlashid.export",
     "backlashid.app",
     "backlashid.errors",
 ]

@@ -11,6 +11,7 @@ The layers, each a subpackage whose ``__init__`` is its public contract:
 - :mod:`backlashid.compensation`: feedforward compensation of the backlash, closed-loop simulation;
 - :mod:`backlashid.diagnosis`: the sim-to-real gap diagnosis, its analyses and effect catalogue;
 - :mod:`backlashid.benchmarks`: the paper's examples and the withheld-effect cases;
+- :mod:`backlashid.export`: the model as a python-control system and as C99;
 - :mod:`backlashid.app`: record files, figures, fleets on Dask and the command line.
 
 The main names of every layer are re-exported here (``import backlashid as bid``); the numerics
@@ -89,7 +90,7 @@ _LAZY = {
     "diagnose": "diagnosis",
     "fit_effect": "diagnosis",
 }
-_SUBPACKAGES = ("app", "benchmarks", "compensation", "diagnosis", "identify", "models")
+_SUBPACKAGES = ("app", "benchmarks", "compensation", "diagnosis", "export", "identify", "models")
 
 
 def _version() -> str:

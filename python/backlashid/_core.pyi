@@ -26,6 +26,7 @@ __all__ = [
     "Compensator",
     "compensate",
     "closed_loop",
+    "linear_inverse",
 ]
 
 _F = NDArray[np.float64]
@@ -59,6 +60,10 @@ class CascadeModel:
         self, u: _F, u_past: list[float], x_past: list[float], y_prev: float
     ) -> tuple[_F, _F, _B, _B, tuple[list[float], list[float], float]]: ...  # x, y, f1, f2, final state
     def moving_count(self, u: _F, u_past: list[float], x_past: list[float], y_prev: float, warmup: int) -> int: ...
+    # one sample (rust/core/src/model/state_space.rs): (y(t), next state [u_past.., x_past.., y_prev])
+    @property
+    def state_size(self) -> int: ...
+    def step(self, state: _F, u: float) -> tuple[float, _F]: ...
 
 @final
 class SandwichModel:
@@ -72,6 +77,10 @@ class SandwichModel:
     def moving_count(
         self, u: _F, u_past: list[float], x_past: list[float], y_past: list[float], w_past: list[float], warmup: int
     ) -> int: ...
+    # one sample: (w(t), next state [u_past.., x_past.., y_past.., w_past..])
+    @property
+    def state_size(self) -> int: ...
+    def step(self, state: _F, u: float) -> tuple[float, _F]: ...
 
 # -- identification (one call per iteration; Python drives the iterations) -------------------
 _LS = tuple[_F, float, _F, float]  # theta, rss, (A^T A)^-1, rcond
@@ -225,3 +234,9 @@ def closed_loop(
     plant: CascadeModel | SandwichModel, state: list[list[float]], reference: _F, feedforward: _F,
     kp: float, ki: float, kd: float, saturation: tuple[float, float] | None,
 ) -> tuple[_F, _F]: ...  # (u, y)
+
+# backlashid.export (rust/python/src/export.rs): (feedthrough, a, b, delay, approximate) of the
+# compensator's inverse filter of the block (a, b, a0) (compensation/linear_inverse.rs)
+def linear_inverse(
+    a: list[float], b: list[float], a0: float | None = None, name: str = "input"
+) -> tuple[float, list[float], list[float], int, bool]: ...

@@ -25,3 +25,23 @@ def pyplot() -> Any:
     except ImportError:
         raise BacklashIdError("plotting needs matplotlib: pip install 'backlashid[plot]'") from None
     return plt
+
+
+def python_control() -> Any:
+    """Import python-control (``control``), with a message naming the ``control`` extra if it is missing.
+
+    Returns
+    -------
+    module
+        ``control``.
+
+    Raises
+    ------
+    BacklashIdError
+        If python-control is not installed.
+    """
+    try:
+        import control
+    except ImportError:
+        raise BacklashIdError("exporting to python-control needs python-control: pip install 'backlashid[control]'") from None
+    return control

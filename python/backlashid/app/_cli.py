@@ -558,6 +558,71 @@ def demo(n: int, snr: float, seed: int, out: Path) -> None:
         click.echo(f"wrote {p}")
 
 
+_CONTROL_MODULE = '''"""The python-control system of a backlashid {kind} model, written by `backlashid export --format python-control`.
+
+Needs backlashid and python-control: pip install 'backlashid[control]'. The model is embedded as
+JSON and rebuilt by backlashid; its step runs in backlashid's core. The model works in model
+units{scaling}.
+"""
+
+import backlashid
+
+MODEL_JSON = {text!r}
+
+model = backlashid.model_from_json(MODEL_JSON)
+
+
+def system(name=None, dt=True):
+    """The model as a discrete-time control.NonlinearIOSystem (model.to_python_control)."""
+    return model.to_python_control(name, dt=dt)
+'''
+
+
+@main.command()
+@click.argument("model_file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--format", "format_", required=True, type=click.Choice(["c", "python-control", "json"]), help="What to write (described above).")
+@click.option("--out", "out", required=True, type=click.Path(path_type=Path), help="c: a folder (PREFIX.h, PREFIX.c in it) or OUT.h and OUT.c; python-control: a .py module; json: the model JSON.")
+@click.option("--prefix", default="bl", show_default=True, help="c: the C identifier every generated name starts with.")
+@_clean_errors
+def export(model_file: Path, format_: str, out: Path, prefix: str) -> None:
+    """Export a model (JSON from fit --json, or a model's to_json) for use outside backlashid.
+
+    \b
+    c               dependency-free C99 header + source: PREFIX_state, PREFIX_init, PREFIX_step
+                    (one sample of simulate, in the core's operation order)
+    python-control  a short Python module that rebuilds the system from the embedded model
+                    JSON via backlashid: system() returns a control.NonlinearIOSystem
+                    (needs backlashid and python-control)
+    json            the plain model JSON (model.to_json())
+
+    The model is exported in model units: a fit's stored scaling and decimation are not part of
+    it (a note gives them).
+    """
+    from ..identify import Scaling
+
+    model, scaling, described = _read_model_file(model_file)
+    if not out.is_dir():
+        out.parent.mkdir(parents=True, exist_ok=True)
+    units = ""
+    if scaling != Scaling():
+        units = (f"; the fit measured u = {scaling.input_offset:.17g} + {scaling.input_scale:.17g} u_model and "
+                 f"y = {scaling.output_offset:.17g} + {scaling.output_scale:.17g} y_model")
+    if format_ == "c":
+        written = list(model.to_c(out, prefix=prefix))
+    elif format_ == "python-control":
+        kind = "cascade" if not isinstance(model, SandwichModel) else "sandwich"
+        write_text(out, _CONTROL_MODULE.format(kind=kind, text=model.to_json(), scaling=units))
+        written = [out]
+    else:
+        write_text(out, model.to_json(indent=2) + "\n")
+        written = [out]
+    if units or int(described.get("decimate", 1)) > 1:
+        factor = int(described.get("decimate", 1))
+        click.echo("note: the model is in model units" + units + (f"; one step is {factor} samples of the fit's record (decimated)" if factor > 1 else ""))
+    for path in written:
+        click.echo(f"wrote {path}")
+
+
 @main.command()
 @click.option("--seed", default=0, show_default=True, help="Random seed of input and noise.")
 @click.option(

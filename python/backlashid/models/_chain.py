@@ -200,6 +200,68 @@ class _ModelIO(ABC):
         except (TypeError, ValueError, OverflowError) as exc:  # a keyword json.dumps refuses
             raise DataError(f"to_json's keywords are json.dumps's; it refused {kwargs} ({type(exc).__name__}: {exc})") from None
 
+    def to_python_control(self, name: str | None = None, *, dt: bool | float = True) -> Any:
+        """The model as a discrete-time python-control ``NonlinearIOSystem``.
+
+        Its state is the flat state vector of :func:`backlashid.export.state_vector` (states
+        named ``u(t-1)``, .., ``y(t-1)``); its update and output functions call the core's
+        one-step function, so ``control.input_output_response`` reproduces :meth:`simulate`.
+        See :func:`backlashid.export.to_python_control`.
+
+        Parameters
+        ----------
+        name : str, optional
+            The system's name.
+        dt : True or float, default True
+            True (discrete time, unspecified sample time) or the sample time in seconds.
+
+        Returns
+        -------
+        control.NonlinearIOSystem
+            The model, input ``u``, output ``y`` (cascade) or ``w`` (sandwich).
+
+        Raises
+        ------
+        BacklashIdError
+            If python-control is not installed (``pip install 'backlashid[control]'``).
+        DataError
+            If ``dt`` is not True or a sample time > 0.
+        """
+        from ..export import to_python_control
+
+        return to_python_control(self, name, dt=dt)  # type: ignore[arg-type]
+
+    def to_c(self, path: Any, *, prefix: str = "bl") -> tuple[Any, Any]:
+        """Write the model's step function and its inverses as a dependency-free C99 header and source.
+
+        See :func:`backlashid.export.to_c`: ``<prefix>_state``, ``<prefix>_init`` and
+        ``<prefix>_step``, computed in the core's order, so that the C reproduces
+        :meth:`simulate` to the last bit; the backlash inverse
+        (``<prefix>_backlash_inverse_step``) and the feedforward compensator
+        (``<prefix>_inverse_step``), ports of the core's.
+
+        Parameters
+        ----------
+        path : str or pathlib.Path
+            An existing directory (``<prefix>.h`` and ``<prefix>.c`` in it) or a file path
+            without extension (``path.h`` and ``path.c``).
+        prefix : str, default "bl"
+            The C identifier every generated name starts with.
+
+        Returns
+        -------
+        tuple of pathlib.Path
+            The header and the source written.
+
+        Raises
+        ------
+        DataError
+            If ``prefix`` is not a C identifier, or the folder of ``path`` does not exist.
+        """
+        from ..export import to_c
+
+        return to_c(self, path, prefix=prefix)  # type: ignore[arg-type]
+
     @classmethod
     @fill(loaded=_LOADED_DOC.format(what="``data`` describes"))
     def from_dict(cls, data: dict[str, Any]) -> Any:

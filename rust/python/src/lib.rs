@@ -8,6 +8,7 @@ mod augmented_problem;
 mod compensation;
 mod convert;
 mod errors;
+mod export;
 mod identify;
 mod models;
 mod problem;
@@ -34,5 +35,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<compensation::PyCompensator>()?;
     m.add_function(wrap_pyfunction!(compensation::compensate, m)?)?;
     m.add_function(wrap_pyfunction!(compensation::closed_loop, m)?)?;
+    m.add_function(wrap_pyfunction!(export::linear_inverse, m)?)?;
     Ok(())
 }

@@ -231,6 +231,24 @@ impl PyCascadeModel {
         let state = cascade_state(u_past, x_past, y_prev);
         run(py, || self.0.moving_count(&u, &state, warmup))
     }
+
+    /// The length of the state vector [u_past.., x_past.., y_prev] of `step`.
+    #[getter]
+    fn state_size(&self) -> usize {
+        self.0.state_size()
+    }
+
+    /// One sample (rust/core/src/model/state_space.rs): (y(t), the next state vector).
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        state: SignalIn<'py>,
+        u: f64,
+    ) -> PyResult<(f64, SignalOut<'py>)> {
+        let state = signal("state", &state)?;
+        let (y, next) = self.0.step(&state, u).map_err(CoreError)?;
+        Ok((y, vec_f64(py, next)))
+    }
 }
 
 #[pyclass(frozen, module = "backlashid._core", name = "SandwichModel")]
@@ -334,5 +352,23 @@ impl PySandwichModel {
         let u = signal("u", &u)?;
         let state = sandwich_state(u_past, x_past, y_past, w_past);
         run(py, || self.0.moving_count(&u, &state, warmup))
+    }
+
+    /// The length of the state vector [u_past.., x_past.., y_past.., w_past..] of `step`.
+    #[getter]
+    fn state_size(&self) -> usize {
+        self.0.state_size()
+    }
+
+    /// One sample (rust/core/src/model/state_space.rs): (w(t), the next state vector).
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        state: SignalIn<'py>,
+        u: f64,
+    ) -> PyResult<(f64, SignalOut<'py>)> {
+        let state = signal("state", &state)?;
+        let (w, next) = self.0.step(&state, u).map_err(CoreError)?;
+        Ok((w, vec_f64(py, next)))
     }
 }
