@@ -1,5 +1,5 @@
 # Type stubs of the Rust extension (rust/python/src: models.rs, problem.rs, identify.rs, augmented.rs,
-# augmented_problem.rs),
+# augmented_problem.rs, bands.rs),
 # checked against the built module by `python -m mypy.stubtest backlashid._core`.
 # Errors raised are those of backlashid.errors: DataError for bad signals, ModelError for bad
 # parameters or divergence, NotIdentifiableError for a rank-deficient regression.
@@ -23,6 +23,8 @@ __all__ = [
     "arx_records",
     "spectral_radius",
     "simulate_augmented",
+    "cascade_output_variance",
+    "sandwich_output_variance",
 ]
 
 _F = NDArray[np.float64]
@@ -197,3 +199,17 @@ def simulate_augmented(
     u: _F, *, effects: list[tuple[str, list[float]]] = ..., t0: float = 0.0, time_scale: float = ...,
     u_past: list[float] | None = None, x_past: list[float] | None = None, y_prev: float = 0.0,
 ) -> _F: ...
+
+# Prediction bands (rust/core/src/identify/bands.rs): (output, variance) of an estimate (no
+# branch-shape checks) for u, var(t) = J_t Sigma J_t^T with Sigma = covariance in theta's layout
+# (p x p), from state = (u_past, x_past, y_prev) / (u_past, x_past, y_past, w_past) or rest
+# (None); the sandwich's r includes r_1.
+def cascade_output_variance(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
+    u: _F, covariance: _F, state: tuple[list[float], list[float], float] | None = None,
+) -> tuple[_F, _F]: ...
+def sandwich_output_variance(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
+    r: list[float], s: list[float], u: _F, covariance: _F,
+    state: tuple[list[float], list[float], list[float], list[float]] | None = None,
+) -> tuple[_F, _F]: ...

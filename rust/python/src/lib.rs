@@ -5,6 +5,7 @@
 
 mod augmented;
 mod augmented_problem;
+mod bands;
 mod convert;
 mod errors;
 mod identify;
@@ -29,6 +30,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<augmented_problem::PyAugmentedProblem>()?;
     m.add_class::<wiener_hammerstein::PyWienerHammersteinProblem>()?;
     identify::register(m)?;
+    bands::register(m)?;
     m.add_function(wrap_pyfunction!(augmented::simulate_augmented, m)?)?;
     Ok(())
 }
