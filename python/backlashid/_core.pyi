@@ -1,5 +1,5 @@
 # Type stubs of the Rust extension (rust/python/src: models.rs, problem.rs, identify.rs, augmented.rs,
-# augmented_problem.rs, compensation.rs),
+# augmented_problem.rs, bands.rs, compensation.rs, export.rs),
 # checked against the built module by `python -m mypy.stubtest backlashid._core`.
 # Errors raised are those of backlashid.errors: DataError for bad signals, ModelError for bad
 # parameters or divergence, NotIdentifiableError for a rank-deficient regression.
@@ -27,6 +27,8 @@ __all__ = [
     "compensate",
     "closed_loop",
     "linear_inverse",
+    "cascade_output_variance",
+    "sandwich_output_variance",
 ]
 
 _F = NDArray[np.float64]
@@ -240,3 +242,17 @@ def closed_loop(
 def linear_inverse(
     a: list[float], b: list[float], a0: float | None = None, name: str = "input"
 ) -> tuple[float, list[float], list[float], int, bool]: ...
+
+# Prediction bands (rust/core/src/identify/bands.rs): (output, variance) of an estimate (no
+# branch-shape checks) for u, var(t) = J_t Sigma J_t^T with Sigma = covariance in theta's layout
+# (p x p), from state = (u_past, x_past, y_prev) / (u_past, x_past, y_past, w_past) or rest
+# (None); the sandwich's r includes r_1.
+def cascade_output_variance(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
+    u: _F, covariance: _F, state: tuple[list[float], list[float], float] | None = None,
+) -> tuple[_F, _F]: ...
+def sandwich_output_variance(
+    a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
+    r: list[float], s: list[float], u: _F, covariance: _F,
+    state: tuple[list[float], list[float], list[float], list[float]] | None = None,
+) -> tuple[_F, _F]: ...

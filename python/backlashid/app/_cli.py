@@ -345,6 +345,7 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup:
     y_sim = simulate_scaled(result.model, scaling, record.u)
     time_unit = {} if dt == 1.0 else {"dt": dt, "time_unit": "s"}
     ax = plot_simulation(record.y, y_sim, warmup=warmup_here, ylabel=output_name, unit=output_unit, **time_unit,
+                         band=_band_in_measured_units(result.model, scaling, record.u),
                          title=f"Measured and simulated output, {which} record")
     paths.append(_save(plt, ax.figure, out / "simulation.png"))
     fig = plot_residuals((record.y - y_sim)[warmup_here:], record.u[warmup_here:], ylabel=output_name, unit=output_unit,
@@ -352,6 +353,19 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup:
                                             f"(input {input_name}, after the {warmup_here}-sample warm-up)")
     paths.append(_save(plt, fig, out / "residuals.png"))
     return paths
+
+
+def _band_in_measured_units(model: Any, scaling: Any, u: Any) -> tuple[Any, Any, str] | None:
+    """The 95 % prediction band of a fitted model's simulated output in measured units (lower,
+    upper, label), None for a model without covariance (a Wiener-Hammerstein fit)."""
+    if getattr(model, "covariance", None) is None:
+        return None
+    pred = model.simulate(scaling.input_to_model(u), band=0.95)
+    lo, hi = scaling.output_from_model(pred.lower), scaling.output_from_model(pred.upper)
+    lower, upper = np.minimum(lo, hi), np.maximum(lo, hi)
+    # a well-identified model's band is thin beside the output's range: its width in the label
+    half = float(np.median(upper - lower)) / 2
+    return lower, upper, f"95 % prediction band (parameter uncertainty), median half-width {half:.2g}"
 
 
 def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:

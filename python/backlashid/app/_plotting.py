@@ -329,6 +329,7 @@ def plot_simulation(
     unit: str | None = None,
     time_unit: str = "s",
     window: int = WINDOW,
+    band: tuple[ArrayLike, ArrayLike, str] | None = None,
     ax: Any = None,
     title: str | None = None,
 ) -> Any:
@@ -358,6 +359,9 @@ def plot_simulation(
         Unit of ``dt``.
     window : int, default 1000
         Longest record drawn whole; longer ones show a window of this many samples.
+    band : tuple of (array_like, array_like, str), optional
+        A prediction band of the simulated output (lower, upper, label), shaded, e.g. from
+        ``model.simulate(u, band=0.95)`` (:class:`backlashid.models.Prediction`).
     {plot}
 
     Examples
@@ -383,6 +387,9 @@ def plot_simulation(
         ax, ax_err, ax_psd = fig.subplots(3, 1, height_ratios=[1.2, 1.0, 1.0])
     shown = _worst_window(ys - sims, warmup, window) if long else slice(0, len(ys))
     ax.plot(t[shown], ys[shown], color="k", lw=1.6, alpha=0.55, label="measured")
+    if band is not None:
+        lower, upper = as_signal(band[0], "band lower").ravel(), as_signal(band[1], "band upper").ravel()
+        ax.fill_between(t[shown], lower[shown], upper[shown], color="C3", alpha=0.25, lw=0, label=band[2], zorder=1)
     ax.plot(t[shown], sims[shown], color="C3", lw=0.9, ls="--", label=f"simulated (free run): fit {fit:.1f} %, {rmse_text}")
     if warmup and shown.start < warmup:
         ax.axvspan(t[shown.start], t[warmup - 1], color="0.9", zorder=0, label=f"skipped transient ({warmup} samples)")
@@ -397,6 +404,10 @@ def plot_simulation(
     ax.grid(alpha=0.3)
     if long:
         _plot_error_panels(ys - sims, t, time_label, dt, warmup, shown, err, ylabel, unit, time_unit, ys, ax_err, ax_psd)
+        if band is not None:  # where the band is visible: around the zero error
+            ax_err.fill_between(t, lower - sims, upper - sims, color="C3", alpha=0.35, lw=0, zorder=3,
+                                label="prediction band - simulated")
+            _legend_outside(ax_err)
     return ax
 
 

@@ -24,7 +24,7 @@ from .. import _core
 from .._docstrings import AXES, fill
 from .._validation import check_choice, check_flag, check_int, check_real, check_seed, identification_record, is_real, shown
 from ..errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
-from ..models import Model
+from ..models import Model, ParameterCovariance, Prediction, sample_band
 from . import _records
 from ._checks import warn_if_suspicious
 from ._coarse import refine_whole
@@ -80,8 +80,10 @@ class FitResult:
     Attributes
     ----------
     model : CascadeModel or SandwichModel or None
-        The identified model; None only in ``NotConvergedError.best`` when the estimate is no
-        valid model (e.g. branches that fall across the dead band).
+        The identified model, carrying the fit's ``covariance`` (a ParameterCovariance under
+        ``structure.names``, for its prediction bands; None where the fit has no finite
+        covariance); None only in ``NotConvergedError.best`` when the estimate is no valid
+        model (e.g. branches that fall across the dead band).
     structure : Structure
         Orders, degree and the parameter layout.
     theta : numpy.ndarray
@@ -198,6 +200,79 @@ class FitResult:
         """
         truth = self.structure.pack(true_model)
         return dict(zip(self.names, map(float, self.theta - truth)))
+
+    def predict(
+        self,
+        u: ArrayLike,
+        *,
+        band: float = 0.95,
+        initial_state: Any = None,
+        method: str = "linear",
+        draws: int = 200,
+        seed: int | None = None,
+    ) -> Prediction:
+        """The model's simulated output for the input u with its prediction band: the
+        parameter covariance propagated to the output.
+
+        The band is where the noise-free output lies given the uncertainty of the estimate
+        (not the measurement noise). "linear" is first order, var(y_hat(t)) = J_t Sigma
+        J_t^T with J_t the exact output sensitivities of the output-error refinement at the
+        estimate, one pass in the core; "sampling" is its check: ``draws`` parameter vectors
+        from N(theta, covariance), each simulated, the band their pointwise quantiles.
+
+        Parameters
+        ----------
+        u : array_like
+            Input u(1), u(2), ..., 1-D, finite.
+        band : float, default 0.95
+            The band's probability, in (0, 1).
+        initial_state : CascadeState or SandwichState, optional
+            The state before the first sample (default rest), taken as known.
+        method : {"linear", "sampling"}, default "linear"
+            First order through the sensitivities, or sampled models.
+        draws : int, default 200
+            Valid models simulated by "sampling"; invalid draws (an unstable block, branches
+            not increasing, a diverging simulation) are redrawn and counted in
+            ``Prediction.invalid_draws``, at most ``10 * draws`` draws in all.
+        seed : int, optional
+            Seed of the draws ("sampling"; the same seed gives the same band).
+
+        Returns
+        -------
+        Prediction
+            The output, the band's edges, the output's standard deviation, level and method.
+
+        Raises
+        ------
+        DataError
+            If u is not a finite signal, band is not in (0, 1), method is unknown, or draws
+            or seed is not a whole number in range.
+        ModelError
+            If the fit has no valid model or no finite covariance.
+        BacklashIdError
+            If "sampling" finds too few valid models among its draws.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> data = bid.example_data(bid.example1(), 1500, snr=25, seed=0)
+        >>> fit = bid.fit_cascade(data.u, data.noisy)
+        >>> pred = fit.predict(data.u, band=0.95)
+        >>> pred.level, pred.method, pred.output.shape
+        (0.95, 'linear', (1500,))
+        """
+        method = check_choice(method, "method", ("linear", "sampling"))
+        if self.model is None:
+            raise ModelError("this fit has no valid model (see NotConvergedError.best_stable), so no prediction band")
+        cov = self.model.covariance
+        if cov is None:
+            raise ModelError("this fit has no finite covariance, so no prediction band: refit (the fit did not converge)")
+        if method == "linear":
+            return self.model.simulate(u, band=band, initial_state=initial_state)
+        return sample_band(
+            self.model, u, np.asarray(self.theta, dtype=np.float64), self.structure.model,
+            band=band, initial_state=initial_state, draws=draws, seed=seed,
+        )
 
     def summary(self, true_model: Model | None = None) -> str:
         """The fit as a table: how it ended, its simulation error, every parameter with its
@@ -889,7 +964,7 @@ def _fit(
     else:
         noise_var, covariance = _covariance(structure, run, refined)
     result = FitResult(
-        model=model,
+        model=_with_covariance(model, structure, covariance),
         structure=structure,
         theta=np.asarray(theta, dtype=np.float64),
         covariance=covariance,
@@ -1012,6 +1087,18 @@ def _refine_with_state(
     projected = model_cols - state_cols @ (np.linalg.pinv(state_cols, rcond=1e-10) @ model_cols)
     state = _records.states(names, p0, fit.theta, isinstance(y, list))
     return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, p0 + rank, projected), state
+
+
+def _with_covariance(model: Model | None, structure: Structure, covariance: NDArray[np.float64]) -> Model | None:
+    """The model carrying the fit's covariance of its parameters (structure.names), for its
+    prediction bands; the model alone where the covariance is not a finite matrix."""
+    if model is None:
+        return None
+    p = structure.model_size
+    names, matrix = structure.names[:p], np.asarray(covariance, dtype=np.float64)[:p, :p]
+    if not np.all(np.isfinite(matrix)):
+        return model
+    return dataclasses.replace(model, covariance=ParameterCovariance(tuple(names), (matrix + matrix.T) / 2))
 
 
 def _covariance(

@@ -10,6 +10,7 @@ from __future__ import annotations
 from ._backlash import BacklashState, BranchCheck, GeneralBacklash, SwitchingSignals
 from ._cascade import CascadeModel, CascadeSimulation, CascadeState
 from ._linear import LinearBlock
+from ._prediction import ParameterCovariance, Prediction, sample_band
 from ._sandwich import SandwichModel, SandwichSimulation, SandwichState
 from ._serialization import Model, model_from_dict, model_from_json
 
@@ -22,10 +23,13 @@ __all__ = [
     "GeneralBacklash",
     "LinearBlock",
     "Model",
+    "ParameterCovariance",
+    "Prediction",
     "SandwichModel",
     "SandwichSimulation",
     "SandwichState",
     "SwitchingSignals",
     "model_from_dict",
     "model_from_json",
+    "sample_band",
 ]

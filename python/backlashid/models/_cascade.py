@@ -19,6 +19,7 @@ from ..errors import DataError
 from ._backlash import GeneralBacklash
 from ._chain import DOCS, FORMAT_VERSION, _ModelIO, _moving_fraction, _Simulation, _State
 from ._linear import LinearBlock
+from ._prediction import COVARIANCE_ATTRIBUTE, SIMULATE_BAND, SIMULATE_BAND_RAISES, ParameterCovariance, Prediction, linear_band
 
 __all__ = ["CascadeModel", "CascadeSimulation", "CascadeState"]
 
@@ -73,7 +74,7 @@ class CascadeSimulation(_Simulation):
 
 
 @dataclass(frozen=True, eq=True)
-@fill(model=DOCS.model)
+@fill(model=DOCS.model, covariance=COVARIANCE_ATTRIBUTE)
 class CascadeModel(_ModelIO):
     """The cascade of Section 3 (Fig. 2): a linear block (16) followed by a general
     backlash (1), u -> x -> y.
@@ -83,6 +84,7 @@ class CascadeModel(_ModelIO):
         The linear block, u -> x.
     backlash : GeneralBacklash
         The backlash, x -> y.
+    {covariance}
 
     Examples
     --------
@@ -94,15 +96,18 @@ class CascadeModel(_ModelIO):
 
     linear: LinearBlock
     backlash: GeneralBacklash
+    covariance: ParameterCovariance | None = field(default=None, repr=False, compare=False)
     _native: Any = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         check_instance(self.linear, LinearBlock, "linear")
         check_instance(self.backlash, GeneralBacklash, "backlash")
+        if self.covariance is not None:
+            check_instance(self.covariance, ParameterCovariance, "covariance")
         object.__setattr__(self, "_native", _core.CascadeModel(self.linear._native, self.backlash._native))
 
     def __reduce__(self) -> tuple[Any, ...]:
-        return (CascadeModel, (self.linear, self.backlash))
+        return (CascadeModel, (self.linear, self.backlash, self.covariance))
 
     def rest_state(self) -> CascadeState:
         """The paper's start: every past signal zero, y(0) = 0.
@@ -116,37 +121,51 @@ class CascadeModel(_ModelIO):
 
     @overload
     def simulate(
-        self, u: ArrayLike, *, initial_state: CascadeState | None = ..., internals: Literal[False] = ...
+        self, u: ArrayLike, *, initial_state: CascadeState | None = ..., internals: Literal[False] = ...,
+        band: None = ..., covariance: ParameterCovariance | None = ...,
     ) -> NDArray[np.float64]: ...
 
     @overload
     def simulate(
-        self, u: ArrayLike, *, initial_state: CascadeState | None = ..., internals: Literal[True]
+        self, u: ArrayLike, *, initial_state: CascadeState | None = ..., internals: Literal[True],
+        band: None = ..., covariance: ParameterCovariance | None = ...,
     ) -> CascadeSimulation: ...
 
-    @fill(simulate=DOCS.simulate.format(state="CascadeState"), raises=DOCS.simulate_raises.format(state="CascadeState"))
+    @overload
     def simulate(
-        self, u: ArrayLike, *, initial_state: CascadeState | None = None, internals: bool = False
-    ) -> NDArray[np.float64] | CascadeSimulation:
+        self, u: ArrayLike, *, initial_state: CascadeState | None = ..., internals: Literal[False] = ...,
+        band: float, covariance: ParameterCovariance | None = ...,
+    ) -> Prediction: ...
+
+    @fill(simulate=DOCS.simulate.format(state="CascadeState"), raises=DOCS.simulate_raises.format(state="CascadeState"), band=SIMULATE_BAND.format(kind="CascadeSimulation"),
+          band_raises=SIMULATE_BAND_RAISES)
+    def simulate(
+        self, u: ArrayLike, *, initial_state: CascadeState | None = None, internals: bool = False,
+        band: float | None = None, covariance: ParameterCovariance | None = None,
+    ) -> NDArray[np.float64] | CascadeSimulation | Prediction:
         """The output y for the input u.
 
         Parameters
         ----------
         {simulate}
-        internals : bool, default False
-            Return a :class:`CascadeSimulation` that also holds x, f1, f2 and the final
-            state.
+        {band}
 
         Returns
         -------
-        numpy.ndarray or CascadeSimulation
-            y(1), y(2), ..., or the simulation with its internal signals.
+        numpy.ndarray or CascadeSimulation or Prediction
+            y(1), y(2), ..., the simulation with its internal signals, or with ``band`` the
+            output and its prediction band.
 
         {raises}
+        {band_raises}
         """
         s = initial_state if initial_state is not None else self.rest_state()
         check_instance(s, CascadeState, "initial_state", DataError)
         u = as_signal(u, "u")
+        if band is not None:
+            if check_flag(internals, "internals"):
+                raise DataError("band and internals=True cannot be combined: ask for one")
+            return linear_band(self, u, band, s, covariance)
         if not check_flag(internals, "internals"):
             return self._native.simulate(u, list(s.u_past), list(s.x_past), s.y_prev)
         x, y, f1, f2, (u_past, x_past, y_prev) = self._native.simulate_internals(
@@ -186,6 +205,7 @@ class CascadeModel(_ModelIO):
             "format_version": FORMAT_VERSION,
             "linear": self.linear.to_dict(),
             "backlash": self.backlash.to_dict(),
+            **({"covariance": self.covariance.to_dict()} if self.covariance is not None else {}),
         }
 
     def __str__(self) -> str:

@@ -20,6 +20,7 @@ from ..errors import DataError
 from ._backlash import GeneralBacklash
 from ._chain import DOCS, FORMAT_VERSION, _ModelIO, _moving_fraction, _Simulation, _State
 from ._linear import LinearBlock
+from ._prediction import COVARIANCE_ATTRIBUTE, SIMULATE_BAND, SIMULATE_BAND_RAISES, ParameterCovariance, Prediction, linear_band
 
 __all__ = ["SandwichModel", "SandwichSimulation", "SandwichState"]
 
@@ -67,7 +68,7 @@ class SandwichSimulation(_Simulation):
 
 
 @dataclass(frozen=True, eq=True)
-@fill(model=DOCS.model)
+@fill(model=DOCS.model, covariance=COVARIANCE_ATTRIBUTE)
 class SandwichModel(_ModelIO):
     """The sandwich of Section 4 (Fig. 3): input block (16), general backlash (1), output
     block (29), u -> x -> y -> w.
@@ -81,6 +82,7 @@ class SandwichModel(_ModelIO):
         The backlash, x -> y.
     output_linear : LinearBlock
         The output block, y -> w.
+    {covariance}
 
     Examples
     --------
@@ -93,12 +95,15 @@ class SandwichModel(_ModelIO):
     input_linear: LinearBlock
     backlash: GeneralBacklash
     output_linear: LinearBlock
+    covariance: ParameterCovariance | None = field(default=None, repr=False, compare=False)
     _native: Any = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         check_instance(self.input_linear, LinearBlock, "input_linear")
         check_instance(self.backlash, GeneralBacklash, "backlash")
         check_instance(self.output_linear, LinearBlock, "output_linear")
+        if self.covariance is not None:
+            check_instance(self.covariance, ParameterCovariance, "covariance")
         object.__setattr__(
             self,
             "_native",
@@ -106,7 +111,7 @@ class SandwichModel(_ModelIO):
         )
 
     def __reduce__(self) -> tuple[Any, ...]:
-        return (SandwichModel, (self.input_linear, self.backlash, self.output_linear))
+        return (SandwichModel, (self.input_linear, self.backlash, self.output_linear, self.covariance))
 
     @property
     def r(self) -> NDArray[np.float64]:
@@ -135,37 +140,51 @@ class SandwichModel(_ModelIO):
 
     @overload
     def simulate(
-        self, u: ArrayLike, *, initial_state: SandwichState | None = ..., internals: Literal[False] = ...
+        self, u: ArrayLike, *, initial_state: SandwichState | None = ..., internals: Literal[False] = ...,
+        band: None = ..., covariance: ParameterCovariance | None = ...,
     ) -> NDArray[np.float64]: ...
 
     @overload
     def simulate(
-        self, u: ArrayLike, *, initial_state: SandwichState | None = ..., internals: Literal[True]
+        self, u: ArrayLike, *, initial_state: SandwichState | None = ..., internals: Literal[True],
+        band: None = ..., covariance: ParameterCovariance | None = ...,
     ) -> SandwichSimulation: ...
 
-    @fill(simulate=DOCS.simulate.format(state="SandwichState"), raises=DOCS.simulate_raises.format(state="SandwichState"))
+    @overload
     def simulate(
-        self, u: ArrayLike, *, initial_state: SandwichState | None = None, internals: bool = False
-    ) -> NDArray[np.float64] | SandwichSimulation:
+        self, u: ArrayLike, *, initial_state: SandwichState | None = ..., internals: Literal[False] = ...,
+        band: float, covariance: ParameterCovariance | None = ...,
+    ) -> Prediction: ...
+
+    @fill(simulate=DOCS.simulate.format(state="SandwichState"), raises=DOCS.simulate_raises.format(state="SandwichState"), band=SIMULATE_BAND.format(kind="SandwichSimulation"),
+          band_raises=SIMULATE_BAND_RAISES)
+    def simulate(
+        self, u: ArrayLike, *, initial_state: SandwichState | None = None, internals: bool = False,
+        band: float | None = None, covariance: ParameterCovariance | None = None,
+    ) -> NDArray[np.float64] | SandwichSimulation | Prediction:
         """The output w for the input u.
 
         Parameters
         ----------
         {simulate}
-        internals : bool, default False
-            Return a :class:`SandwichSimulation` that also holds x, y, f1, f2 and the final
-            state.
+        {band}
 
         Returns
         -------
-        numpy.ndarray or SandwichSimulation
-            w(1), w(2), ..., or the simulation with its internal signals.
+        numpy.ndarray or SandwichSimulation or Prediction
+            w(1), w(2), ..., the simulation with its internal signals, or with ``band`` the
+            output and its prediction band.
 
         {raises}
+        {band_raises}
         """
         s = initial_state if initial_state is not None else self.rest_state()
         check_instance(s, SandwichState, "initial_state", DataError)
         u = as_signal(u, "u")
+        if band is not None:
+            if check_flag(internals, "internals"):
+                raise DataError("band and internals=True cannot be combined: ask for one")
+            return linear_band(self, u, band, s, covariance)
         args = (list(s.u_past), list(s.x_past), list(s.y_past), list(s.w_past))
         if not check_flag(internals, "internals"):
             return self._native.simulate(u, *args)
@@ -201,6 +220,7 @@ class SandwichModel(_ModelIO):
             "input_linear": self.input_linear.to_dict(),
             "backlash": self.backlash.to_dict(),
             "output_linear": self.output_linear.to_dict(),
+            **({"covariance": self.covariance.to_dict()} if self.covariance is not None else {}),
         }
 
     def __str__(self) -> str:

@@ -10,6 +10,7 @@ from ._backlash import GeneralBacklash
 from ._cascade import CascadeModel
 from ._chain import FORMAT_VERSION, _parse_json
 from ._linear import LinearBlock
+from ._prediction import ParameterCovariance
 from ._sandwich import SandwichModel
 
 __all__ = ["Model", "model_from_dict", "model_from_json"]
@@ -50,19 +51,22 @@ def model_from_dict(data: dict[str, Any]) -> Model:
         )
     if blocks is None:
         raise ModelError(f"unknown model kind {data['model']!r}: expected 'cascade' or 'sandwich'")
-    extra = sorted(map(str, set(data) - {"model", "format_version", *blocks}))
+    extra = sorted(map(str, set(data) - {"model", "format_version", "covariance", *blocks}))
     if extra:
         raise ModelError(f"unknown key(s) {', '.join(extra)} in a {data['model']} model description: use a dict from to_dict()")
     version = data.get("format_version", FORMAT_VERSION)
     if not is_real(version) or version != FORMAT_VERSION:
         raise ModelError(f"format_version = {version!r}: this version of backlashid reads format {FORMAT_VERSION}")
     parts = {key: _block(data, key, kind) for key, kind in blocks.items()}
+    # the fit's covariance (optional, a later addition: files without it read as before)
+    covariance = ParameterCovariance.from_dict(data["covariance"]) if data.get("covariance") is not None else None
     if data["model"] == "cascade":
-        return CascadeModel(LinearBlock.from_dict(parts["linear"]), GeneralBacklash.from_dict(parts["backlash"]))
+        return CascadeModel(LinearBlock.from_dict(parts["linear"]), GeneralBacklash.from_dict(parts["backlash"]), covariance)
     return SandwichModel(
         LinearBlock.from_dict(parts["input_linear"]),
         GeneralBacklash.from_dict(parts["backlash"]),
         LinearBlock.from_dict(parts["output_linear"]),
+        covariance,
     )
 
 

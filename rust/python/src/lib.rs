@@ -5,6 +5,7 @@
 
 mod augmented;
 mod augmented_problem;
+mod bands;
 mod compensation;
 mod convert;
 mod errors;
@@ -31,6 +32,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<augmented_problem::PyAugmentedProblem>()?;
     m.add_class::<wiener_hammerstein::PyWienerHammersteinProblem>()?;
     identify::register(m)?;
+    bands::register(m)?;
     m.add_function(wrap_pyfunction!(augmented::simulate_augmented, m)?)?;
     m.add_class::<compensation::PyCompensator>()?;
     m.add_function(wrap_pyfunction!(compensation::compensate, m)?)?;

@@ -6,6 +6,7 @@
 
 pub mod augmented_problem;
 mod augmented_sensitivity;
+pub mod bands;
 pub mod gradient;
 pub mod initial;
 pub mod problem;
@@ -15,6 +16,7 @@ pub mod sensitivity;
 pub mod wiener_hammerstein;
 
 pub use augmented_problem::{AugmentedProblem, RecordStart};
+pub use bands::{cascade_output_variance, sandwich_output_variance, OutputVariance};
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, Motion, OeGradient};
 pub use initial::InitialState;
 pub use problem::{Iteration, Problem, Record, Structure};
