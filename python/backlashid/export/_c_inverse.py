@@ -2,8 +2,8 @@
 
 The generated functions follow that module's documented algorithm step by step, with the
 same floating-point operations in the same order: the smoothing gate (step 1), the branch
-chosen by the target against the memory and the clamp of a hold (step 2), the memory moved by
-the forward eq (1) (step 3), and the root search (the closed form of a degree-1 branch, else
+chosen by the target against the memory and the clamp of a hold (step 2), the memory set to
+the target when the forward eq (1) takes the intended branch (step 3), and the root search (the closed form of a degree-1 branch, else
 the bracket grown from x(t-1) and Newton safeguarded by bisection, with ulp computed from the
 bits as ``f64::from_bits(bits + 1) - a``). abs, min and max are written out so that no
 library (libm) is needed.
@@ -38,7 +38,7 @@ def backlash_inverse_c(backlash: GeneralBacklash, p: str) -> tuple[str, str]:
     header = f"""
 /* The backlash inverse (rust/core/src/model/inverse.rs, GeneralBacklash.inverse): for a desired
  * backlash output y_d(t), the backlash input x(t) that produces it. Fields as the core's
- * BacklashInverse: the memory y(t-1) as the forward eq (1) has it, x(t-1), the smoothing
+ * BacklashInverse: the memory y(t-1) (the target reached, or eq (1)'s value off the intended branch), x(t-1), the smoothing
  * gate's direction (-1, 0, +1) and extremum, and the threshold (0: the exact inverse). */
 typedef struct {{
     double y_prev;
@@ -199,8 +199,8 @@ int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double 
     function(
         f"int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double *x)",
         [
-            "    double against, target, root, lo, hi;",
-            "    int failed;",
+            "    double against, target, root, lo, hi, l, r;",
+            "    int failed, intended, f1, f2;",
             f"    if (!{p}_finite(y_d)) {{",
             "        return 1;",
             "    }",
@@ -224,10 +224,13 @@ int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double 
             "    }",
             "    /* 2. R^-1 rising, L^-1 falling, else hold inside the dead band at the level */",
             "    if (target > inverse->y_prev) {",
+            "        intended = 2;",
             f"        failed = {p}_right_root(target, inverse->x_prev, &root);",
             "    } else if (target < inverse->y_prev) {",
+            "        intended = 1;",
             f"        failed = {p}_left_root(target, inverse->x_prev, &root);",
             "    } else {",
+            "        intended = 0;",
             f"        failed = {p}_left_root(inverse->y_prev, inverse->x_prev, &lo);",
             "        if (!failed) {",
             f"            failed = {p}_right_root(inverse->y_prev, inverse->x_prev, &hi);",
@@ -240,8 +243,19 @@ int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double 
             "    if (failed) {",
             "        return failed;",
             "    }",
-            "    /* 3. the memory moved by the forward eq (1) */",
-            f"    inverse->y_prev = {p}_select({p}_left(root), {p}_right(root), inverse->y_prev);",
+            "    /* 3. the memory: the target if eq (1) takes the intended branch (f2 rising, f1",
+            "     * falling), else eq (1)'s value; a hold leaves it */",
+            "    if (intended != 0) {",
+            f"        l = {p}_left(root);",
+            f"        r = {p}_right(root);",
+            "        f1 = (l - inverse->y_prev <= 0.0);",
+            "        f2 = (inverse->y_prev - r <= 0.0) && !f1;",
+            "        if ((intended == 1 && f1) || (intended == 2 && f2)) {",
+            "            inverse->y_prev = target;",
+            "        } else {",
+            f"            inverse->y_prev = {p}_select(l, r, inverse->y_prev);",
+            "        }",
+            "    }",
             "    inverse->x_prev = root;",
             "    *x = root;",
             "    return 0;",

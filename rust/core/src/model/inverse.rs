@@ -54,7 +54,7 @@ use crate::model::signal::check_signal;
 /// The per-sample backlash inverse: `step` returns x(t) for the target y_d(t).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BacklashInverse {
-    /// The backlash memory y(t-1) as the forward eq (1) has it after the x's returned so far.
+    /// The backlash memory y(t-1): the last target reached (eq 1's value where it left the intended branch).
     pub y_prev: f64,
     /// x(t-1), the last x returned (x(0) before the first sample).
     pub x_prev: f64,
