@@ -450,6 +450,85 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
 
 
 @main.command()
+@click.argument("model_file", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("reference_file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--reference", "-r", "column", default="0", show_default=True,
+              help="The desired output in REFERENCE_FILE (NAME, NAME[K] or a column number), in measured output units.")
+@click.option("--range", "range_", help="Samples a:b of REFERENCE_FILE to follow (0-based, b excluded).")
+@click.option("--reference-offset", "offset", default=0.0, show_default=True, type=float,
+              help="Added to the reference, e.g. the device's operating point when the reference is a motion about it.")
+@click.option("--threshold", default=0.0, show_default=True, type=click.FloatRange(min=0.0),
+              help="Smoothing of the backlash inverse for a noisy reference, in measured output units: a reversal is taken once "
+                   "the reference has gone back by more than this (0: the exact inverse).")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="CSV to write: reference, u (the input to apply) and y_model (the model's simulated output with it).")
+@click.option("--png", "png", type=click.Path(dir_okay=False, path_type=Path), help="Also draw the reference, the model's output and the input here.")
+@_clean_errors
+def compensate(model_file: Path, reference_file: Path, column: str, range_: str | None, offset: float, threshold: float, out: Path,
+               png: Path | None) -> None:
+    """Compute the input that makes a model's output follow a reference (feedforward compensation).
+
+    The model (JSON from fit --json, or a model's to_json) is inverted block by block: the
+    backlash inverse and a stable inverse of the linear blocks (backlashid.compensate). The
+    model starts at rest, which for a fit with --scale auto is the estimation record's mean
+    level: start the reference there. The reported error is a simulation on the model, not a
+    measurement on the device.
+    """
+    from ..compensation import Compensator
+    from ..compensation import compensate as inverse_input
+    from ._io import Record, _finite_record, _read_signals, decimate, parse_range
+
+    model, scaling, described = _read_model_file(model_file)
+    reference = _read_signals(reference_file, [column])[column]
+    if not np.isfinite(offset):
+        raise DataError(f"--reference-offset {offset}: give a finite number")
+    reference = reference + offset
+    record = Record(reference, reference, str(reference_file))
+    if range_:
+        part = parse_range(range_, len(record), "--range")
+        record = _finite_record(record.slice(part, "--range"), column, column, "choose a --range without it", part.start, f"--range {range_}", str(reference_file))
+    else:
+        _finite_record(record, column, column, "select a --range without it")
+    factor = int(described.get("decimate", 1))
+    record = decimate(record, factor)
+    target = scaling.output_to_model(record.u)
+    compensator = Compensator(model)  # its preview and whether an inverse is approximate
+    u_model = inverse_input(model, target, threshold=threshold / abs(scaling.output_scale))
+    y_model = model.simulate(u_model)
+    columns = {"reference": record.u, "u": scaling.input_from_model(u_model), "y_model": scaling.output_from_model(y_model)}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(out, "w", encoding="utf-8") as fh:  # an interrupted write leaves the old file or none
+        np.savetxt(fh, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
+    d = compensator.delay
+    error = columns["y_model"][d:] - record.u[d:]
+    rmse = float(np.sqrt(np.mean(error**2))) if error.size else float("nan")
+    click.echo(f"computed the input for {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else "")
+               + f"; preview {d} sample{'s' if d != 1 else ''} (u[t] aims at reference[t + {d}])"
+               + ("; a linear block is non-minimum phase: its inverse is the stable approximation" if compensator.approximate else ""))
+    click.echo(f"tracking RMSE of the model's simulated output after the first {d} samples: {rmse:.6g} (simulation on the model)")
+    click.echo(f"input range {columns['u'].min():.6g} to {columns['u'].max():.6g}")
+    click.echo(f"wrote {out}")
+    if png is not None:
+        from .._optional import pyplot
+
+        plt = pyplot()
+        fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+        t = np.arange(len(record))
+        axes[0].plot(t, record.u, color="k", lw=1.2, label="reference")
+        axes[0].plot(t, columns["y_model"], color="C0", lw=0.9, ls="--", label="model output with the compensator's input (simulation)")
+        axes[0].set_ylabel("output (units of the record)")
+        axes[1].plot(t, columns["u"], color="C1", lw=0.9, label="compensator's input u")
+        axes[1].set_ylabel("input (units of the record)")
+        axes[1].set_xlabel("sample" + (f" (decimated by {factor})" if factor > 1 else ""))
+        for ax in axes:
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the axes, not on the data
+        fig.tight_layout()
+        png.parent.mkdir(parents=True, exist_ok=True)
+        click.echo(f"wrote {_save(plt, fig, png)}")
+
+
+@main.command()
 @_data_options
 @click.option("--model-file", "--model", "model_file", type=click.Path(dir_okay=False, path_type=Path), help="Model JSON (from fit --json); its scaling and decimation are used.")
 @click.option("--fit-cascade", is_flag=True, help="Fit a cascade on the estimation record instead of reading --model.")

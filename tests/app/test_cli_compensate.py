@@ -1,0 +1,88 @@
+"""``backlashid compensate MODEL REFERENCE --out U.csv`` (issue 19)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import backlashid as bx
+from backlashid.app._cli import main
+
+
+def run(*args: object):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def read(path: Path) -> dict[str, np.ndarray]:
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    return {k: np.asarray(data[k]) for k in data.dtype.names}
+
+
+@pytest.fixture
+def reference_file(tmp_path: Path) -> Path:
+    t = np.arange(600)
+    path = tmp_path / "reference.csv"
+    np.savetxt(path, np.column_stack([t, 30.0 + 2.0 * np.sin(2 * np.pi * t / 150)]), delimiter=",", header="t,position", comments="")
+    return path
+
+
+def test_the_input_makes_the_scaled_model_follow_the_reference(tmp_path: Path, reference_file: Path) -> None:
+    # a fit file with a scaling: the reference is in measured units, the input comes out in them
+    fit_file = tmp_path / "fit.json"
+    scaling = {"input_offset": 5.0, "input_scale": 2.0, "output_offset": 30.0, "output_scale": 4.0}
+    fit_file.write_text(json.dumps({"model": bx.example1().to_dict(), "scaling": scaling, "data": {"decimate": 1}}))
+    out = tmp_path / "sub" / "u.csv"
+    res = run("compensate", fit_file, reference_file, "-r", "position", "--out", out, "--png", tmp_path / "figs" / "c.png")
+    assert res.exit_code == 0, res.output
+    cols = read(out)
+    assert list(cols) == ["reference", "u", "y_model"]
+    # the model in model units, driven by the input converted back, follows the reference from sample 1 on
+    u_model = (cols["u"] - 5.0) / 2.0
+    y = 30.0 + 4.0 * bx.example1().simulate(u_model)
+    assert np.max(np.abs(y[1:] - cols["reference"][1:])) < 1e-9
+    assert np.allclose(cols["y_model"], y, rtol=0, atol=1e-12)
+    assert "preview 1 sample" in res.output and "(simulation on the model)" in res.output
+    assert (tmp_path / "figs" / "c.png").stat().st_size > 10_000
+
+
+def test_offset_range_and_threshold(tmp_path: Path, reference_file: Path) -> None:
+    model_file = tmp_path / "model.json"
+    model_file.write_text(bx.example2().to_json())
+    out = tmp_path / "u.csv"
+    res = run("compensate", model_file, reference_file, "-r", "position", "--range", "100:400", "--reference-offset", "-30", "--threshold", "0.01", "--out", out)
+    assert res.exit_code == 0, res.output
+    cols = read(out)
+    assert cols["reference"].size == 300
+    assert np.allclose(cols["reference"] + 30.0, np.loadtxt(reference_file, delimiter=",", skiprows=1)[100:400, 1])
+    # the sandwich's preview is 2 samples; after it the smoothed inverse holds the output within
+    # the threshold of the reference (at the reversals), the exact one follows it
+    assert "preview 2 samples" in res.output
+    gap = np.max(np.abs(cols["y_model"][2:] - cols["reference"][2:]))
+    assert 1e-3 < gap <= 0.01 + 1e-9
+    exact = run("compensate", model_file, reference_file, "-r", "position", "--range", "100:400", "--reference-offset", "-30", "--out", out)
+    assert exact.exit_code == 0, exact.output
+    cols = read(out)
+    assert np.max(np.abs(cols["y_model"][2:] - cols["reference"][2:])) < 1e-9
+
+
+def test_refusals_end_with_one_error_line(tmp_path: Path, reference_file: Path) -> None:
+    model_file = tmp_path / "model.json"
+    model_file.write_text(bx.example1().to_json())
+    missing = run("compensate", model_file, reference_file, "-r", "speed", "--out", tmp_path / "u.csv")
+    assert missing.exit_code == 1 and "no column 'speed'" in missing.output
+    bad = tmp_path / "bad.csv"
+    bad.write_text("position\n1.0\nnan\n2.0\n")
+    nan = run("compensate", model_file, bad, "-r", "position", "--out", tmp_path / "u.csv")
+    assert nan.exit_code == 1 and "Error:" in nan.output and "Traceback" not in nan.output
+    # a branch that turns: a reference above its maximum cannot be reached
+    turning = bx.CascadeModel(bx.LinearBlock([1.0]), bx.GeneralBacklash(0.1, 0.1, [1.0, 0.0, -1.0], [1.0, 0.0, -1.0]))
+    model_file.write_text(turning.to_json())
+    high = run("compensate", model_file, reference_file, "-r", "position", "--out", tmp_path / "u.csv")
+    assert high.exit_code == 1 and "cannot reach" in high.output and "Traceback" not in high.output
+    assert not (tmp_path / "u.csv").exists()
+    negative = run("compensate", model_file, reference_file, "--threshold", "-1", "--out", tmp_path / "u.csv")
+    assert negative.exit_code == 2 and "--threshold" in negative.output
