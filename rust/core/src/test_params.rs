@@ -16,6 +16,18 @@ pub fn example1_backlash() -> GeneralBacklash {
     GeneralBacklash::new(0.6, 0.5, vec![1.0, -0.3, 0.3], vec![1.5, 0.4, 0.2]).unwrap()
 }
 
+/// A backlash of degree 5 on the left (past the fixed-size hot loops' degree 3), cubic on the
+/// right: Example 1's widths.
+pub fn quintic_backlash() -> GeneralBacklash {
+    GeneralBacklash::new(
+        0.6,
+        0.5,
+        vec![1.0, 0.0, 0.2, 0.0, 0.01],
+        vec![1.5, 0.1, 0.2],
+    )
+    .unwrap()
+}
+
 /// Example 1 of the paper (cascade, eq 16-17): its linear block and backlash.
 pub fn example1() -> (LinearBlock, GeneralBacklash) {
     (example1_linear(), example1_backlash())

@@ -117,10 +117,7 @@ impl PyCompensator {
             backlash,
             samples,
         };
-        Ok(self
-            .0
-            .set_state(saved)
-            .map_err(crate::errors::CoreError)?)
+        Ok(self.0.set_state(saved).map_err(crate::errors::CoreError)?)
     }
 }
 
@@ -135,7 +132,10 @@ pub(crate) fn compensate<'py>(
 ) -> PyResult<SignalOut<'py>> {
     let (m, s) = chain(model, state)?;
     let r = signal("reference", &reference)?;
-    Ok(vec_f64(py, run(py, || core::compensate(&m, &r, &s, threshold))?))
+    Ok(vec_f64(
+        py,
+        run(py, || core::compensate(&m, &r, &s, threshold))?,
+    ))
 }
 
 /// (u, y) of the PID loop around the plant (`core::compensation::closed_loop`).

@@ -507,7 +507,7 @@ fn intervals_where_nonpositive(f: impl Fn(f64) -> f64, lo: f64, hi: f64) -> Vec<
 mod tests {
     use super::*;
 
-    use crate::test_params::example1_backlash as example1;
+    use crate::test_params::{example1_backlash as example1, quintic_backlash};
 
     #[test]
     fn padded_branches_and_slopes_are_the_branches_bit_for_bit() {
@@ -525,13 +525,7 @@ mod tests {
                 assert_eq!(rs.slope(x).to_bits(), bl.right().slope(x).to_bits());
             }
         }
-        let quintic = GeneralBacklash::new(
-            0.6,
-            0.5,
-            vec![1.0, 0.0, 0.2, 0.0, 0.01],
-            vec![1.5, 0.1, 0.2],
-        )
-        .unwrap();
+        let quintic = quintic_backlash();
         assert!(quintic.padded_slopes().is_none());
     }
 

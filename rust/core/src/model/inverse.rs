@@ -283,7 +283,7 @@ pub(crate) fn branch_root(branch: &Branch, shift: f64, level: f64, start: f64) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_params::{example1_backlash, example2_backlash, lcg_unit};
+    use crate::test_params::{example1_backlash, example2_backlash, lcg_unit, quintic_backlash};
 
     /// backlash.simulate(inverse(y_d)) against y_d, relative error per sample.
     fn worst_error(bl: &GeneralBacklash, y_d: &[f64], threshold: f64) -> f64 {
@@ -317,22 +317,22 @@ mod tests {
             for level in [0.37, -0.81, 1e-3, 2.5] {
                 let x = bl.inverse(&[level; 50], -0.01, 0.0, 0.0).unwrap();
                 // still up to the ulp the hold's clamp may take (the band is about 1 wide)
-                assert!(x[1..].iter().all(|&v| (v - x[0]).abs() <= 1e-12), "{level}: {x:?}");
+                assert!(
+                    x[1..].iter().all(|&v| (v - x[0]).abs() <= 1e-12),
+                    "{level}: {x:?}"
+                );
                 let y = bl.simulate(&x, -0.01).unwrap();
-                assert!(y.iter().all(|v| (v - level).abs() <= 1e-12), "{level}: {y:?}");
+                assert!(
+                    y.iter().all(|v| (v - level).abs() <= 1e-12),
+                    "{level}: {y:?}"
+                );
             }
         }
     }
 
     #[test]
     fn the_backlash_of_the_inverse_is_the_identity() {
-        let quintic = GeneralBacklash::new(
-            0.6,
-            0.5,
-            vec![1.0, 0.0, 0.2, 0.0, 0.01],
-            vec![1.5, 0.1, 0.2],
-        )
-        .unwrap();
+        let quintic = quintic_backlash();
         let linear = GeneralBacklash::new(0.3, 0.2, vec![1.1], vec![0.9]).unwrap();
         for bl in [example1_backlash(), example2_backlash(), quintic, linear] {
             for y_d in [smooth(3000), rough(2000, 7), rough(500, 99)] {

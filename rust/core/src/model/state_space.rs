@@ -211,7 +211,7 @@ mod tests {
     use crate::model::cascade::{CascadeModel, CascadeState};
     use crate::model::linear::{LinearBlock, LinearState};
     use crate::model::sandwich::{SandwichModel, SandwichState};
-    use crate::test_params::{example1_model, example2_model};
+    use crate::test_params::{example1_model, example2_model, quintic_backlash};
 
     /// A white-ish and a smooth input.
     fn inputs(n: usize) -> [Vec<f64>; 2] {
@@ -241,13 +241,7 @@ mod tests {
     }
 
     fn cascades() -> Vec<CascadeModel> {
-        let quintic = GeneralBacklash::new(
-            0.6,
-            0.5,
-            vec![1.0, 0.0, 0.2, 0.0, 0.01],
-            vec![1.5, 0.1, 0.2],
-        )
-        .unwrap();
+        let quintic = quintic_backlash();
         let with_a0 = LinearBlock::with_feedthrough(0.3, vec![0.7, 0.5, 0.1], vec![-0.2]).unwrap();
         let fir = LinearBlock::new(vec![0.5, 0.25], vec![]).unwrap();
         vec![
