@@ -334,8 +334,10 @@ def test_linear_block(a, b, feedthrough, u, u_past, x_past, names):
     hi=maybe(st.floats(0, 5, **finite)),
     num=maybe(st.integers(2, 50)),
     x_range=maybe(st.tuples(st.floats(-5, 0, **finite), st.floats(0, 5, **finite))),
+    start=maybe(st.none() | st.tuples(st.floats(-2, 2, **finite), st.floats(-2, 2, **finite))),
+    threshold=maybe(st.floats(0.0, 0.5, **finite)),
 )
-def test_general_backlash(c_l, c_r, m_l, m_r, x, x_wide, y0, form, lo, hi, num, x_range):
+def test_general_backlash(c_l, c_r, m_l, m_r, x, x_wide, y0, form, lo, hi, num, x_range, start, threshold):
     kind, bl = check_call(bid.GeneralBacklash, c_l, c_r, m_l, m_r, finite=None)
     if kind == "error":
         return
@@ -344,6 +346,7 @@ def test_general_backlash(c_l, c_r, m_l, m_r, x, x_wide, y0, form, lo, hi, num, 
         check_call(bl.right, values)
         check_call(bl.simulate, values, y0=y0, form=form)
         check_call(bl.switching, values, y0=y0)
+        check_call(bl.inverse, values, initial_state=start, threshold=threshold)  # x as y_desired
     check_call(bl.breakpoints, y0, x_range, infinite_ok=True)  # +-inf: the branch does not reach y_prev
     check_call(bl.check_branches, lo, hi)
     check_call(bl.characteristic, lo, hi, num)
@@ -363,6 +366,50 @@ def test_model_simulate(model, u, state, internals, warmup):
         state = model.rest_state()
     check_call(model.simulate, u, initial_state=state, internals=internals)
     check_call(model.moving_fraction, u, initial_state=state, warmup=warmup)
+
+
+@fuzz(500, 10000)
+@given(
+    model=MODELS,
+    reference=signals(n_max=60),
+    state=maybe(st.none(), JUNK),
+    threshold=maybe(st.floats(0.0, 0.5, **finite)),
+    gains=maybe(st.tuples(st.floats(0.0, 2.0, **finite), st.floats(0.0, 0.5, **finite), st.floats(0.0, 0.5, **finite))),
+    saturation=maybe(st.none() | st.tuples(st.floats(-5.0, 0.0, **finite), st.floats(0.0, 5.0, **finite))),
+    sample=maybe(st.floats(-2, 2, **finite)),
+)
+def test_compensation(model, reference, state, threshold, gains, saturation, sample):
+    check_call(bid.compensate, model, reference, initial_state=state, threshold=threshold)
+    kind, compensator = check_call(bid.Compensator, model, initial_state=state, threshold=threshold, finite=None, repeat=False)
+    if kind == "ok":
+        check_call(compensator.run, reference, repeat=False)  # the state moves on: no second call alike
+        check_call(compensator.step, sample, repeat=False)
+    kp, ki, kd = gains if isinstance(gains, tuple) and len(gains) == 3 else (gains, 0.0, 0.0)
+    check_call(bid.closed_loop, model, reference, kp=kp, ki=ki, kd=kd, compensator=model, saturation=saturation,
+               finite=lambda r: (r.output, r.input, r.rmse))
+
+
+@fuzz(300, 10000)
+@given(
+    model=MODELS,
+    u=signals(n_max=60),
+    band=maybe(st.floats(0.5, 0.99, **finite)),
+    scale=maybe(st.floats(0.0, 1e-2, **finite)),
+    covariance=JUNK,
+    prefix=maybe(st.sampled_from(["bl", "gear_1", "_x"]), st.text(max_size=4)),
+    dt=maybe(st.sampled_from([True, 0.01, 1.0])),
+)
+def test_bands_and_export(model, u, band, scale, covariance, prefix, dt, tmp_path_factory):
+    from backlashid.models import ParameterCovariance
+    from backlashid.models._prediction import model_layout
+
+    if isinstance(scale, float) and 0.0 <= scale < 1.0:  # else the junk covariance
+        names = model_layout(model)
+        covariance = ParameterCovariance(names, scale * np.eye(len(names)))
+    band_parts = lambda p: (p.output, p.lower, p.upper, p.std) if hasattr(p, "lower") else p  # noqa: E731 (band=None: the output)
+    check_call(model.simulate, u, band=band, covariance=covariance, finite=band_parts)
+    check_call(model.to_c, tmp_path_factory.mktemp("c") / "model", prefix=prefix, finite=None, repeat=False)
+    check_call(model.to_python_control, dt=dt, finite=None, repeat=False)
 
 
 @fuzz(600, 10000)

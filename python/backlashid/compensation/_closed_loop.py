@@ -12,7 +12,8 @@ from numpy.typing import ArrayLike, NDArray
 from .. import _core
 from .._optional import pyplot
 from .._validation import check_real, shown
-from ..errors import DataError
+from ..errors import DataError, ModelError
+from ..identify import rmse
 from ..models import CascadeModel, CascadeState, SandwichModel, SandwichState
 from ._compensator import Chain, Compensator, _reference, compensate, native_chain
 
@@ -178,4 +179,8 @@ def closed_loop(
     limits = _saturation(saturation)
     ff = _feedforward(compensator, r, initial_state)
     u, y = _core.closed_loop(native, state, r, ff, k_p, k_i, k_d, limits)
-    return ClosedLoopResult(reference=r.copy(), output=y, input=u, feedforward=ff, rmse=float(np.sqrt(np.mean((y - r) ** 2))))
+    with np.errstate(over="ignore"):
+        error = rmse(r, y)
+    if not np.isfinite(error):  # the output is finite but its squares overflow: the loop diverged
+        raise ModelError(f"the closed loop diverges (its output reaches {np.max(np.abs(y)):.3g}): lower the gains or give a saturation")
+    return ClosedLoopResult(reference=r.copy(), output=y, input=u, feedforward=ff, rmse=error)

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from .._optional import python_control
-from .._validation import shown
+from .._validation import check_real, shown
 from ..errors import DataError
 from ._state import AnyModel, check_model, native, output_name, state_names
 
@@ -16,9 +16,9 @@ def _check_dt(dt: Any) -> bool | float:
     """True (an unspecified sample time) or a finite sample time > 0."""
     if dt is True:
         return True
-    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)) or not (np.isfinite(dt) and dt > 0):
+    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
         raise DataError(f"dt = {shown(dt)}: give True (discrete time, unspecified sample time) or a sample time > 0")
-    return float(dt)
+    return check_real(dt, "dt", low=0.0, low_open=True)
 
 
 def to_python_control(model: AnyModel, name: str | None = None, *, dt: bool | float = True) -> Any:

@@ -69,6 +69,8 @@ class ParameterCovariance:
     >>> cov = ParameterCovariance(["a1", "b1"], [[1e-4, 0.0], [0.0, 4e-4]])
     >>> cov.standard_errors()
     {'a1': 0.01, 'b1': 0.02}
+    >>> cov == ParameterCovariance.from_dict(cov.to_dict())
+    True
     """
 
     names: tuple[str, ...]
@@ -92,6 +94,14 @@ class ParameterCovariance:
         m.setflags(write=False)
         object.__setattr__(self, "names", names)
         object.__setattr__(self, "matrix", m)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, ParameterCovariance):
+            return NotImplemented
+        return self.names == other.names and bool(np.array_equal(self.matrix, other.matrix))
+
+    def __hash__(self) -> int:
+        return hash((self.names, self.matrix.tobytes()))
 
     def standard_errors(self) -> dict[str, float]:
         """The standard errors by name.
