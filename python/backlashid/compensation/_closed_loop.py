@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._optional import pyplot
-from .._validation import check_real, shown
+from .._validation import check_real, check_warmup, shown
 from ..errors import DataError, ModelError
 from ..identify import rmse
 from ..models import CascadeModel, CascadeState, SandwichModel, SandwichState
@@ -37,7 +37,10 @@ class ClosedLoopResult:
     feedforward : numpy.ndarray
         The compensator's part of the input (zeros without a compensator).
     rmse : float
-        Root mean square of output - reference over all samples.
+        Root mean square of output - reference from sample ``warmup`` on.
+    warmup : int
+        Samples at the start left out of ``rmse`` (the start's transient: a reference that
+        does not start at the plant's initial output cannot be met at once).
     """
 
     reference: NDArray[np.float64]
@@ -45,6 +48,7 @@ class ClosedLoopResult:
     input: NDArray[np.float64]
     feedforward: NDArray[np.float64]
     rmse: float
+    warmup: int = 0
 
     def plot(self) -> Any:
         """Plot reference and output, the error and the input.
@@ -120,11 +124,14 @@ def closed_loop(
     compensator: Compensator | Chain | None = None,
     saturation: tuple[float, float] | None = None,
     initial_state: CascadeState | SandwichState | None = None,
+    warmup: int = 0,
 ) -> ClosedLoopResult:
     """Simulate a discrete PID loop around a plant model, optionally with feedforward compensation.
 
-    The controller sees the output one sample late, as a digital controller does:
-    e(t) = r(t) - y(t-1), and u(t) = u_ff(t) + kp e(t) + ki sum e + kd (e(t) - e(t-1)),
+    The controller sees the output one sample late, as a digital controller does, and
+    compares it with the reference of that sample: e(t) = r(t-1) - y(t-1) (r(0) taken as
+    y(0)), so a feedforward that makes y follow r leaves e = 0, and
+    u(t) = u_ff(t) + kp e(t) + ki sum e + kd (e(t) - e(t-1)),
     clamped to ``saturation`` (the integral then stops growing in the clamped direction).
     u_ff is the feedforward of ``compensator`` (:func:`compensate`; a model is compensated
     from the plant's initial state if it fits, else from its rest state; a
@@ -148,6 +155,8 @@ def closed_loop(
         Input limits (lo, hi).
     initial_state : CascadeState or SandwichState, optional
         The plant's state before the first sample (default its rest state).
+    warmup : int, default 0
+        Samples at the start left out of the result's ``rmse``.
 
     Returns
     -------
@@ -179,8 +188,9 @@ def closed_loop(
     limits = _saturation(saturation)
     ff = _feedforward(compensator, r, initial_state)
     u, y = _core.closed_loop(native, state, r, ff, k_p, k_i, k_d, limits)
+    start = check_warmup(warmup, r.size)
     with np.errstate(over="ignore"):
-        error = rmse(r, y)
+        error = rmse(r, y, warmup=start)
     if not np.isfinite(error):  # the output is finite but its squares overflow: the loop diverged
         raise ModelError(f"the closed loop diverges (its output reaches {np.max(np.abs(y)):.3g}): lower the gains or give a saturation")
-    return ClosedLoopResult(reference=r.copy(), output=y, input=u, feedforward=ff, rmse=error)
+    return ClosedLoopResult(reference=r.copy(), output=y, input=u, feedforward=ff, rmse=error, warmup=start)

@@ -1,9 +1,12 @@
 //! A discrete PID loop around a plant model (cascade or sandwich):
-//!     e(t) = r(t) - y(t-1),
+//!     e(t) = r(t-1) - y(t-1),
 //!     u(t) = u_ff(t) + kp e(t) + ki sum_{s<=t} e(s) + kd (e(t) - e(t-1)),
 //! the controller seeing the output one sample late (the computation delay of a digital
-//! controller), y(0) the plant's output before the record (the cascade's memory y(0), the
-//! sandwich's w(0), 0 without one) and e(0) - e(-1) taken as 0 (no derivative kick). With a
+//! controller) and comparing it with the reference of that same sample, so that a
+//! feedforward that makes y follow r leaves e = 0 (against r(t), e would be r(t) - r(t-1) on
+//! every ramp, and the PI would push the plant off the reference). y(0) is the plant's output
+//! before the record (the cascade's memory y(0), the sandwich's w(0), 0 without one), r(0)
+//! is taken as y(0) (no error before the record) and e(0) - e(-1) as 0 (no derivative kick). With a
 //! saturation [lo, hi] the input is clamped, and the integral does not grow while the input
 //! is clamped in the direction of the error (conditional integration, against windup).
 
@@ -112,7 +115,7 @@ pub fn closed_loop(
     let (mut model, mut y_last) = Plant::new(plant, state)?;
     let n = reference.len();
     let (mut u, mut y) = (guard::buffer(n, "u")?, guard::buffer(n, "y")?);
-    let (mut integral, mut e_prev) = (0.0, None::<f64>);
+    let (mut integral, mut e_prev, mut r_last) = (0.0, None::<f64>, y_last);
     for (i, (chunk_r, chunk_ff)) in reference
         .chunks(guard::CHUNK)
         .zip(feedforward.chunks(guard::CHUNK))
@@ -120,7 +123,8 @@ pub fn closed_loop(
     {
         guard::check()?;
         for (k, (&r, &ff)) in chunk_r.iter().zip(chunk_ff).enumerate() {
-            let e = r - y_last;
+            let e = r_last - y_last;
+            r_last = r;
             let derivative = e - e_prev.unwrap_or(e);
             let trial = integral + e;
             let mut ut = ff + pid.kp * e + pid.ki * trial + pid.kd * derivative;
