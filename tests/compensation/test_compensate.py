@@ -121,6 +121,22 @@ def test_a_pi_loop_tracks_better_with_the_compensator(make) -> None:
     assert np.all(np.abs(limited.input) <= 0.3)
 
 
+@pytest.mark.parametrize("make", [bid.example1, bid.example2])
+def test_a_perfect_feedforward_leaves_the_pid_idle(make) -> None:
+    # the controller compares y(t-1) with r(t-1): with the true model's feedforward the error is
+    # zero on ramps too (compared with r(t) it was r(t) - r(t-1), and the PID pushed off the ramp)
+    plant = make()
+    half = 0.4 if make is bid.example1 else 0.2
+    r = _bench().trapezoid(1500, half, half)
+    loop = bid.closed_loop(plant, r, kp=0.3, ki=0.1, kd=0.05, compensator=plant)
+    np.testing.assert_allclose(loop.input, loop.feedforward, rtol=0, atol=1e-12)
+    assert loop.rmse < 1e-12
+    # warmup leaves the start out of the rmse: a reference away from the rest output
+    start = bid.closed_loop(plant, r + 0.3, kp=0.3, ki=0.1, compensator=plant, warmup=50)
+    assert start.warmup == 50
+    assert start.rmse == pytest.approx(np.sqrt(np.mean((start.output - start.reference)[50:] ** 2)))
+
+
 def test_the_closed_loop_result_plots() -> None:
     import matplotlib.figure
 
