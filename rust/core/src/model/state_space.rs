@@ -207,7 +207,6 @@ impl SandwichModel {
 
 #[cfg(test)]
 mod tests {
-    use crate::model::backlash::GeneralBacklash;
     use crate::model::cascade::{CascadeModel, CascadeState};
     use crate::model::linear::{LinearBlock, LinearState};
     use crate::model::sandwich::{SandwichModel, SandwichState};
