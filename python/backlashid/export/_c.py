@@ -23,7 +23,7 @@ from .._validation import shown
 from ..errors import DataError, ModelError
 from ..models import CascadeModel, LinearBlock
 from ._c_compensator import compensator_c
-from ._c_inverse import backlash_inverse_c
+from ._c_inverse import backlash_inverse_c, c_literal
 from ._state import AnyModel, check_model, state_names
 
 _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
@@ -44,27 +44,22 @@ def check_prefix(prefix: Any) -> str:
     return prefix
 
 
-def _lit(value: float) -> str:
-    """The exact C99 literal of a double: hexadecimal, in parentheses (a sign may lead)."""
-    return f"({float(value).hex()})"
-
-
 def _linear_lines(block: LinearBlock, u: str, u_past: str, x_past: str, names: str = "ab") -> list[str]:
     """The body of one linear block's output: acc = a_0 u, + a_i u(t-i), - b_j x(t-j)
     (``names`` "rs" for the output block's r and s of eq 29)."""
     coeffs = [float(v) for v in block.a]
     a0, a = (coeffs[0], coeffs[1:]) if block.feedthrough else (0.0, coeffs)
     na, nb = names
-    lines = [f"    double acc = {_lit(a0)} * {u}; /* {na}_0 = {a0!r} */", f"    (void){u_past};", f"    (void){x_past};"]
-    lines += [f"    acc += {_lit(ai)} * {u_past}[{i}]; /* {na}_{i + 1} = {ai!r} */" for i, ai in enumerate(a)]
-    lines += [f"    acc -= {_lit(bj)} * {x_past}[{j}]; /* {nb}_{j + 1} = {float(bj)!r} */" for j, bj in enumerate(block.b)]
+    lines = [f"    double acc = {c_literal(a0)} * {u}; /* {na}_0 = {a0!r} */", f"    (void){u_past};", f"    (void){x_past};"]
+    lines += [f"    acc += {c_literal(ai)} * {u_past}[{i}]; /* {na}_{i + 1} = {ai!r} */" for i, ai in enumerate(a)]
+    lines += [f"    acc -= {c_literal(bj)} * {x_past}[{j}]; /* {nb}_{j + 1} = {float(bj)!r} */" for j, bj in enumerate(block.b)]
     return lines
 
 
 def _branch_lines(m: Any, shift: float, what: str) -> list[str]:
     """Horner's rule in xi = x + shift: acc = 0, acc = acc xi + m_k for k = n..1, then acc xi."""
-    lines = [f"    const double xi = x + {_lit(shift)}; /* {what} */", "    double acc = 0.0;"]
-    lines += [f"    acc = acc * xi + {_lit(mk)}; /* m_{k} = {float(mk)!r} */" for k, mk in reversed(list(enumerate(m, start=1)))]
+    lines = [f"    const double xi = x + {c_literal(shift)}; /* {what} */", "    double acc = 0.0;"]
+    lines += [f"    acc = acc * xi + {c_literal(mk)}; /* m_{k} = {float(mk)!r} */" for k, mk in reversed(list(enumerate(m, start=1)))]
     return lines + ["    return acc * xi;"]
 
 

@@ -17,10 +17,7 @@ from typing import Any
 
 from .. import _core
 from ..models import CascadeModel, LinearBlock, SandwichModel
-
-
-def _lit(value: float) -> str:
-    return f"({float(value).hex()})"
+from ._c_inverse import c_literal
 
 
 def _inverse_filter(block: LinearBlock, name: str) -> tuple[float, list[float], list[float], int, bool]:
@@ -90,9 +87,9 @@ int {p}_inverse_step({p}_inverse *inverse, double reference, double *u);
         functions.append(signature + "\n{\n" + "\n".join(body) + "\n}\n")
 
     for name, (feedthrough, a, b, d, _) in filters.items():
-        body = [f"    double acc = {_lit(feedthrough)} * v;", "    (void)in_past;", "    (void)out_past;"]
-        body += [f"    acc += {_lit(ai)} * in_past[{i}];" for i, ai in enumerate(a)]
-        body += [f"    acc -= {_lit(bj)} * out_past[{j}];" for j, bj in enumerate(b)]
+        body = [f"    double acc = {c_literal(feedthrough)} * v;", "    (void)in_past;", "    (void)out_past;"]
+        body += [f"    acc += {c_literal(ai)} * in_past[{i}];" for i, ai in enumerate(a)]
+        body += [f"    acc -= {c_literal(bj)} * out_past[{j}];" for j, bj in enumerate(b)]
         body += [f"    {p}_push(in_past, {len(a)}, v);", f"    {p}_push(out_past, {len(b)}, acc);", "    return acc;"]
         function(f"/* the {name} block's inverse filter (delay {d}), Filter::next */\nstatic double {p}_{name}_inverse(double *in_past, double *out_past, double v)", body)
     function(

@@ -16,17 +16,18 @@ from collections.abc import Sequence
 from ..models import GeneralBacklash
 
 
-def _lit(value: float) -> str:
+def c_literal(value: float) -> str:
+    """The exact C99 literal of a double: hexadecimal, in parentheses (a sign may lead)."""
     return f"({float(value).hex()})"
 
 
 def _slope_lines(m: Sequence[float], shift: float) -> list[str]:
     """``Branch::slope``: acc = 0, then acc = acc xi + (k m_k) for k = n..1 (k m_k as the
     core computes it, one correctly rounded product, written as its exact literal)."""
-    lines = [f"    const double xi = x + {_lit(shift)};", "    double acc = 0.0;"]
+    lines = [f"    const double xi = x + {c_literal(shift)};", "    double acc = 0.0;"]
     for k in range(len(m), 0, -1):
         product = float(k) * float(m[k - 1])
-        lines.append(f"    acc = acc * xi + {_lit(product)}; /* {k} m_{k} */")
+        lines.append(f"    acc = acc * xi + {c_literal(product)}; /* {k} m_{k} */")
     return lines + ["    return acc;"]
 
 
@@ -170,8 +171,8 @@ int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double 
     for name, right, m, shift in (("left", 0, backlash.m_left, backlash.c_left), ("right", 1, backlash.m_right, -backlash.c_right)):
         if len(m) == 1:  # degree 1: the closed form
             body = [
-                f"    const double xi = level / {_lit(m[0])};",
-                f"    const double x = xi - {_lit(shift)};",
+                f"    const double xi = level / {c_literal(m[0])};",
+                f"    const double x = xi - {c_literal(shift)};",
                 "    (void)start;",
                 f"    if (!{p}_finite(x)) {{",
                 "        return 2;",
@@ -180,7 +181,7 @@ int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double 
                 "    return 0;",
             ]
         else:
-            body = [f"    return {p}_root_search({right}, {_lit(shift)}, level, start, root);"]
+            body = [f"    return {p}_root_search({right}, {c_literal(shift)}, level, start, root);"]
         function(f"static int {p}_{name}_root(double level, double start, double *root)", body)
     function(
         f"int {p}_backlash_inverse_init({p}_backlash_inverse *inverse, double y0, double x0, double threshold)",

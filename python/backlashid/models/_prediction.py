@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._optional import pyplot
-from .._validation import as_signal, check_int, check_seed, is_real
+from .._validation import as_signal, check_int, check_real, check_seed, is_real, shown
 from ..errors import BacklashIdError, DataError, ModelError
 
 __all__ = ["ParameterCovariance", "Prediction", "sample_band"]
@@ -303,9 +303,13 @@ def shade_band(ax: Any, t: NDArray[Any], prediction: Prediction) -> None:
 
 def check_level(band: Any) -> float:
     """The band's probability, checked to lie in (0, 1)."""
-    if isinstance(band, bool) or not is_real(band) or not 0.0 < float(band) < 1.0:
-        raise DataError(f"band = {band!r}: give the band's probability, a number in (0, 1) such as 0.95")
-    return float(band)
+    message = f"band = {shown(band)}: give the band's probability, a number in (0, 1) such as 0.95"
+    if isinstance(band, bool) or not is_real(band):
+        raise DataError(message)
+    try:  # an int beyond the float range (10**400) is out of (0, 1) too
+        return check_real(band, "band", low=0.0, high=1.0, low_open=True, high_open=True)
+    except DataError:
+        raise DataError(message) from None
 
 
 def model_layout(model: Any) -> list[str]:
