@@ -173,10 +173,16 @@ class TrackResult:
                 ax.axvline(alarm.sample, color="C3", linewidth=0.8, alpha=0.7)
             ax.set_title(name, fontsize=10)
             ax.tick_params(labelsize=8)
+            ax.locator_params(axis="x", nbins=5)
+            ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))
         for k in range(p, rows * cols):
             fig.delaxes(axes[k // cols][k % cols])
-        for ax in fig.axes[-cols:]:
-            ax.set_xlabel("sample", fontsize=9)
+        for col in range(cols):  # the lowest panel of each column carries the sample axis
+            last = max(k for k in range(p) if k % cols == col) if col < p else None
+            if last is not None:
+                ax = axes[last // cols][col]
+                ax.xaxis.set_tick_params(labelbottom=True)
+                ax.set_xlabel("sample", fontsize=9)
         fig.axes[0].legend(fontsize=7, loc="best")
         suffix = f", {len(self.alarms)} alarm(s) (red)" if self.alarms else ""
         fig.suptitle(f"tracked parameters with +-2 standard errors{suffix}", fontsize=11)

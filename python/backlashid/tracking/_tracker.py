@@ -18,7 +18,7 @@ from ._result import Alarm, TrackResult
 __all__ = ["Tracker", "track"]
 
 _METHODS = ("prediction_error", "regression")
-_DEFAULT_FORGETTING = 0.9999  # a window of about 1e4 samples
+_DEFAULT_FORGETTING = 0.999  # a window of about 1000 samples (benches/tracking.py)
 _PRIOR_NOISE_COUNT = 100.0  # samples the start's noise estimate counts for
 
 
@@ -111,7 +111,7 @@ class Tracker:
         covariance if it carries one), or a structure (a neutral start with a wide prior;
         the prediction-error method needs a good start, so prefer a fit).
     forgetting : float, optional
-        lambda in (0, 1]; default 0.9999 without ``drift``, 1 (no forgetting) with it.
+        lambda in (0, 1]; default 0.999 (a window of about 1000 samples) without ``drift``, 1 (no forgetting) with it.
     drift : float or dict or array_like, optional
         Random-walk rates, the standard deviation of each parameter's change per sample: one
         number for all, a mapping name -> rate (others 0), or p values.
