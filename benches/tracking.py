@@ -33,6 +33,20 @@ The rules, frozen before the quoted seeds were run (developed on seeds >= 100):
   ``CascadeModel.simulate``; the criterion bench (``cargo bench -p backlashid-core --bench
   tracking``) measures the core alone. Memory: the pickled tracker's size after 1e3 and 1e6
   samples.
+
+Measured 2026-11-24 on the shared 2-core machine (quoted seeds 0..19, rules as above):
+
+- drift: lowest per-parameter share within 3 s.e. after the settling 0.9932 (median over
+  seeds 0.9952), 20/20 seeds pass; the regression (eq 18 by RLS) 0.73-0.78 on c_R, 0/20
+  (biased: an equation-error method);
+- constant: largest |tracked - batch| / tracked s.e. 0.955 (median 0.344), 20/20 pass; the
+  regression up to 15.7, 3/20;
+- step: detected 20/20, delay 2211 / 3643 / 5391 samples (min / median / max; readings every
+  3000 samples), no alarm before the step in 20 x 1e5 samples;
+- false alarms: 1 in 1e8 samples (33333 readings) = 0.1 per 1e7; calibration 39 alarms where
+  i.i.d. N(0, 1) readings give 19 (the readings are somewhat overdispersed);
+- Python ``update`` 6.5 M samples/s (every=1000) beside simulate's 102 M; the pickled tracker
+  3642 bytes after 1e3 and after 1e6 samples.
 """
 
 from __future__ import annotations
