@@ -521,7 +521,7 @@ impl<const W: usize> Engine<W> {
         self.wx[0] = fx;
         self.push_lags(ut, xt);
         let psi = self.psi;
-        self.update(&psi, yt - self.y_hat, true);
+        self.update(&psi, yt - self.y_hat, xt);
         Ok(())
     }
 
@@ -578,7 +578,7 @@ impl<const W: usize> Engine<W> {
         self.push_lags(ut, xt);
         if moving {
             self.fold_pending();
-            self.update(&phi, yt - self.y_hat, true);
+            self.update(&phi, yt - self.y_hat, xt);
         } else {
             self.pending += 1.0;
             self.s1 *= self.lambda;
@@ -621,11 +621,12 @@ impl<const W: usize> Engine<W> {
         self.q_wait = 0.0;
     }
 
-    /// The measurement update with row `phi` and error `e`, then P / lambda + Q / sigma2;
-    /// a step that leaves the linear block unstable or m_R1 <= 0 is rejected (theta
-    /// kept), a negative width projected to 0 (the batch LM's `feasible` and `bounds`).
+    /// The measurement update with row `phi` and error `e` at internal signal `xt`, then
+    /// P / lambda (drift added in batches, `add_drift`); a step that leaves the linear block
+    /// unstable, m_R1 <= 0 or a branch decreasing at `xt` is rejected (theta kept), a
+    /// negative width projected to 0 (the batch LM's `feasible` and `bounds`).
     #[inline(always)]
-    fn update(&mut self, phi: &[f64; W], e: f64, noise: bool) {
+    fn update(&mut self, phi: &[f64; W], e: f64, xt: f64) {
         let p = self.dims.p();
         if self.q_wait >= DRIFT_BATCH {
             self.add_drift();
@@ -666,7 +667,16 @@ impl<const W: usize> Engine<W> {
         );
         cand[c_l] = cand[c_l].max(0.0);
         cand[c_r] = cand[c_r].max(0.0);
+        // both branches still increase at this sample's x (m_L1 = 1)
+        let n = self.dims.n;
+        let c_right = match self.method {
+            Method::PredictionError => cand[c_r],
+            Method::Regression => cand[c_r] / cand[m_r1],
+        };
+        let rising = slope(1.0, &cand[c_l + 1..c_l + n], xt + cand[c_l]) > 0.0
+            && slope(cand[m_r1], &cand[c_r + 1..c_r + n], xt - c_right) > 0.0;
         if cand[m_r1] > 0.0
+            && rising
             && stable::<W>(&cand[na..na + nb])
             && cand[..p].iter().all(|v| v.is_finite())
         {
@@ -686,7 +696,7 @@ impl<const W: usize> Engine<W> {
         }
         self.s1 = self.lambda * self.s1 + 1.0;
         self.s2 = self.lambda * self.lambda * self.s2 + 1.0;
-        if noise {
+        {
             self.noise_count += 1.0;
             let gamma = 1.0 / self.noise_count.min(self.noise_memory);
             let v = e * e * inv_s;

@@ -587,6 +587,28 @@ mod tests {
         assert!(Tracker::new(30, 30, 3, &[0.0; 67], &[0.0; 67 * 67], 1.0, 0.0, &o, None).is_err());
     }
 
+    /// A wild start (variance 100 on every parameter): the guard rejects the steps that
+    /// would leave the linear block unstable, m_R1 <= 0 or a branch decreasing, so every
+    /// recorded estimate is feasible and c_L, c_R >= 0.
+    #[test]
+    fn the_guard_keeps_every_estimate_feasible() {
+        let (u, y) = record(5000, 12);
+        let y = noisy(&y, 13);
+        for method in [Method::Regression, Method::PredictionError] {
+            let mut t = tracker(method, &TRUE, 100.0, false);
+            let (theta, _, _) = run(&mut t, &u, &y);
+            assert!(t.rejected() > 0, "{method:?}");
+            for row in theta.chunks(11) {
+                let block = crate::LinearBlock::new(row[..2].to_vec(), row[2..4].to_vec()).unwrap();
+                assert!(block.spectral_radius() < 1.0, "{method:?} {row:?}");
+                assert!(
+                    row[7] > 0.0 && row[4] >= 0.0 && row[8] >= 0.0,
+                    "{method:?} {row:?}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn schur_cohn_agrees_with_the_poles() {
         let mut rng = StdRng::seed_from_u64(9);
