@@ -20,6 +20,7 @@ __all__ = ["Tracker", "track"]
 _METHODS = ("prediction_error", "regression")
 _DEFAULT_FORGETTING = 0.999  # a window of about 1000 samples (benches/tracking.py)
 _PRIOR_NOISE_COUNT = 100.0  # samples the start's noise estimate counts for
+_MOST = 2**62  # every / spacing: whole sample counts the core holds (u64)
 
 
 def _structure(value: Any) -> Structure:
@@ -206,13 +207,13 @@ class Tracker:
             if spacing is None:
                 every = int(np.ceil(3.0 / (1.0 - lam))) if lam < 1.0 else 30_000
             else:
-                every = check_int(spacing, "spacing", 1)
+                every = check_int(spacing, "spacing", 1, _MOST)
             det = (
                 every,
-                check_int(reference, "reference", 1),
+                check_int(reference, "reference", 1, 2**31),
                 check_real(slack, "slack", low=0.0),
                 check_real(threshold, "threshold", low=0.0, low_open=True),
-                check_int(holdoff, "holdoff", 0),
+                check_int(holdoff, "holdoff", 0, 2**31),
             )
         self._names = names
         self._structure = structure
@@ -314,10 +315,11 @@ class Tracker:
         Raises
         ------
         DataError
-            If the blocks are not finite 1-D signals of one length. The tracker keeps the
-            samples before the first bad one.
+            If the blocks are not finite 1-D signals of one length (checked first: the
+            tracker takes none of the block).
         ModelError
-            If the tracked model's simulated output overflowed.
+            If the tracked model's simulated output overflowed (the tracker keeps the
+            samples before that one).
 
         Examples
         --------
@@ -332,7 +334,7 @@ class Tracker:
         y = as_signal(y_block, "y_block")
         if u.ndim != 1 or y.ndim != 1 or u.size != y.size:
             raise DataError(f"u_block and y_block must be 1-D of one length, got shapes {u.shape} and {y.shape}")
-        step = check_int(every, "every", 1)
+        step = check_int(every, "every", 1, _MOST)
         first = self.samples
         theta, se, alarms = self._native.update(u, y, step)
         start = (first // step + 1) * step - 1

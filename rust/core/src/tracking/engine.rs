@@ -66,6 +66,8 @@ pub(crate) struct Engine<const W: usize> {
     /// Samples of drift (Q) not yet added to P: Q is added every `DRIFT_BATCH` samples as
     /// h Q (P + h Q re-factored), the random walk's variance over those h samples.
     q_wait: f64,
+    /// trace(P), kept beside S (`TRACE_CAP`).
+    trace: f64,
     sigma2: f64,
     noise_count: f64,
     /// sum lambda^k and sum lambda^2k over the updates (forgetting's covariance factor).
@@ -138,6 +140,12 @@ pub(crate) fn stable<const W: usize>(b: &[f64]) -> bool {
 
 /// Samples between two additions of the drift's covariance (`Engine::sm`).
 const DRIFT_BATCH: f64 = 16.0;
+
+/// Anti-windup: forgetting inflates P by 1 / lambda per sample whatever the data say, so
+/// without excitation (u = 0, or a long hold in the regression) P grows until it overflows.
+/// Forgetting is suspended while trace(P) (normalised by the noise variance) would exceed
+/// this.
+const TRACE_CAP: f64 = 1e8;
 
 /// The lower Cholesky factor of the p x p block of a symmetric positive semi-definite
 /// matrix; a pivot <= 0 (a direction without variance) leaves its column zero.
@@ -221,6 +229,7 @@ impl<const W: usize> Engine<W> {
             }
         }
         let sm = cholesky(&pm, p);
+        let trace = (0..p).map(|i| pm[i][i]).sum();
         let mut q = [0.0; W];
         for (i, d) in options.drift.iter().enumerate() {
             q[i] = d * d;
@@ -246,6 +255,7 @@ impl<const W: usize> Engine<W> {
             theta,
             sm,
             q_wait: 0.0,
+            trace,
             sigma2,
             noise_count,
             s1: 0.0,
@@ -549,8 +559,7 @@ impl<const W: usize> Engine<W> {
         self.wx[0] = fx;
         self.push_lags(ut, xt);
         let psi = self.psi;
-        self.update(&psi, yt - self.y_hat, xt);
-        Ok(())
+        self.update(&psi, yt - self.y_hat, xt)
     }
 
     /// One sample of the paper's quasi-linear form: x(t) and the switching of eq (25)-(26)
@@ -606,7 +615,7 @@ impl<const W: usize> Engine<W> {
         self.push_lags(ut, xt);
         if moving {
             self.fold_pending();
-            self.update(&phi, yt - self.y_hat, xt);
+            self.update(&phi, yt - self.y_hat, xt)?;
         } else {
             self.pending += 1.0;
             self.s1 *= self.lambda;
@@ -622,7 +631,12 @@ impl<const W: usize> Engine<W> {
             return;
         }
         let h = self.pending;
-        let grow = self.inv_lambda.powf(0.5 * h);
+        let mut grow2 = self.inv_lambda.powf(h);
+        if self.trace * grow2 > TRACE_CAP {
+            grow2 = (TRACE_CAP / self.trace).max(1.0);
+        }
+        self.trace *= grow2;
+        let grow = grow2.sqrt();
         if grow != 1.0 {
             for row in self.sm.iter_mut() {
                 for v in row.iter_mut() {
@@ -646,6 +660,7 @@ impl<const W: usize> Engine<W> {
             pm[i][i] += scale * self.q[i];
         }
         self.sm = cholesky(&pm, p);
+        self.trace = (0..p).map(|i| pm[i][i]).sum();
         self.q_wait = 0.0;
     }
 
@@ -654,7 +669,7 @@ impl<const W: usize> Engine<W> {
     /// unstable, m_R1 <= 0 or a branch decreasing at `xt` is rejected (theta kept), a
     /// negative width projected to 0 (the batch LM's `feasible` and `bounds`).
     #[inline(always)]
-    fn update(&mut self, phi: &[f64; W], e: f64, xt: f64) {
+    fn update(&mut self, phi: &[f64; W], e: f64, xt: f64) -> Result<()> {
         let p = self.dims.p();
         if self.q_wait >= DRIFT_BATCH {
             self.add_drift();
@@ -678,6 +693,9 @@ impl<const W: usize> Engine<W> {
                 acc += self.sm[i][j] * f[j];
             }
             g[i] = acc;
+        }
+        if !beta.is_finite() {
+            return Err(sensitivities_overflowed(self.t));
         }
         let inv_s = 1.0 / beta;
         let gamma = 1.0 / (beta + beta.sqrt());
@@ -712,7 +730,18 @@ impl<const W: usize> Engine<W> {
         } else {
             self.rejected += 1;
         }
-        let c = self.sqrt_inv_lambda;
+        let mut g2 = 0.0;
+        for v in &g {
+            g2 += v * v;
+        }
+        let kept = (self.trace - g2 * inv_s).max(0.0);
+        let c = if kept * self.inv_lambda > TRACE_CAP {
+            self.trace = kept;
+            1.0
+        } else {
+            self.trace = kept * self.inv_lambda;
+            self.sqrt_inv_lambda
+        };
         for i in 0..W {
             let gi = g[i] * gamma;
             for j in 0..W {
@@ -724,15 +753,14 @@ impl<const W: usize> Engine<W> {
         }
         self.s1 = self.lambda * self.s1 + 1.0;
         self.s2 = self.lambda * self.lambda * self.s2 + 1.0;
-        {
-            self.noise_count += 1.0;
-            let gamma = 1.0 / self.noise_count.min(self.noise_memory);
-            let v = e * e * inv_s;
-            if v.is_finite() {
-                self.sigma2 += gamma * (v - self.sigma2);
-            }
-            self.sigma2 = self.sigma2.max(f64::MIN_POSITIVE);
+        self.noise_count += 1.0;
+        let gamma = 1.0 / self.noise_count.min(self.noise_memory);
+        let v = e * e * inv_s;
+        if v.is_finite() {
+            self.sigma2 += gamma * (v - self.sigma2);
         }
+        self.sigma2 = self.sigma2.max(f64::MIN_POSITIVE);
+        Ok(())
     }
 
     /// Every number that changes while tracking, in a fixed order (`load` reads it back).
@@ -755,6 +783,7 @@ impl<const W: usize> Engine<W> {
             self.y_hat,
             self.pending,
             self.q_wait,
+            self.trace,
             self.t as f64,
             self.rejected as f64,
         ]);
@@ -766,7 +795,7 @@ impl<const W: usize> Engine<W> {
 
     pub(crate) fn saved_len(&self) -> usize {
         let p = self.dims.p();
-        p * p + 7 * p + 9 + self.detector.as_ref().map_or(0, |_| DETECTOR_SAVED)
+        p * p + 7 * p + 10 + self.detector.as_ref().map_or(0, |_| DETECTOR_SAVED)
     }
 
     pub(crate) fn load(&mut self, s: &[f64]) -> Result<()> {
@@ -791,7 +820,7 @@ impl<const W: usize> Engine<W> {
         take(&mut self.wu[..p]);
         take(&mut self.wx[..p]);
         take(&mut self.psi[..p]);
-        let mut rest = [0.0; 9];
+        let mut rest = [0.0; 10];
         take(&mut rest);
         [
             self.sigma2,
@@ -804,8 +833,9 @@ impl<const W: usize> Engine<W> {
         ] = [
             rest[0], rest[1], rest[2], rest[3], rest[4], rest[5], rest[6],
         ];
-        self.t = rest[7] as u64;
-        self.rejected = rest[8] as u64;
+        self.trace = rest[7];
+        self.t = rest[8] as u64;
+        self.rejected = rest[9] as u64;
         if let Some(d) = &mut self.detector {
             let mut ds = [0.0; DETECTOR_SAVED];
             take(&mut ds);
@@ -813,6 +843,13 @@ impl<const W: usize> Engine<W> {
         }
         Ok(())
     }
+}
+
+fn sensitivities_overflowed(t: u64) -> Error {
+    Error::Model(format!(
+        "the tracker's regressor overflowed at sample {t} (a huge input or internal signal): \
+         scale the signals down"
+    ))
 }
 
 fn diverged(t: u64) -> Error {

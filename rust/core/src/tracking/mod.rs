@@ -233,7 +233,8 @@ impl Tracker {
 
     /// Track a block: u and y of the same length, finite. The estimate after every
     /// `every`-th sample goes into `sink` (`recorded` rows of p values), alarms are
-    /// appended. On an error the tracker keeps the samples before it.
+    /// appended. Bad input is refused before any sample is taken; on an overflow the
+    /// tracker keeps the samples before it.
     pub fn update(&mut self, u: &[f64], y: &[f64], sink: &mut Sink) -> Result<()> {
         if u.len() != y.len() {
             return Err(Error::Data(format!(
@@ -606,6 +607,48 @@ mod tests {
                     "{method:?} {row:?}"
                 );
             }
+        }
+    }
+
+    /// Without excitation forgetting would inflate P by 1 / lambda per sample until it
+    /// overflows: the trace cap keeps every standard error finite; a regressor that
+    /// overflows is an error, not a NaN.
+    #[test]
+    fn no_windup_and_no_nan() {
+        for method in [Method::Regression, Method::PredictionError] {
+            let cov: Vec<f64> = (0..121)
+                .map(|k| if k % 12 == 0 { 1e-4 } else { 0.0 })
+                .collect();
+            let o = options(method, 0.5);
+            let mut t = Tracker::new(2, 2, 3, &TRUE, &cov, 1e-4, 0.0, &o, None).unwrap();
+            let zeros = vec![0.0; 5000];
+            let (_, se, _) = run(&mut t, &zeros, &zeros);
+            assert!(se.iter().all(|v| v.is_finite()), "{method:?}");
+            let (_, se, _) = run(&mut t, &[0.3, -0.2, 0.5], &[0.1, 0.0, 0.2]);
+            assert!(se.iter().all(|v| v.is_finite()), "{method:?}");
+            let lin = Tracker::new(
+                1,
+                0,
+                2,
+                &[1.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+                &[0.0; 36],
+                1e-2,
+                0.0,
+                &o,
+                None,
+            );
+            let mut lin = lin.unwrap();
+            let (mut th, mut s, mut al) = (vec![0.0; 12], vec![0.0; 12], vec![]);
+            let mut sink = Sink {
+                theta: &mut th,
+                se: &mut s,
+                every: 1,
+                alarms: &mut al,
+            };
+            let err = lin
+                .update(&[1e300, 0.0], &[0.0, 0.0], &mut sink)
+                .unwrap_err();
+            assert!(matches!(err, Error::Model(_)), "{method:?} {err:?}");
         }
     }
 
