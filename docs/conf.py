@@ -80,6 +80,7 @@ API_MODULES = [  # each page opens with the module's own docstring
     "backlashid.diagnosis.analyses",
     "backlashid.diagnosis.effects",
     "backlashid.compensation",
+    "backlashid.tracking",
     "backlashid.benchmarks",
     "backlashid.export",
     "backlashid.app",

@@ -51,6 +51,8 @@ TOP_LEVEL_ALL = [
     "SandwichState",
     "StructureSelection",
     "SwitchingSignals",
+    "TrackResult",
+    "Tracker",
     "WienerHammersteinFit",
     "__version__",
     "closed_loop",
@@ -73,6 +75,7 @@ TOP_LEVEL_ALL = [
     "select_structure",
     "shared_data_folder",
     "simulate_from_samples",
+    "track",
     "wiener_hammerstein_model",
 ]
 
@@ -184,7 +187,7 @@ def test_the_top_level_names_stay() -> None:
 
 
 def test_every_layer_is_there() -> None:
-    assert {"models", "identify", "diagnosis", "benchmarks", "app", "compensation"} <= layers()
+    assert {"models", "identify", "diagnosis", "benchmarks", "app", "compensation", "tracking"} <= layers()
     assert {"backlashid.diagnosis.analyses", "backlashid.diagnosis.effects"} <= set(SUBPACKAGES)
 
 

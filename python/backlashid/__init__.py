@@ -12,6 +12,7 @@ The layers, each a subpackage whose ``__init__`` is its public contract:
 - :mod:`backlashid.diagnosis`: the sim-to-real gap diagnosis, its analyses and effect catalogue;
 - :mod:`backlashid.benchmarks`: the paper's examples and the withheld-effect cases;
 - :mod:`backlashid.export`: the model as a python-control system and as C99;
+- :mod:`backlashid.tracking`: online identification, sample by sample, and wear detection;
 - :mod:`backlashid.app`: record files, figures, fleets on Dask and the command line.
 
 The main names of every layer are re-exported here (``import backlashid as bid``); the numerics
@@ -66,6 +67,7 @@ from .models import (
     model_from_dict,
     model_from_json,
 )
+from .tracking import Tracker, TrackResult, track
 
 if TYPE_CHECKING:  # imported on first use (``__getattr__`` below); named here for type checkers
     from .app import diagnose_many, fit_many
@@ -90,7 +92,7 @@ _LAZY = {
     "diagnose": "diagnosis",
     "fit_effect": "diagnosis",
 }
-_SUBPACKAGES = ("app", "benchmarks", "compensation", "diagnosis", "export", "identify", "models")
+_SUBPACKAGES = ("app", "benchmarks", "compensation", "diagnosis", "export", "identify", "models", "tracking")
 
 
 def _version() -> str:
@@ -169,4 +171,7 @@ __all__ = [
     "shared_data_folder",
     "closed_loop",
     "compensate",
+    "TrackResult",
+    "Tracker",
+    "track",
 ]

@@ -1,5 +1,5 @@
 # Type stubs of the Rust extension (rust/python/src: models.rs, problem.rs, identify.rs, augmented.rs,
-# augmented_problem.rs, bands.rs, compensation.rs, export.rs),
+# augmented_problem.rs, bands.rs, compensation.rs, export.rs, tracking.rs),
 # checked against the built module by `python -m mypy.stubtest backlashid._core`.
 # Errors raised are those of backlashid.errors: DataError for bad signals, ModelError for bad
 # parameters or divergence, NotIdentifiableError for a rank-deficient regression.
@@ -24,6 +24,7 @@ __all__ = [
     "spectral_radius",
     "simulate_augmented",
     "Compensator",
+    "Tracker",
     "compensate",
     "closed_loop",
     "linear_inverse",
@@ -256,3 +257,29 @@ def sandwich_output_variance(
     r: list[float], s: list[float], u: _F, covariance: _F,
     state: tuple[list[float], list[float], list[float], list[float]] | None = None,
 ) -> tuple[_F, _F]: ...
+
+# Online identification (rust/core/src/tracking): a cascade's recursive estimator; theta0 and the
+# covariance in the fits' layout (a, b, c_L, m_L2.., m_R1, c_R, m_R2..); method "prediction_error"
+# or "regression"; detector = (spacing, reference, slack, threshold, holdoff) or None. update
+# returns (theta, standard errors) as (rows, p) arrays of every `every`-th sample and the alarms
+# (sample, direction, width, reference, statistic).
+@final
+class Tracker:
+    def __new__(
+        cls, na: int, nb: int, degree: int, theta0: list[float], covariance: _F, noise_var: float,
+        noise_count: float, method: str, forgetting: float, drift: list[float], noise_memory: float,
+        detector: tuple[int, int, float, float, int] | None,
+    ) -> Self: ...
+    @property
+    def size(self) -> int: ...
+    @property
+    def samples(self) -> int: ...
+    @property
+    def rejected(self) -> int: ...
+    @property
+    def noise_variance(self) -> float: ...
+    def detector_state(self) -> tuple[float, float, bool] | None: ...  # (S+, S-, armed)
+    def estimate(self) -> tuple[_F, _F]: ...
+    def update(self, u: _F, y: _F, every: int) -> tuple[_F, _F, list[tuple[int, int, float, float, float]]]: ...
+    def save(self) -> list[float]: ...
+    def load(self, state: list[float]) -> None: ...

@@ -27,6 +27,7 @@ pub mod linalg;
 pub mod model;
 #[cfg(test)]
 pub(crate) mod test_params;
+pub mod tracking;
 // `test_params` names this crate as the integration tests do.
 #[cfg(test)]
 extern crate self as backlashid_core;

@@ -13,6 +13,7 @@ mod export;
 mod identify;
 mod models;
 mod problem;
+mod tracking;
 mod wiener_hammerstein;
 
 // The helpers the effect binding (`augmented`) shares.
@@ -38,5 +39,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compensation::compensate, m)?)?;
     m.add_function(wrap_pyfunction!(compensation::closed_loop, m)?)?;
     m.add_function(wrap_pyfunction!(export::linear_inverse, m)?)?;
+    m.add_class::<tracking::PyTracker>()?;
     Ok(())
 }

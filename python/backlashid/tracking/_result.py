@@ -1,0 +1,192 @@
+"""The trajectory of a tracked block or record, its alarms and its figure."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._optional import pyplot
+from .._validation import as_signal
+from ..errors import DataError
+
+__all__ = ["Alarm", "TrackResult"]
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """A change of the dead-band width c_L + c_R flagged by the tracker's detector.
+
+    Attributes
+    ----------
+    sample : int
+        The sample the detector fired at, counted from the tracker's first sample.
+    direction : int
+        +1 for a wider dead band (wear), -1 for a narrower one.
+    width : float
+        The tracked width c_L + c_R when it fired.
+    reference : float
+        The width it was compared with (the mean of the readings after arming).
+    statistic : float
+        The CUSUM statistic that crossed the threshold, in standard deviations.
+
+    Examples
+    --------
+    >>> from backlashid.tracking import Alarm
+    >>> Alarm(sample=1200, direction=1, width=1.32, reference=1.1, statistic=12.0).direction
+    1
+    """
+
+    sample: int
+    direction: int
+    width: float
+    reference: float
+    statistic: float
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """The tracked parameters of a block or a record, after every recorded sample.
+
+    Attributes
+    ----------
+    names : list of str
+        The parameters in the fits' layout: a1.., b1.., c_L, m_L2.., m_R1, c_R, m_R2...
+    samples : numpy.ndarray
+        The sample of each row (int64), counted from the tracker's first sample.
+    theta : numpy.ndarray
+        Row k: the estimate after sample ``samples[k]`` (rows x p).
+    standard_errors : numpy.ndarray
+        Their standard errors (rows x p), from the tracker's covariance scaled by its
+        running noise-variance estimate.
+    alarms : list of Alarm
+        The detector's alarms in this block or record.
+    noise_std : float
+        The running estimate of the output noise's standard deviation at the end.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> d = bid.example_data(bid.example1(), 2000, snr=25, seed=1)
+    >>> r = bid.track(d.u, d.noisy, bid.example1(), noise_std=d.noise_std)
+    >>> r.theta.shape, r.names[8]
+    ((2000, 11), 'c_R')
+    """
+
+    names: list[str]
+    samples: NDArray[np.int64] = field(repr=False)
+    theta: NDArray[np.float64] = field(repr=False)
+    standard_errors: NDArray[np.float64] = field(repr=False)
+    alarms: list[Alarm]
+    noise_std: float
+
+    def __len__(self) -> int:
+        return int(self.samples.size)
+
+    def parameter(self, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """One parameter's trajectory and its standard errors.
+
+        Parameters
+        ----------
+        name : str
+            One of :attr:`names`.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            (values, standard errors), one per row.
+
+        Raises
+        ------
+        DataError
+            If ``name`` is not a tracked parameter.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> d = bid.example_data(bid.example1(), 500, snr=25, seed=1)
+        >>> values, se = bid.track(d.u, d.noisy, bid.example1(), noise_std=d.noise_std).parameter("c_R")
+        >>> values.shape == se.shape == (500,)
+        True
+        """
+        if name not in self.names:
+            raise DataError(f"{name!r} is not a tracked parameter: use one of {self.names}")
+        k = self.names.index(name)
+        return self.theta[:, k], self.standard_errors[:, k]
+
+    def plot(self, *, truth: ArrayLike | None = None, path: str | None = None, columns: int = 3) -> Any:
+        """Every parameter over time with its +-2 standard-error band, and the alarms.
+
+        Parameters
+        ----------
+        truth : array_like, optional
+            The true parameters, drawn dashed: p values (constant) or one row of p per row
+            of :attr:`theta`.
+        path : str, optional
+            Save the figure there (any format matplotlib writes, e.g. ``params.png``).
+        columns : int, default 3
+            Panels per row.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            The figure, one panel per parameter.
+
+        Raises
+        ------
+        DataError
+            If ``truth`` has the wrong shape.
+        BacklashIdError
+            If matplotlib is not installed.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> d = bid.example_data(bid.example1(), 500, snr=25, seed=1)
+        >>> fig = bid.track(d.u, d.noisy, bid.example1(), noise_std=d.noise_std).plot()
+        >>> len(fig.axes)
+        11
+        """
+        plt = pyplot()
+        p = len(self.names)
+        true = None
+        if truth is not None:
+            true = as_signal(truth, "truth")
+            if true.shape == (p,):
+                true = np.broadcast_to(true, self.theta.shape)
+            if true.shape != self.theta.shape:
+                raise DataError(f"truth has shape {true.shape}: give {p} values or an array of shape {self.theta.shape}")
+        cols = max(1, min(int(columns), p))
+        rows = -(-p // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.4 * rows), sharex=True, squeeze=False)
+        t = self.samples
+        for k, name in enumerate(self.names):
+            ax = axes[k // cols][k % cols]
+            v, s = self.theta[:, k], self.standard_errors[:, k]
+            ax.fill_between(t, v - 2 * s, v + 2 * s, color="C0", alpha=0.25, linewidth=0, label="+-2 s.e.")
+            ax.plot(t, v, color="C0", linewidth=0.9, label="tracked")
+            if true is not None:
+                ax.plot(t, true[:, k], color="k", linestyle="--", linewidth=0.9, label="true")
+            for alarm in self.alarms:
+                ax.axvline(alarm.sample, color="C3", linewidth=0.8, alpha=0.7)
+            ax.set_title(name, fontsize=10)
+            ax.tick_params(labelsize=8)
+            ax.locator_params(axis="x", nbins=5)
+            ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))
+        for k in range(p, rows * cols):
+            fig.delaxes(axes[k // cols][k % cols])
+        for col in range(cols):  # the lowest panel of each column carries the sample axis
+            last = max(k for k in range(p) if k % cols == col) if col < p else None
+            if last is not None:
+                ax = axes[last // cols][col]
+                ax.xaxis.set_tick_params(labelbottom=True)
+                ax.set_xlabel("sample", fontsize=9)
+        fig.axes[0].legend(fontsize=7, loc="best")
+        suffix = f", {len(self.alarms)} alarm(s) (red)" if self.alarms else ""
+        fig.suptitle(f"tracked parameters with +-2 standard errors{suffix}", fontsize=11)
+        fig.tight_layout()
+        if path is not None:
+            fig.savefig(path, dpi=120)
+        return fig

@@ -1,0 +1,428 @@
+"""The streaming tracker of a cascade (rust/core/src/tracking) and ``track`` for a record."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .. import _core
+from .._validation import as_signal, check_choice, check_flag, check_int, check_real
+from ..errors import DataError, ModelError
+from ..identify import FitResult, Structure
+from ..models import CascadeModel
+from ._result import Alarm, TrackResult
+
+__all__ = ["Tracker", "track"]
+
+_METHODS = ("prediction_error", "regression")
+_DEFAULT_FORGETTING = 0.999  # a window of about 1000 samples (benches/tracking.py)
+_PRIOR_NOISE_COUNT = 100.0  # samples the start's noise estimate counts for
+_MOST = 2**62  # every / spacing: whole sample counts the core holds (u64)
+
+
+def _structure(value: Any) -> Structure:
+    """The tracked structure: a cascade without feedthrough or initial state."""
+    if value.is_sandwich or value.feedthrough:
+        raise ModelError(f"tracking takes a cascade without feedthrough, got {value}")
+    return Structure(value.na, value.nb, value.degree)
+
+
+def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDArray[np.float64] | None, float | None]:
+    """(structure, theta0, covariance or None, noise std or None) of the start."""
+    if isinstance(model_or_structure, FitResult):
+        fit = model_or_structure
+        if fit.model is None:
+            raise ModelError("the fit has no model (it failed): refit before tracking")
+        structure = _structure(fit.structure)
+        p = structure.size
+        cov = np.asarray(fit.covariance, dtype=np.float64)[:p, :p]
+        return structure, structure.pack(fit.model), cov if np.all(np.isfinite(cov)) else None, float(fit.noise_std)
+    if isinstance(model_or_structure, CascadeModel):
+        lin, bl = model_or_structure.linear, model_or_structure.backlash
+        if lin.feedthrough:
+            raise ModelError("tracking takes a cascade without feedthrough")
+        structure = Structure(lin.na, lin.nb, bl.degree)
+        cov = None
+        pc = getattr(model_or_structure, "covariance", None)
+        if pc is not None and list(pc.names) == structure.names:
+            cov = np.asarray(pc.matrix, dtype=np.float64)
+        return structure, structure.pack(model_or_structure), cov, None
+    if isinstance(model_or_structure, Structure):
+        structure = _structure(model_or_structure)
+        names = structure.names
+        theta = np.zeros(structure.size)
+        theta[: structure.na] = 1.0 / structure.na  # a, b: unit static gain, no poles
+        theta[names.index("m_R1")] = 1.0
+        return structure, theta, None, None
+    raise ModelError(f"model_or_structure must be a FitResult, CascadeModel or Structure, got {type(model_or_structure).__name__}")
+
+
+def _drift(drift: Any, names: list[str]) -> list[float]:
+    """Per-parameter drift rates (standard deviation per sample) from None, a number, a
+    mapping name -> rate or p values."""
+    if drift is None:
+        return []
+    p = len(names)
+    if isinstance(drift, Mapping):
+        unknown = [k for k in drift if k not in names]
+        if unknown:
+            raise DataError(f"drift names {unknown}: the parameters are {names}")
+        rates = [check_real(drift.get(n, 0.0), f"drift[{n!r}]", low=0.0) for n in names]
+    elif np.ndim(drift) == 0:
+        rates = [check_real(drift, "drift", low=0.0)] * p
+    else:
+        arr = as_signal(drift, "drift")
+        if arr.shape != (p,):
+            raise DataError(f"drift has shape {arr.shape}: give one rate or {p} (one per parameter)")
+        rates = [check_real(v, "drift", low=0.0) for v in arr]
+    return [float(v) for v in rates]
+
+
+class Tracker:
+    """A recursive estimator that follows a cascade's parameters sample by sample.
+
+    Each sample updates the estimate by Ljung's recursive prediction-error method on the
+    output error (``method="prediction_error"``: the simulated output of the current
+    estimate and its derivatives by the sensitivity recursions of the batch refinement) or
+    by recursive least squares on the paper's quasi-linear regression (``"regression"``:
+    eq 17-21, the row of eq 18 with x and the switching from the current estimate; an
+    equation-error method, biased under output noise). Old samples are forgotten
+    exponentially (``forgetting`` = lambda, a window of about 1 / (1 - lambda) samples),
+    and/or the parameters are modelled as random walks with the given ``drift`` rates (the
+    Kalman filter's P + Q). The covariance is kept as a square root (Potter), so it stays
+    positive semi-definite; standard errors are its diagonal scaled by a running estimate of
+    the noise variance. A step that would make the linear block unstable or m_R1 <= 0 is
+    rejected and a negative width projected to 0. The state is a fixed set of p x p numbers:
+    memory does not grow with the record, and a pickled tracker continues with the same bits.
+
+    A detector watches the dead-band width c_L + c_R: every ``spacing`` samples (by default
+    3 / (1 - lambda): readings that share under 5 % of their data) it reads the tracked
+    width and its standard error, and a two-sided CUSUM of the standardised deviations from
+    a reference (the mean of the first ``reference`` readings) raises an :class:`Alarm`
+    when it exceeds ``threshold``; it then waits ``holdoff`` readings and re-arms.
+
+    Parameters
+    ----------
+    model_or_structure : FitResult or CascadeModel or Structure
+        The start: a batch fit (its model, covariance and noise level: the recommended start,
+        e.g. :func:`~backlashid.fit_cascade` on the first samples), a model (with its fit's
+        covariance if it carries one), or a structure (a neutral start with a wide prior;
+        the prediction-error method needs a good start, so prefer a fit).
+    forgetting : float, optional
+        lambda in (0, 1]; default 0.999 (a window of about 1000 samples) without ``drift``, 1 (no forgetting) with it.
+    drift : float or dict or array_like, optional
+        Random-walk rates, the standard deviation of each parameter's change per sample: one
+        number for all, a mapping name -> rate (others 0), or p values.
+    method : {"prediction_error", "regression"}, default "prediction_error"
+        The update rule.
+    covariance : array_like, optional
+        The start's p x p covariance (default: the fit's, else a wide diagonal prior).
+    noise_std : float, optional
+        The output noise's standard deviation at the start (default: the fit's, else 0.1);
+        the tracker re-estimates it as it goes.
+    noise_memory : float, optional
+        Samples the running noise-variance estimate averages over (default: the forgetting
+        window, or all samples without forgetting).
+    detector : bool, default True
+        Watch the dead-band width for changes.
+    spacing : int, optional
+        Samples between two readings of the detector (default 3 / (1 - lambda), or 30000
+        without forgetting).
+    threshold : float, default 10.0
+        CUSUM threshold, in standard deviations.
+    slack : float, default 1.0
+        CUSUM slack (allowance), in standard deviations.
+    reference : int, default 8
+        Readings averaged into the reference width after (re)arming.
+    holdoff : int, default 2
+        Readings skipped after an alarm.
+
+    Raises
+    ------
+    ModelError
+        If the start is not a cascade without feedthrough, is unstable or has m_R1 <= 0.
+    DataError
+        If an option is out of range or the covariance has the wrong shape.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> d = bid.example_data(bid.example1(), 4000, snr=25, seed=3)
+    >>> start = bid.fit_cascade(d.u[:1500], d.noisy[:1500], na=2, nb=2, degree=3)
+    >>> tracker = bid.Tracker(start, forgetting=0.999)
+    >>> block = tracker.update(d.u[1500:], d.noisy[1500:])
+    >>> block.theta.shape, tracker.samples
+    ((2500, 11), 2500)
+    >>> abs(tracker.parameters["c_R"] - 0.5) < 0.05
+    True
+    """
+
+    def __init__(
+        self,
+        model_or_structure: FitResult | CascadeModel | Structure,
+        *,
+        forgetting: float | None = None,
+        drift: float | Mapping[str, float] | ArrayLike | None = None,
+        method: str = "prediction_error",
+        covariance: ArrayLike | None = None,
+        noise_std: float | None = None,
+        noise_memory: float | None = None,
+        detector: bool = True,
+        spacing: int | None = None,
+        threshold: float = 10.0,
+        slack: float = 1.0,
+        reference: int = 8,
+        holdoff: int = 2,
+    ) -> None:
+        structure, theta0, cov, fit_noise = _start(model_or_structure)
+        names = structure.names
+        p = len(names)
+        method = check_choice(method, "method", _METHODS)
+        rates = _drift(drift, names)
+        if forgetting is None:
+            lam = 1.0 if rates else _DEFAULT_FORGETTING
+        else:
+            lam = check_real(forgetting, "forgetting", low=0.0, high=1.0, low_open=True)
+        if covariance is not None:
+            cov = as_signal(covariance, "covariance")
+            if cov.shape != (p, p):
+                raise DataError(f"covariance has shape {cov.shape}: give the {p} x {p} matrix of {names}")
+        if cov is None:
+            scale = np.maximum(np.abs(theta0), 0.3)
+            cov = np.diag((0.3 * scale) ** 2)
+        cov = (np.asarray(cov, dtype=np.float64) + np.asarray(cov, dtype=np.float64).T) / 2
+        if noise_std is not None:
+            sigma = check_real(noise_std, "noise_std", low=0.0, low_open=True)
+            count = _PRIOR_NOISE_COUNT
+        elif fit_noise is not None and np.isfinite(fit_noise) and fit_noise > 0:
+            sigma, count = fit_noise, _PRIOR_NOISE_COUNT
+        else:
+            sigma, count = 0.1, 0.0  # no prior: the data set it from the first sample
+        memory = np.inf if noise_memory is None else check_real(noise_memory, "noise_memory", low=1.0)
+        det = None
+        if check_flag(detector, "detector"):
+            if spacing is None:
+                every = int(np.ceil(3.0 / (1.0 - lam))) if lam < 1.0 else 30_000
+            else:
+                every = check_int(spacing, "spacing", 1, _MOST)
+            det = (
+                every,
+                check_int(reference, "reference", 1, 2**31),
+                check_real(slack, "slack", low=0.0),
+                check_real(threshold, "threshold", low=0.0, low_open=True),
+                check_int(holdoff, "holdoff", 0, 2**31),
+            )
+        self._names = names
+        self._structure = structure
+        self._args = (
+            structure.na,
+            structure.nb,
+            structure.degree,
+            [float(v) for v in theta0],
+            cov.tolist(),
+            float(sigma) ** 2,
+            float(count),
+            method,
+            float(lam),
+            rates,
+            float(memory),
+            det,
+        )
+        self._native = self._build(self._args)
+
+    @staticmethod
+    def _build(args: tuple[Any, ...]) -> Any:
+        na, nb, degree, theta0, cov, var, count, method, lam, rates, memory, det = args
+        return _core.Tracker(na, nb, degree, theta0, np.asarray(cov), var, count, method, lam, rates, memory, det)
+
+    @property
+    def names(self) -> list[str]:
+        """The parameters' names, in the fits' layout."""
+        return list(self._names)
+
+    @property
+    def samples(self) -> int:
+        """Samples tracked so far."""
+        return int(self._native.samples)
+
+    @property
+    def rejected(self) -> int:
+        """Updates whose step the stability guard rejected."""
+        return int(self._native.rejected)
+
+    @property
+    def noise_std(self) -> float:
+        """The running estimate of the output noise's standard deviation."""
+        return float(np.sqrt(self._native.noise_variance))
+
+    @property
+    def method(self) -> str:
+        """The update rule, "prediction_error" or "regression"."""
+        return str(self._args[7])
+
+    @property
+    def forgetting(self) -> float:
+        """lambda."""
+        return float(self._args[8])
+
+    @property
+    def theta(self) -> NDArray[np.float64]:
+        """The current estimate, in the order of :attr:`names`."""
+        return np.asarray(self._native.estimate()[0])
+
+    @property
+    def covariance(self) -> NDArray[np.float64]:
+        """The current estimate's covariance (p x p)."""
+        return np.asarray(self._native.estimate()[1])
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """The current estimate by name."""
+        return dict(zip(self._names, map(float, self.theta)))
+
+    @property
+    def standard_errors(self) -> dict[str, float]:
+        """The current standard errors by name."""
+        return dict(zip(self._names, map(float, np.sqrt(np.clip(np.diag(self.covariance), 0, None)))))
+
+    @property
+    def model(self) -> CascadeModel:
+        """The current estimate as a model."""
+        return self._structure.model(self.theta)  # type: ignore[return-value]
+
+    def update(self, u_block: ArrayLike, y_block: ArrayLike, *, every: int = 1) -> TrackResult:
+        """Track a block of samples, continuing from the previous block.
+
+        Parameters
+        ----------
+        u_block : array_like
+            Input samples, 1-D, finite (may be empty).
+        y_block : array_like
+            Measured output samples, the same length, finite.
+        every : int, default 1
+            Record the estimate after every ``every``-th sample only (counted over the
+            tracker's life), to keep the trajectory of a long record small.
+
+        Returns
+        -------
+        TrackResult
+            The block's trajectory (its ``samples`` count from the tracker's first sample)
+            and the alarms raised in it.
+
+        Raises
+        ------
+        DataError
+            If the blocks are not finite 1-D signals of one length (checked first: the
+            tracker takes none of the block).
+        ModelError
+            If the tracked model's simulated output overflowed (the tracker keeps the
+            samples before that one).
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> d = bid.example_data(bid.example1(), 1000, snr=25, seed=2)
+        >>> tracker = bid.Tracker(bid.example1(), noise_std=d.noise_std)
+        >>> r = tracker.update(d.u[:600], d.noisy[:600], every=100)
+        >>> r.samples.tolist()
+        [99, 199, 299, 399, 499, 599]
+        """
+        u = as_signal(u_block, "u_block")
+        y = as_signal(y_block, "y_block")
+        if u.ndim != 1 or y.ndim != 1 or u.size != y.size:
+            raise DataError(f"u_block and y_block must be 1-D of one length, got shapes {u.shape} and {y.shape}")
+        step = check_int(every, "every", 1, _MOST)
+        first = self.samples
+        theta, se, alarms = self._native.update(u, y, step)
+        start = (first // step + 1) * step - 1
+        samples = np.arange(start, first + u.size, step, dtype=np.int64)
+        return TrackResult(
+            names=list(self._names),
+            samples=samples,
+            theta=np.asarray(theta),
+            standard_errors=np.asarray(se),
+            alarms=[Alarm(int(s), int(d), float(w), float(r), float(z)) for s, d, w, r, z in alarms],
+            noise_std=self.noise_std,
+        )
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_restore, (self._args, self._structure, self._native.save()))
+
+    def __repr__(self) -> str:
+        return (
+            f"Tracker({self.method}, forgetting={self.forgetting:g}, p={len(self._names)}, "
+            f"samples={self.samples}, noise_std={self.noise_std:.3g})"
+        )
+
+
+def _restore(args: tuple[Any, ...], structure: Structure, state: list[float]) -> Tracker:
+    """A pickled :class:`Tracker`: rebuilt from its arguments, then its state restored."""
+    tracker = Tracker.__new__(Tracker)
+    tracker._args = args
+    tracker._structure = structure
+    tracker._names = structure.names
+    tracker._native = Tracker._build(args)
+    tracker._native.load(list(state))
+    return tracker
+
+
+def track(
+    u: ArrayLike, y: ArrayLike, model_or_structure: FitResult | CascadeModel | Structure, *, every: int = 1, **options: Any
+) -> TrackResult:
+    """Track a cascade's parameters over a whole record (a :class:`Tracker` run once).
+
+    Parameters
+    ----------
+    u : array_like
+        Input u(t), 1-D, finite.
+    y : array_like
+        Measured output y(t), the same length, finite.
+    model_or_structure : FitResult or CascadeModel or Structure
+        The start (:class:`Tracker`).
+    every : int, default 1
+        Record the estimate after every ``every``-th sample only.
+    **options
+        The options of :class:`Tracker` (forgetting, drift, method, covariance, noise_std,
+        noise_memory, detector, spacing, threshold, slack, reference, holdoff).
+
+    Returns
+    -------
+    TrackResult
+        The trajectory: ``theta`` and ``standard_errors`` (N x p with ``every=1``, the
+        estimate after each sample) and the alarms.
+
+    Raises
+    ------
+    DataError
+        If the record or an option is invalid.
+    ModelError
+        If the start is not a stable cascade without feedthrough.
+
+    Examples
+    --------
+    >>> import backlashid as bid
+    >>> d = bid.example_data(bid.example1(), 3000, snr=25, seed=4)
+    >>> r = bid.track(d.u, d.noisy, bid.example1(), noise_std=d.noise_std, forgetting=0.999)
+    >>> len(r), r.alarms
+    (3000, [])
+    """
+    unknown = set(options) - {
+        "forgetting",
+        "drift",
+        "method",
+        "covariance",
+        "noise_std",
+        "noise_memory",
+        "detector",
+        "spacing",
+        "threshold",
+        "slack",
+        "reference",
+        "holdoff",
+    }
+    if unknown:
+        raise DataError(f"track() got unknown options {sorted(unknown)}: see Tracker for the options")
+    return Tracker(model_or_structure, **options).update(u, y, every=every)

@@ -1,0 +1,920 @@
+#![allow(clippy::needless_range_loop)] // p x p algebra on fixed arrays reads as the formulas: P[i][j]
+//! The recursive estimator with fixed-size state: `Engine<W>` holds theta, P and the lags in
+//! arrays of W values (W >= p; the padding stays zero and changes nothing), so an update
+//! allocates nothing and the compiler unrolls the p x p loops for the common orders.
+
+use super::detector::{Alarm, Detector, DETECTOR_SAVED};
+use super::{Method, Options};
+use crate::error::{Error, Result};
+
+/// theta's positions (`identify::problem::Layout`, the cascade without feedthrough).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Dims {
+    pub na: usize,
+    pub nb: usize,
+    pub n: usize,
+}
+
+impl Dims {
+    pub fn p(&self) -> usize {
+        self.na + self.nb + 2 * self.n + 1
+    }
+    fn c_l(&self) -> usize {
+        self.na + self.nb
+    }
+    fn m_r1(&self) -> usize {
+        self.na + self.nb + self.n
+    }
+    fn c_r(&self) -> usize {
+        self.m_r1() + 1
+    }
+}
+
+/// Where a sample's output goes: the trajectory (theta and standard errors of recorded
+/// samples, p values each) and the alarms.
+pub struct Sink<'a> {
+    pub theta: &'a mut [f64],
+    pub se: &'a mut [f64],
+    /// Record every `every`-th sample (sample t recorded when (t + 1) % every == 0, counted
+    /// over the tracker's life).
+    pub every: u64,
+    pub alarms: &'a mut Vec<Alarm>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Engine<const W: usize> {
+    dims: Dims,
+    method: Method,
+    lambda: f64,
+    /// 1 / lambda and its square root.
+    inv_lambda: f64,
+    sqrt_inv_lambda: f64,
+    /// Whether Q has a nonzero drift.
+    has_drift: bool,
+    /// Per-sample drift variances in the working parametrisation (Kalman random walk).
+    q: [f64; W],
+    noise_memory: f64,
+    /// The working parameters: the physical layout for `PredictionError`; eq (19)'s
+    /// regression parameters for `Regression` (c_R's slot holds c_2 = m_R1 c_R, eq 20).
+    theta: [f64; W],
+    /// A square root S of P, P = S S' normalised by the noise variance: Cov(theta) =
+    /// sigma2 * P (times `s2 / s1` with forgetting). Potter's square-root update keeps P
+    /// positive semi-definite by construction; the plain update P - g g' / s lost it after
+    /// about 3e4 samples of Example 1 with lambda = 0.999 (a negative variance, then
+    /// divergence), in both methods.
+    sm: [[f64; W]; W],
+    /// Samples of drift (Q) not yet added to P: Q is added every `DRIFT_BATCH` samples as
+    /// h Q (P + h Q re-factored), the random walk's variance over those h samples.
+    q_wait: f64,
+    /// trace(P), kept beside S (`TRACE_CAP`).
+    trace: f64,
+    sigma2: f64,
+    noise_count: f64,
+    /// sum lambda^k and sum lambda^2k over the updates (forgetting's covariance factor).
+    s1: f64,
+    s2: f64,
+    /// u(t-1), u(t-2), ..; x(t-1), ..; 1/B-filtered u and x lags (prediction error).
+    u_lag: [f64; W],
+    x_lag: [f64; W],
+    wu: [f64; W],
+    wx: [f64; W],
+    /// d y_hat / d theta carried over holds (prediction error).
+    psi: [f64; W],
+    /// y_hat(t-1): the simulated backlash memory of the current estimate.
+    y_hat: f64,
+    /// Held samples not yet folded into P (regression: their rows are zero).
+    pending: f64,
+    t: u64,
+    rejected: u64,
+    detector: Option<Detector>,
+}
+
+/// Horner: sum_{i>=1} m_i xi^i with m_1 = `m1` and m_2.. = `rest`.
+#[inline(always)]
+fn branch(m1: f64, rest: &[f64], xi: f64) -> f64 {
+    let mut acc = 0.0;
+    for m in rest.iter().rev() {
+        acc = acc * xi + m;
+    }
+    (acc * xi + m1) * xi
+}
+
+/// d/dxi of `branch`.
+#[inline(always)]
+fn slope(m1: f64, rest: &[f64], xi: f64) -> f64 {
+    let mut acc = 0.0;
+    for (k, m) in rest.iter().enumerate().rev() {
+        acc = acc * xi + (k + 2) as f64 * m;
+    }
+    acc * xi + m1
+}
+
+/// Whether 1 + b_1 z^-1 + .. + b_nb z^-nb has every root strictly inside the unit circle
+/// (Schur-Cohn step-down: every reflection coefficient below 1 in magnitude).
+#[inline]
+pub(crate) fn stable<const W: usize>(b: &[f64]) -> bool {
+    let nb = b.len();
+    match nb {
+        0 => true,
+        1 => b[0].abs() < 1.0,
+        2 => b[1].abs() < 1.0 && b[0].abs() < 1.0 + b[1],
+        _ => {
+            let mut a = [0.0; W];
+            a[..nb].copy_from_slice(b);
+            for m in (1..=nb).rev() {
+                let k = a[m - 1];
+                if k.abs() >= 1.0 || k.is_nan() {
+                    return false;
+                }
+                let d = 1.0 - k * k;
+                let mut next = [0.0; W];
+                for i in 0..m - 1 {
+                    next[i] = (a[i] - k * a[m - 2 - i]) / d;
+                }
+                a = next;
+            }
+            true
+        }
+    }
+}
+
+/// Samples between two additions of the drift's covariance (`Engine::sm`).
+const DRIFT_BATCH: f64 = 16.0;
+
+/// Anti-windup: forgetting inflates P by 1 / lambda per sample whatever the data say, so
+/// without excitation (u = 0, or a long hold in the regression) P grows until it overflows.
+/// Forgetting is suspended while trace(P) (normalised by the noise variance) would exceed
+/// this.
+const TRACE_CAP: f64 = 1e8;
+
+/// The lower Cholesky factor of the p x p block of a symmetric positive semi-definite
+/// matrix; a pivot <= 0 (a direction without variance) leaves its column zero.
+fn cholesky<const W: usize>(a: &[[f64; W]; W], p: usize) -> [[f64; W]; W] {
+    let mut l = [[0.0; W]; W];
+    for j in 0..p {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d -= l[j][k] * l[j][k];
+        }
+        if d.is_nan() || d <= 1e-300 {
+            continue;
+        }
+        let d = d.sqrt();
+        l[j][j] = d;
+        for i in j + 1..p {
+            let mut v = a[i][j];
+            for k in 0..j {
+                v -= l[i][k] * l[j][k];
+            }
+            l[i][j] = v / d;
+        }
+    }
+    l
+}
+
+/// P = S S'.
+fn product<const W: usize>(s: &[[f64; W]; W], p: usize) -> [[f64; W]; W] {
+    let mut a = [[0.0; W]; W];
+    for i in 0..p {
+        for j in 0..=i {
+            let mut v = 0.0;
+            for k in 0..W {
+                v += s[i][k] * s[j][k];
+            }
+            a[i][j] = v;
+            a[j][i] = v;
+        }
+    }
+    a
+}
+
+impl<const W: usize> Engine<W> {
+    /// From a physical theta0 and its absolute covariance `cov0` (p x p row-major), the noise
+    /// variance `sigma2` (> 0) standing for `noise_count` samples.
+    pub(crate) fn new(
+        dims: Dims,
+        options: &Options,
+        theta0: &[f64],
+        cov0: &[f64],
+        sigma2: f64,
+        noise_count: f64,
+        detector: Option<Detector>,
+    ) -> Result<Self> {
+        let p = dims.p();
+        debug_assert!(p <= W);
+        let mut theta = [0.0; W];
+        theta[..p].copy_from_slice(theta0);
+        // the working parametrisation's Jacobian (regression: c_2 = m_R1 c_R)
+        let mut jac = [[0.0; W]; W];
+        for (i, row) in jac.iter_mut().enumerate().take(p) {
+            row[i] = 1.0;
+        }
+        let (m_r1, c_r) = (dims.m_r1(), dims.c_r());
+        if options.method == Method::Regression {
+            let (m, c) = (theta0[m_r1], theta0[c_r]);
+            theta[c_r] = m * c;
+            jac[c_r][c_r] = m;
+            jac[c_r][m_r1] = c;
+        }
+        let mut pm = [[0.0; W]; W];
+        for i in 0..p {
+            for j in 0..p {
+                let mut v = 0.0;
+                for k in 0..p {
+                    for l in 0..p {
+                        v += jac[i][k] * cov0[k * p + l] * jac[j][l];
+                    }
+                }
+                pm[i][j] = v / sigma2;
+            }
+        }
+        let sm = cholesky(&pm, p);
+        let trace = (0..p).map(|i| pm[i][i]).sum();
+        let mut q = [0.0; W];
+        for (i, d) in options.drift.iter().enumerate() {
+            q[i] = d * d;
+        }
+        if options.method == Method::Regression && !options.drift.is_empty() {
+            let (m, c) = (theta0[m_r1], theta0[c_r]);
+            q[c_r] = m * m * q[c_r] + c * c * q[m_r1];
+        }
+        let noise_memory = if options.forgetting < 1.0 {
+            options.noise_memory.min(1.0 / (1.0 - options.forgetting))
+        } else {
+            options.noise_memory
+        };
+        Ok(Self {
+            dims,
+            method: options.method,
+            lambda: options.forgetting,
+            inv_lambda: 1.0 / options.forgetting,
+            sqrt_inv_lambda: (1.0 / options.forgetting).sqrt(),
+            has_drift: q.iter().any(|v| *v > 0.0),
+            q,
+            noise_memory,
+            theta,
+            sm,
+            q_wait: 0.0,
+            trace,
+            sigma2,
+            noise_count,
+            s1: 0.0,
+            s2: 0.0,
+            u_lag: [0.0; W],
+            x_lag: [0.0; W],
+            wu: [0.0; W],
+            wx: [0.0; W],
+            psi: [0.0; W],
+            y_hat: 0.0,
+            pending: 0.0,
+            t: 0,
+            rejected: 0,
+            detector,
+        })
+    }
+
+    pub(crate) fn samples(&self) -> u64 {
+        self.t
+    }
+
+    pub(crate) fn rejected(&self) -> u64 {
+        self.rejected
+    }
+
+    pub(crate) fn noise_variance(&self) -> f64 {
+        self.sigma2
+    }
+
+    pub(crate) fn detector(&self) -> Option<&Detector> {
+        self.detector.as_ref()
+    }
+
+    /// The covariance factor of forgetting: with weights lambda^k the estimate's covariance
+    /// is sigma2 (sum l^k phi phi')^-1 (sum l^2k phi phi') (sum l^k phi phi')^-1, about
+    /// sigma2 P * s2 / s1 (1 / (1 + lambda) in the steady state, 1 without forgetting).
+    #[inline(always)]
+    fn scale(&self) -> f64 {
+        if self.s1 > 0.0 && self.lambda < 1.0 {
+            self.sigma2 * self.s2 / self.s1
+        } else {
+            self.sigma2
+        }
+    }
+
+    /// The physical theta and its covariance (p x p row-major).
+    pub(crate) fn estimate(&self) -> (Vec<f64>, Vec<f64>) {
+        let p = self.dims.p();
+        let scale = self.scale();
+        let mut theta = self.theta[..p].to_vec();
+        let pm = product(&self.sm, p);
+        let mut cov: Vec<f64> = (0..p * p).map(|k| scale * pm[k / p][k % p]).collect();
+        if self.method == Method::Regression {
+            // c_R = c_2 / m_R1: its row and column by the delta method
+            let (m_r1, c_r) = (self.dims.m_r1(), self.dims.c_r());
+            let (m, c2) = (self.theta[m_r1], self.theta[c_r]);
+            theta[c_r] = c2 / m;
+            let (gc, gm) = (1.0 / m, -c2 / (m * m));
+            let col: Vec<f64> = (0..p)
+                .map(|k| gc * cov[k * p + c_r] + gm * cov[k * p + m_r1])
+                .collect();
+            let var = gc * col[c_r] + gm * col[m_r1];
+            for k in 0..p {
+                cov[k * p + c_r] = col[k];
+                cov[c_r * p + k] = col[k];
+            }
+            cov[c_r * p + c_r] = var;
+        }
+        (theta, cov)
+    }
+
+    /// The dead-band width c_L + c_R and its variance.
+    #[inline]
+    fn width(&self) -> (f64, f64) {
+        let (c_l, m_r1, c_r) = (self.dims.c_l(), self.dims.m_r1(), self.dims.c_r());
+        let (w, g): (f64, [(usize, f64); 3]) = match self.method {
+            Method::PredictionError => (
+                self.theta[c_l] + self.theta[c_r],
+                [(c_l, 1.0), (c_r, 1.0), (m_r1, 0.0)],
+            ),
+            Method::Regression => {
+                let (m, c2) = (self.theta[m_r1], self.theta[c_r]);
+                (
+                    self.theta[c_l] + c2 / m,
+                    [(c_l, 1.0), (c_r, 1.0 / m), (m_r1, -c2 / (m * m))],
+                )
+            }
+        };
+        // g' S S' g = |S' g|^2
+        let mut var = 0.0;
+        for k in 0..W {
+            let mut f = 0.0;
+            for &(i, gi) in &g {
+                f += gi * self.sm[i][k];
+            }
+            var += f * f;
+        }
+        (w, self.scale() * var)
+    }
+
+    /// Write the physical estimate's theta and standard errors into `theta`, `se` (p each).
+    #[inline]
+    fn record(&self, theta: &mut [f64], se: &mut [f64]) {
+        let p = self.dims.p();
+        let scale = self.scale();
+        for i in 0..p {
+            theta[i] = self.theta[i];
+            let mut v = 0.0;
+            for k in 0..W {
+                v += self.sm[i][k] * self.sm[i][k];
+            }
+            se[i] = (scale * v).sqrt();
+        }
+        if self.method == Method::Regression {
+            let (m_r1, c_r) = (self.dims.m_r1(), self.dims.c_r());
+            let (m, c2) = (self.theta[m_r1], self.theta[c_r]);
+            let (gc, gm) = (1.0 / m, -c2 / (m * m));
+            let mut var = 0.0;
+            for k in 0..W {
+                let f = gc * self.sm[c_r][k] + gm * self.sm[m_r1][k];
+                var += f * f;
+            }
+            theta[c_r] = c2 / m;
+            se[c_r] = (scale * var).sqrt();
+        }
+    }
+
+    /// Track the samples (u[t], y[t]) in order; see `Sink`.
+    pub(crate) fn run(&mut self, u: &[f64], y: &[f64], sink: &mut Sink) -> Result<()> {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, checked just above
+            return unsafe { self.run_avx2(u, y, sink) };
+        }
+        self.run_plain(u, y, sink)
+    }
+
+    /// `run_plain` compiled with AVX2's wider vectors: the same operations in the same
+    /// order (no fused multiply-add: Rust does not contract a * b + c), so the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn run_avx2(&mut self, u: &[f64], y: &[f64], sink: &mut Sink) -> Result<()> {
+        self.run_plain(u, y, sink)
+    }
+
+    #[inline(always)]
+    fn run_plain(&mut self, u: &[f64], y: &[f64], sink: &mut Sink) -> Result<()> {
+        let p = self.dims.p();
+        let mut k = 0;
+        // samples until the next recorded row and the next reading (countdowns: no division
+        // per sample)
+        let mut to_record = sink.every - self.t % sink.every;
+        let spacing = self
+            .detector
+            .as_ref()
+            .map_or(u64::MAX, |d| d.options.spacing);
+        let mut to_reading = spacing - self.t % spacing;
+        for (&ut, &yt) in u.iter().zip(y) {
+            match self.method {
+                Method::PredictionError => self.step_pe(ut, yt)?,
+                Method::Regression => self.step_regression(ut, yt)?,
+            }
+            self.t += 1;
+            to_record -= 1;
+            if to_record == 0 {
+                to_record = sink.every;
+                self.record(
+                    &mut sink.theta[k * p..(k + 1) * p],
+                    &mut sink.se[k * p..(k + 1) * p],
+                );
+                k += 1;
+            }
+            to_reading -= 1;
+            if to_reading == 0 {
+                to_reading = spacing;
+                let (w, var) = self.width();
+                let sample = self.t - 1;
+                if let Some(alarm) = self
+                    .detector
+                    .as_mut()
+                    .and_then(|d| d.observe(sample, w, var))
+                {
+                    sink.alarms.push(alarm);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// x(t) of eq (16) at the current a, b from the lags.
+    #[inline(always)]
+    fn internal(&self) -> f64 {
+        let Dims { na, nb, .. } = self.dims;
+        let mut x = 0.0;
+        for i in 0..na {
+            x += self.theta[i] * self.u_lag[i];
+        }
+        for j in 0..nb {
+            x -= self.theta[na + j] * self.x_lag[j];
+        }
+        x
+    }
+
+    /// The branches' parameters: (c_L, m_L2..), (m_R1, c_R, m_R2..) as slices of theta.
+    #[inline(always)]
+    fn c_right(&self) -> f64 {
+        let (m_r1, c_r) = (self.dims.m_r1(), self.dims.c_r());
+        match self.method {
+            Method::PredictionError => self.theta[c_r],
+            Method::Regression => self.theta[c_r] / self.theta[m_r1],
+        }
+    }
+
+    #[inline(always)]
+    fn push_lags(&mut self, ut: f64, xt: f64) {
+        let Dims { na, nb, .. } = self.dims;
+        for i in (1..na).rev() {
+            self.u_lag[i] = self.u_lag[i - 1];
+        }
+        self.u_lag[0] = ut;
+        if nb > 0 {
+            for j in (1..nb).rev() {
+                self.x_lag[j] = self.x_lag[j - 1];
+            }
+            self.x_lag[0] = xt;
+        }
+    }
+
+    /// One sample of the recursive prediction-error method: y_hat(t) of the current estimate
+    /// and psi(t) = d y_hat(t) / d theta by the recursions of `identify::sensitivity`, then
+    /// the update with e(t) = y(t) - y_hat(t).
+    #[inline(always)]
+    fn step_pe(&mut self, ut: f64, yt: f64) -> Result<()> {
+        let d = self.dims;
+        let (na, nb, n) = (d.na, d.nb, d.n);
+        let (c_l, m_r1, c_r) = (d.c_l(), d.m_r1(), d.c_r());
+        let xt = self.internal();
+        let th = self.theta;
+        let m_l = &th[c_l + 1..c_l + n];
+        let m_r = &th[c_r + 1..c_r + n];
+        let xi1 = xt + th[c_l];
+        let xi2 = xt - th[c_r];
+        let lv = branch(1.0, m_l, xi1);
+        let yp = self.y_hat;
+        let mv = if lv <= yp {
+            1
+        } else if branch(th[m_r1], m_r, xi2) >= yp {
+            2
+        } else {
+            0
+        };
+        if mv != 0 {
+            let psi = &mut self.psi;
+            let (s, xi) = if mv == 1 {
+                (slope(1.0, m_l, xi1), xi1)
+            } else {
+                (slope(th[m_r1], m_r, xi2), xi2)
+            };
+            for k in 0..na {
+                psi[k] = s * self.wu[k];
+            }
+            for k in 0..nb {
+                psi[na + k] = -s * self.wx[k];
+            }
+            for v in &mut psi[c_l..c_l + 2 * n + 1] {
+                *v = 0.0;
+            }
+            let mut pw = xi;
+            if mv == 1 {
+                psi[c_l] = s;
+                for i in 2..=n {
+                    pw *= xi;
+                    psi[c_l + i - 1] = pw;
+                }
+                self.y_hat = lv;
+            } else {
+                psi[c_r] = -s;
+                psi[m_r1] = xi;
+                for i in 2..=n {
+                    pw *= xi;
+                    psi[c_r + i - 1] = pw;
+                }
+                self.y_hat = branch(th[m_r1], m_r, xi2);
+            }
+        }
+        if !(self.y_hat.is_finite() && xt.is_finite()) {
+            return Err(diverged(self.t));
+        }
+        // the 1/B-filtered lags for sample t + 1
+        let lags = na.max(nb);
+        let (mut fu, mut fx) = (ut, xt);
+        for k in 0..nb {
+            fu -= th[na + k] * self.wu[k];
+            fx -= th[na + k] * self.wx[k];
+        }
+        for k in (1..lags).rev() {
+            self.wu[k] = self.wu[k - 1];
+            self.wx[k] = self.wx[k - 1];
+        }
+        self.wu[0] = fu;
+        self.wx[0] = fx;
+        self.push_lags(ut, xt);
+        let psi = self.psi;
+        self.update(&psi, yt - self.y_hat, xt)
+    }
+
+    /// One sample of the paper's quasi-linear form: x(t) and the switching of eq (25)-(26)
+    /// from the current estimate (its simulated memory y_hat(t-1)), the row phi(t) of eq (18)
+    /// and its target y(t) (eq 21 on a moving sample); a held sample's row is zero, so only
+    /// forgetting and drift act on P (folded in at the next moving sample).
+    #[inline(always)]
+    fn step_regression(&mut self, ut: f64, yt: f64) -> Result<()> {
+        let d = self.dims;
+        let (na, nb, n) = (d.na, d.nb, d.n);
+        let (c_l, m_r1, c_r) = (d.c_l(), d.m_r1(), d.c_r());
+        let xt = self.internal();
+        let th = self.theta;
+        let m_l = &th[c_l + 1..c_l + n];
+        let m_r = &th[c_r + 1..c_r + n];
+        let xi1 = xt + th[c_l];
+        let xi2 = xt - self.c_right();
+        let lv = branch(1.0, m_l, xi1);
+        let yp = self.y_hat;
+        let mut phi = [0.0; W];
+        let moving = if lv <= yp {
+            self.y_hat = lv;
+            phi[..na].copy_from_slice(&self.u_lag[..na]);
+            for j in 0..nb {
+                phi[na + j] = -self.x_lag[j];
+            }
+            phi[c_l] = 1.0;
+            let mut pw = xi1;
+            for i in 2..=n {
+                pw *= xi1;
+                phi[c_l + i - 1] = pw;
+            }
+            true
+        } else {
+            let rv = branch(th[m_r1], m_r, xi2);
+            if rv >= yp {
+                self.y_hat = rv;
+                phi[m_r1] = xt;
+                phi[c_r] = -1.0;
+                let mut pw = xi2;
+                for i in 2..=n {
+                    pw *= xi2;
+                    phi[c_r + i - 1] = pw;
+                }
+                true
+            } else {
+                false
+            }
+        };
+        if !(self.y_hat.is_finite() && xt.is_finite()) {
+            return Err(diverged(self.t));
+        }
+        self.push_lags(ut, xt);
+        if moving {
+            self.fold_pending();
+            self.update(&phi, yt - self.y_hat, xt)?;
+        } else {
+            self.pending += 1.0;
+            self.s1 *= self.lambda;
+            self.s2 *= self.lambda * self.lambda;
+        }
+        Ok(())
+    }
+
+    /// P of the held samples: P lambda^-h (S lambda^(-h/2)); their drift joins `q_wait`.
+    #[inline(always)]
+    fn fold_pending(&mut self) {
+        if self.pending == 0.0 {
+            return;
+        }
+        let h = self.pending;
+        let mut grow2 = self.inv_lambda.powf(h);
+        if self.trace * grow2 > TRACE_CAP {
+            grow2 = (TRACE_CAP / self.trace).max(1.0);
+        }
+        self.trace *= grow2;
+        let grow = grow2.sqrt();
+        if grow != 1.0 {
+            for row in self.sm.iter_mut() {
+                for v in row.iter_mut() {
+                    *v *= grow;
+                }
+            }
+        }
+        if self.has_drift {
+            self.q_wait += h;
+        }
+        self.pending = 0.0;
+    }
+
+    /// P + h Q for the h samples of drift waiting, S re-factored.
+    #[cold]
+    fn add_drift(&mut self) {
+        let p = self.dims.p();
+        let mut pm = product(&self.sm, p);
+        let scale = self.q_wait / self.sigma2;
+        for i in 0..p {
+            pm[i][i] += scale * self.q[i];
+        }
+        self.sm = cholesky(&pm, p);
+        self.trace = (0..p).map(|i| pm[i][i]).sum();
+        self.q_wait = 0.0;
+    }
+
+    /// The measurement update with row `phi` and error `e` at internal signal `xt`, then
+    /// P / lambda (drift added in batches, `add_drift`); a step that leaves the linear block
+    /// unstable, m_R1 <= 0 or a branch decreasing at `xt` is rejected (theta kept), a
+    /// negative width projected to 0 (the batch LM's `feasible` and `bounds`).
+    #[inline(always)]
+    fn update(&mut self, phi: &[f64; W], e: f64, xt: f64) -> Result<()> {
+        let p = self.dims.p();
+        if self.q_wait >= DRIFT_BATCH {
+            self.add_drift();
+        }
+        // Potter: f = S' phi, beta = 1 + f'f, g = S f = P phi, S <- S (I - gamma f f')
+        let mut f = [0.0; W];
+        for i in 0..W {
+            let (row, ph) = (&self.sm[i], phi[i]);
+            for j in 0..W {
+                f[j] += row[j] * ph;
+            }
+        }
+        let mut beta = 1.0;
+        for v in &f {
+            beta += v * v;
+        }
+        let mut g = [0.0; W];
+        for i in 0..W {
+            let mut acc = 0.0;
+            for j in 0..W {
+                acc += self.sm[i][j] * f[j];
+            }
+            g[i] = acc;
+        }
+        if !beta.is_finite() {
+            return Err(sensitivities_overflowed(self.t));
+        }
+        let inv_s = 1.0 / beta;
+        let gamma = 1.0 / (beta + beta.sqrt());
+        let mut cand = self.theta;
+        let ke = e * inv_s;
+        for i in 0..W {
+            cand[i] += g[i] * ke;
+        }
+        let (c_l, m_r1, c_r, na, nb) = (
+            self.dims.c_l(),
+            self.dims.m_r1(),
+            self.dims.c_r(),
+            self.dims.na,
+            self.dims.nb,
+        );
+        cand[c_l] = cand[c_l].max(0.0);
+        cand[c_r] = cand[c_r].max(0.0);
+        // both branches still increase at this sample's x (m_L1 = 1)
+        let n = self.dims.n;
+        let c_right = match self.method {
+            Method::PredictionError => cand[c_r],
+            Method::Regression => cand[c_r] / cand[m_r1],
+        };
+        let rising = slope(1.0, &cand[c_l + 1..c_l + n], xt + cand[c_l]) > 0.0
+            && slope(cand[m_r1], &cand[c_r + 1..c_r + n], xt - c_right) > 0.0;
+        if cand[m_r1] > 0.0
+            && rising
+            && stable::<W>(&cand[na..na + nb])
+            && cand[..p].iter().all(|v| v.is_finite())
+        {
+            self.theta = cand;
+        } else {
+            self.rejected += 1;
+        }
+        let mut g2 = 0.0;
+        for v in &g {
+            g2 += v * v;
+        }
+        let kept = (self.trace - g2 * inv_s).max(0.0);
+        let c = if kept * self.inv_lambda > TRACE_CAP {
+            self.trace = kept;
+            1.0
+        } else {
+            self.trace = kept * self.inv_lambda;
+            self.sqrt_inv_lambda
+        };
+        for i in 0..W {
+            let gi = g[i] * gamma;
+            for j in 0..W {
+                self.sm[i][j] = (self.sm[i][j] - gi * f[j]) * c;
+            }
+        }
+        if self.has_drift {
+            self.q_wait += 1.0;
+        }
+        self.s1 = self.lambda * self.s1 + 1.0;
+        self.s2 = self.lambda * self.lambda * self.s2 + 1.0;
+        self.noise_count += 1.0;
+        let gamma = 1.0 / self.noise_count.min(self.noise_memory);
+        let v = e * e * inv_s;
+        if v.is_finite() {
+            self.sigma2 += gamma * (v - self.sigma2);
+        }
+        self.sigma2 = self.sigma2.max(f64::MIN_POSITIVE);
+        Ok(())
+    }
+
+    /// Every number that changes while tracking, in a fixed order (`load` reads it back).
+    pub(crate) fn save(&self) -> Vec<f64> {
+        let p = self.dims.p();
+        let mut out = Vec::with_capacity(p * p + 10 * p + 16);
+        out.extend_from_slice(&self.q[..p]);
+        out.extend_from_slice(&self.theta[..p]);
+        for row in self.sm.iter().take(p) {
+            out.extend_from_slice(&row[..p]);
+        }
+        for lags in [&self.u_lag, &self.x_lag, &self.wu, &self.wx, &self.psi] {
+            out.extend_from_slice(&lags[..p]);
+        }
+        out.extend([
+            self.sigma2,
+            self.noise_count,
+            self.s1,
+            self.s2,
+            self.y_hat,
+            self.pending,
+            self.q_wait,
+            self.trace,
+            self.t as f64,
+            self.rejected as f64,
+        ]);
+        if let Some(d) = &self.detector {
+            d.save(&mut out);
+        }
+        out
+    }
+
+    pub(crate) fn saved_len(&self) -> usize {
+        let p = self.dims.p();
+        p * p + 7 * p + 10 + self.detector.as_ref().map_or(0, |_| DETECTOR_SAVED)
+    }
+
+    pub(crate) fn load(&mut self, s: &[f64]) -> Result<()> {
+        if s.len() != self.saved_len() {
+            return Err(Error::Data(format!(
+                "a saved tracker state of {} numbers, this tracker's has {}: restore it \
+                 into a tracker of the same structure and options",
+                s.len(),
+                self.saved_len()
+            )));
+        }
+        let p = self.dims.p();
+        let mut it = s.iter().copied();
+        let mut take = |dst: &mut [f64]| dst.iter_mut().for_each(|v| *v = it.next().unwrap());
+        take(&mut self.q[..p]);
+        take(&mut self.theta[..p]);
+        for row in self.sm.iter_mut().take(p) {
+            take(&mut row[..p]);
+        }
+        take(&mut self.u_lag[..p]);
+        take(&mut self.x_lag[..p]);
+        take(&mut self.wu[..p]);
+        take(&mut self.wx[..p]);
+        take(&mut self.psi[..p]);
+        let mut rest = [0.0; 10];
+        take(&mut rest);
+        [
+            self.sigma2,
+            self.noise_count,
+            self.s1,
+            self.s2,
+            self.y_hat,
+            self.pending,
+            self.q_wait,
+        ] = [
+            rest[0], rest[1], rest[2], rest[3], rest[4], rest[5], rest[6],
+        ];
+        self.trace = rest[7];
+        self.t = rest[8] as u64;
+        self.rejected = rest[9] as u64;
+        if let Some(d) = &mut self.detector {
+            let mut ds = [0.0; DETECTOR_SAVED];
+            take(&mut ds);
+            d.load(&ds);
+        }
+        Ok(())
+    }
+}
+
+fn sensitivities_overflowed(t: u64) -> Error {
+    Error::Model(format!(
+        "the tracker's regressor overflowed at sample {t} (a huge input or internal signal): \
+         scale the signals down"
+    ))
+}
+
+fn diverged(t: u64) -> Error {
+    Error::Model(format!(
+        "the tracked model's simulated output overflowed at sample {t}: start from a better \
+         model (a batch fit on the first samples) or a smaller initial covariance"
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_params::{example1_model, noisy};
+
+    /// The AVX2 build of the loop gives the same bits as the plain one (no contraction into
+    /// fused multiply-adds): a tracker pickled on one machine continues alike on another.
+    #[test]
+    fn wide_vectors_change_no_bit() {
+        let u: Vec<f64> = (0..20_000)
+            .map(|k| ((k as f64) * 0.7).sin() * 0.8 + ((k as f64) * 0.13).cos() * 0.3)
+            .collect();
+        let m = example1_model();
+        let y = noisy(&m.simulate(&u, &m.rest_state()).unwrap(), 21);
+        let theta0 = [
+            0.68, 0.52, -0.21, 0.33, 0.58, -0.28, 0.31, 1.45, 0.52, 0.42, 0.18,
+        ];
+        let cov: Vec<f64> = (0..121)
+            .map(|k| if k % 12 == 0 { 1e-3 } else { 0.0 })
+            .collect();
+        let dims = Dims { na: 2, nb: 2, n: 3 };
+        for method in [Method::Regression, Method::PredictionError] {
+            let options = Options {
+                method,
+                forgetting: 0.999,
+                drift: vec![1e-5; 11],
+                noise_memory: 1e4,
+            };
+            let det = Detector::new(super::super::DetectorOptions::for_forgetting(0.99)).ok();
+            let new = || Engine::<12>::new(dims, &options, &theta0, &cov, 1e-3, 10.0, det.clone());
+            let (mut a, mut b) = (new().unwrap(), new().unwrap());
+            let (mut ta, mut sa, mut aa) = (vec![0.0; 11 * 20_000], vec![0.0; 11 * 20_000], vec![]);
+            let (mut tb, mut sb, mut ab) = (ta.clone(), sa.clone(), vec![]);
+            let mut sink_a = Sink {
+                theta: &mut ta,
+                se: &mut sa,
+                every: 1,
+                alarms: &mut aa,
+            };
+            a.run(&u, &y, &mut sink_a).unwrap();
+            let mut sink_b = Sink {
+                theta: &mut tb,
+                se: &mut sb,
+                every: 1,
+                alarms: &mut ab,
+            };
+            b.run_plain(&u, &y, &mut sink_b).unwrap();
+            assert!(
+                ta.iter().zip(&tb).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{method:?}"
+            );
+            assert!(
+                sa.iter().zip(&sb).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{method:?}"
+            );
+            assert_eq!(a.save(), b.save());
+        }
+    }
+}

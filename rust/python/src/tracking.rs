@@ -1,0 +1,173 @@
+//! The online identification of `backlashid._core` (rust/core/src/tracking): the recursive
+//! estimator of a cascade with its change detector. A block's trajectory crosses as two
+//! (rows, p) arrays, the alarms as tuples; the state as a flat list of numbers (`save`).
+
+use backlashid_core::guard;
+use backlashid_core::tracking::{DetectorOptions, Method, Options, Sink, Tracker};
+use numpy::PyArrayMethods;
+use pyo3::prelude::*;
+
+use crate::convert::{matrix, signal, vec_f64, MatrixOut, SignalIn, SignalOut};
+use crate::errors::{run, CoreError, DataError};
+
+/// (sample, direction, width, reference, statistic).
+type AlarmOut = (u64, i8, f64, f64, f64);
+/// (spacing, reference, slack, threshold, holdoff).
+type DetectorIn = (u64, u32, f64, f64, u32);
+
+#[pyclass(module = "backlashid._core", name = "Tracker")]
+pub(crate) struct PyTracker(Tracker);
+
+#[pymethods]
+impl PyTracker {
+    #[new]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (na, nb, degree, theta0, covariance, noise_var, noise_count, method, forgetting, drift, noise_memory, detector))]
+    fn new(
+        na: usize,
+        nb: usize,
+        degree: usize,
+        theta0: Vec<f64>,
+        covariance: SignalIn<'_>,
+        noise_var: f64,
+        noise_count: f64,
+        method: &str,
+        forgetting: f64,
+        drift: Vec<f64>,
+        noise_memory: f64,
+        detector: Option<DetectorIn>,
+    ) -> PyResult<Self> {
+        let method = match method {
+            "regression" => Method::Regression,
+            "prediction_error" => Method::PredictionError,
+            other => {
+                return Err(DataError::new_err(format!(
+                    "method = {other:?}: give \"prediction_error\" or \"regression\""
+                )))
+            }
+        };
+        let (cov, rows, cols) = matrix("covariance", &covariance)?;
+        if rows != cols {
+            return Err(DataError::new_err("the covariance must be a square matrix"));
+        }
+        let options = Options {
+            method,
+            forgetting,
+            drift,
+            noise_memory,
+        };
+        let detector =
+            detector.map(
+                |(spacing, reference, slack, threshold, holdoff)| DetectorOptions {
+                    spacing,
+                    reference,
+                    slack,
+                    threshold,
+                    holdoff,
+                },
+            );
+        let tracker = Tracker::new(
+            na,
+            nb,
+            degree,
+            &theta0,
+            &cov,
+            noise_var,
+            noise_count,
+            &options,
+            detector,
+        )
+        .map_err(CoreError)?;
+        Ok(Self(tracker))
+    }
+
+    /// The number of parameters p.
+    #[getter]
+    fn size(&self) -> usize {
+        self.0.size()
+    }
+
+    /// Samples tracked so far.
+    #[getter]
+    fn samples(&self) -> u64 {
+        self.0.samples()
+    }
+
+    /// Updates the stability guard rejected.
+    #[getter]
+    fn rejected(&self) -> u64 {
+        self.0.rejected()
+    }
+
+    /// The running noise-variance estimate.
+    #[getter]
+    fn noise_variance(&self) -> f64 {
+        self.0.noise_variance()
+    }
+
+    /// The detector's CUSUM statistics (S+, S-) and whether it is armed; None without one.
+    fn detector_state(&self) -> Option<(f64, f64, bool)> {
+        self.0.detector().map(|d| {
+            let (pos, neg) = d.statistics();
+            (pos, neg, d.armed())
+        })
+    }
+
+    /// The current physical estimate and its covariance.
+    fn estimate<'py>(&self, py: Python<'py>) -> PyResult<(SignalOut<'py>, MatrixOut<'py>)> {
+        let p = self.0.size();
+        let (theta, cov) = self.0.estimate();
+        Ok((vec_f64(py, theta), vec_f64(py, cov).reshape([p, p])?))
+    }
+
+    /// Track a block: (theta, standard errors) of every `every`-th sample as (rows, p)
+    /// arrays, and the alarms raised.
+    #[allow(clippy::type_complexity)]
+    fn update<'py>(
+        &mut self,
+        py: Python<'py>,
+        u: SignalIn<'py>,
+        y: SignalIn<'py>,
+        every: u64,
+    ) -> PyResult<(MatrixOut<'py>, MatrixOut<'py>, Vec<AlarmOut>)> {
+        let (u, y) = (signal("u", &u)?, signal("y", &y)?);
+        if every == 0 {
+            return Err(DataError::new_err("every must be a whole number >= 1"));
+        }
+        let p = self.0.size();
+        let rows = self.0.recorded(u.len(), every);
+        let tracker = &mut self.0;
+        let (theta, se, alarms) = run(py, || {
+            let mut theta = guard::filled(rows * p, 0.0, "the tracked parameters")?;
+            let mut se = guard::filled(rows * p, 0.0, "the standard errors")?;
+            let mut alarms = Vec::new();
+            let mut sink = Sink {
+                theta: &mut theta,
+                se: &mut se,
+                every,
+                alarms: &mut alarms,
+            };
+            tracker.update(&u, &y, &mut sink)?;
+            Ok((theta, se, alarms))
+        })?;
+        let alarms = alarms
+            .into_iter()
+            .map(|a| (a.sample, a.direction, a.width, a.reference, a.statistic))
+            .collect();
+        Ok((
+            vec_f64(py, theta).reshape([rows, p])?,
+            vec_f64(py, se).reshape([rows, p])?,
+            alarms,
+        ))
+    }
+
+    /// Every number that changes while tracking.
+    fn save(&self) -> Vec<f64> {
+        self.0.save()
+    }
+
+    /// Restore `save`'s numbers (a tracker built with the same arguments).
+    fn load(&mut self, state: Vec<f64>) -> PyResult<()> {
+        Ok(self.0.load(&state).map_err(CoreError)?)
+    }
+}

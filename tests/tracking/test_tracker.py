@@ -1,0 +1,207 @@
+"""backlashid.tracking: the streaming tracker, its state, its detector and its figure."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+import backlashid as bid
+from backlashid.errors import DataError, ModelError
+from backlashid.identify import Structure
+from backlashid.models import CascadeModel, GeneralBacklash, LinearBlock
+from backlashid.tracking import Alarm, Tracker, TrackResult, track
+
+E1 = bid.example1()
+TRUE = Structure(2, 2, 3).pack(E1)
+
+
+@pytest.fixture(scope="module")
+def data() -> bid.ExampleData:
+    return bid.example_data(E1, 20_000, snr=25, seed=11)
+
+
+@pytest.fixture(scope="module")
+def start(data: bid.ExampleData) -> bid.FitResult:
+    return bid.fit_cascade(data.u[:3000], data.noisy[:3000], na=2, nb=2, degree=3)
+
+
+def stepped(n: int, at: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Example 1 whose dead band widens by 20 % (c_L, c_R x 1.2) at sample ``at``, SNR 25."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-1, 1, n)
+    first = E1.simulate(u[:at], internals=True)
+    bl = E1.backlash
+    wider = CascadeModel(E1.linear, GeneralBacklash(0.72, 0.6, bl.m_left, bl.m_right))
+    y = np.concatenate([first.output, wider.simulate(u[at:], initial_state=first.final_state)])
+    return u, y + y[:at].std() / 25 * rng.standard_normal(n)
+
+
+def test_track_follows_a_constant_cascade_with_honest_standard_errors(data: bid.ExampleData, start: bid.FitResult) -> None:
+    r = track(data.u, data.noisy, start, forgetting=1.0)
+    assert isinstance(r, TrackResult) and len(r) == data.u.size
+    assert r.names == Structure(2, 2, 3).names
+    assert r.theta.shape == r.standard_errors.shape == (data.u.size, 11)
+    assert r.samples.tolist() == list(range(data.u.size))
+    z = np.abs(r.theta[-1] - TRUE) / r.standard_errors[-1]
+    assert z.max() < 4, dict(zip(r.names, z))
+    assert r.alarms == []
+    assert r.noise_std == pytest.approx(data.noise_std, rel=0.1)
+    # the standard errors shrink like 1 / sqrt(samples) without forgetting
+    ratio = r.standard_errors[4999] / r.standard_errors[-1]
+    assert np.all((ratio > 1.5) & (ratio < 2.8)), ratio
+
+
+def test_the_end_agrees_with_the_batch_fit(data: bid.ExampleData, start: bid.FitResult) -> None:
+    """Issue 20's "constant parameters" property on one record (benches/tracking.py: 20 seeds)."""
+    batch = bid.fit_cascade(data.u, data.noisy, na=2, nb=2, degree=3)
+    tracker = Tracker(start, forgetting=1.0, detector=False)
+    tracker.update(data.u, data.noisy, every=data.u.size)
+    se = np.array(list(tracker.standard_errors.values()))
+    assert np.all(np.abs(tracker.theta - batch.theta) <= 2 * se)
+
+
+def test_blocks_and_every_give_the_one_pass_trajectory(data: bid.ExampleData, start: bid.FitResult) -> None:
+    whole = track(data.u, data.noisy, start)
+    tracker = Tracker(start)
+    parts = [tracker.update(data.u[a:b], data.noisy[a:b]) for a, b in [(0, 777), (777, 777), (777, 9000), (9000, 20_000)]]
+    assert np.array_equal(np.concatenate([p.theta for p in parts]), whole.theta)
+    assert np.array_equal(np.concatenate([p.standard_errors for p in parts]), whole.standard_errors)
+    assert np.array_equal(np.concatenate([p.samples for p in parts]), whole.samples)
+    thin = Tracker(start)
+    rows = [thin.update(data.u[a:b], data.noisy[a:b], every=250) for a, b in [(0, 1000), (1000, 1130), (1130, 20_000)]]
+    samples = np.concatenate([r.samples for r in rows])
+    assert samples.tolist() == list(range(249, 20_000, 250))
+    assert np.array_equal(np.concatenate([r.theta for r in rows]), whole.theta[samples])
+    assert tracker.samples == thin.samples == 20_000
+
+
+def test_a_pickled_tracker_continues_with_the_same_bits(start: bid.FitResult) -> None:
+    u, y = stepped(30_000, 15_000, seed=3)
+    for method in ("prediction_error", "regression"):
+        whole = track(u, y, start, method=method, spacing=1500)
+        tracker = Tracker(start, method=method, spacing=1500)
+        first = tracker.update(u[:12_345], y[:12_345])
+        shipped = pickle.loads(pickle.dumps(tracker))  # e.g. to a worker
+        assert repr(shipped) == repr(tracker)
+        rest = shipped.update(u[12_345:], y[12_345:])
+        assert np.array_equal(np.concatenate([first.theta, rest.theta]), whole.theta)
+        assert np.array_equal(np.concatenate([first.standard_errors, rest.standard_errors]), whole.standard_errors)
+        assert first.alarms + rest.alarms == whole.alarms
+        # the original goes on independently, to the same bits
+        assert np.array_equal(tracker.update(u[12_345:], y[12_345:]).theta, rest.theta)
+
+
+def test_the_state_does_not_grow_with_the_record(start: bid.FitResult) -> None:
+    u, y = stepped(40_000, 39_999, seed=4)
+    tracker = Tracker(start)
+    sizes = []
+    for a in range(0, 40_000, 10_000):
+        tracker.update(u[a : a + 10_000], y[a : a + 10_000], every=10_000)
+        sizes.append(len(pickle.dumps(tracker)))
+    assert len(set(sizes)) == 1, sizes
+
+
+def test_a_wider_dead_band_raises_one_alarm_after_the_step(start: bid.FitResult) -> None:
+    u, y = stepped(60_000, 40_000, seed=5)
+    r = track(u, y, start, forgetting=0.999, spacing=2000, every=100)
+    assert len(r.alarms) == 1, r.alarms
+    alarm = r.alarms[0]
+    assert isinstance(alarm, Alarm) and alarm.direction == 1
+    assert 40_000 <= alarm.sample < 40_000 + 3 * 2000, alarm
+    assert alarm.reference == pytest.approx(1.1, abs=0.01) and alarm.width > 1.2
+    after = r.theta[-1]
+    assert after[4] + after[8] == pytest.approx(1.32, abs=0.01)
+    assert track(u, y, start, forgetting=0.999, detector=False, every=100).alarms == []
+    # no alarm on the constant part
+    assert track(u[:40_000], y[:40_000], start, forgetting=0.999, spacing=2000, every=1000).alarms == []
+
+
+def test_drift_rates_follow_a_step_that_no_forgetting_misses(start: bid.FitResult) -> None:
+    u, y = stepped(30_000, 10_000, seed=6)
+    frozen = track(u, y, start, forgetting=1.0, detector=False, every=30_000)
+    drifting = track(u, y, start, drift={"c_L": 2e-4, "c_R": 2e-4}, detector=False, every=30_000)
+    assert abs(frozen.theta[-1, 8] - 0.6) > 0.03
+    assert drifting.theta[-1, 8] == pytest.approx(0.6, abs=3 * drifting.standard_errors[-1, 8] + 1e-3)
+    same = track(u, y, start, drift=[0, 0, 0, 0, 2e-4, 0, 0, 0, 2e-4, 0, 0], detector=False, every=30_000)
+    assert np.array_equal(same.theta, drifting.theta)
+
+
+def test_every_start_and_both_methods(data: bid.ExampleData, start: bid.FitResult) -> None:
+    u, y = data.u[:8000], data.noisy[:8000]
+    # a model, with the fit's covariance attached, or a bare model with a noise level
+    with_cov = Tracker(start.model)
+    assert np.allclose(with_cov.covariance, start.covariance, rtol=1e-9, atol=1e-15)
+    for model in (start.model, E1):
+        r = track(u, y, model, noise_std=data.noise_std)
+        assert np.all(np.abs(r.theta[-1] - TRUE) < 0.1)
+    # both methods find Example 1 from a neutral structure (a = [0.5, 0.5], b = 0, c = 0,
+    # m_R1 = 1) with forgetting, which lets the poor early estimates go
+    for method in ("prediction_error", "regression"):
+        r = track(data.u, data.noisy, Structure(2, 2, 3), method=method, forgetting=0.999)
+        assert np.all(np.abs(r.theta[-1] - TRUE) < 0.05), (method, r.theta[-1] - TRUE)
+    tracker = Tracker(start, method="regression")
+    tracker.update(u, y)
+    assert tracker.method == "regression" and tracker.rejected >= 0
+    assert set(tracker.parameters) == set(tracker.standard_errors) == set(tracker.names)
+    assert isinstance(tracker.model, CascadeModel)
+    assert tracker.model.backlash.c_right == pytest.approx(tracker.parameters["c_R"])
+
+
+def test_bad_starts_and_options_are_refused(data: bid.ExampleData, start: bid.FitResult) -> None:
+    with pytest.raises(ModelError, match="SandwichModel"):
+        Tracker(bid.example2())
+    with pytest.raises(ModelError, match="cascade"):
+        Tracker(Structure(2, 2, 3, nr=1, ns=1))
+    with pytest.raises(ModelError, match="feedthrough"):
+        Tracker(CascadeModel(LinearBlock([0.5, 0.2], [0.1], feedthrough=0.3), E1.backlash))
+    unstable = CascadeModel(LinearBlock([0.7, 0.5], [-0.2, 1.5]), E1.backlash)
+    with pytest.raises(ModelError, match="unstable"):
+        Tracker(unstable)
+    bad = [
+        {"forgetting": 0.0},
+        {"forgetting": 1.5},
+        {"method": "kalman"},
+        {"drift": [1e-4] * 3},
+        {"drift": {"c_X": 1e-4}},
+        {"drift": -1.0},
+        {"covariance": np.eye(3)},
+        {"noise_std": 0.0},
+        {"spacing": 0},
+        {"threshold": 0.0},
+        {"detector": "yes"},
+    ]
+    for options in bad:
+        with pytest.raises(DataError):
+            Tracker(start, **options)
+    with pytest.raises(DataError, match="unknown options"):
+        track(data.u, data.noisy, start, forgeting=0.99)
+    tracker = Tracker(start)
+    with pytest.raises(DataError):
+        tracker.update(data.u[:10], data.noisy[:9])
+    with pytest.raises(DataError):
+        tracker.update(data.u[:10], data.noisy[:10], every=0)
+    y = data.noisy[:10].copy()
+    y[4] = np.nan
+    with pytest.raises(DataError, match=r"y\[4\]"):
+        tracker.update(data.u[:10], y)
+    assert tracker.samples == 0
+    assert len(tracker.update([], [])) == 0
+
+
+def test_plot_draws_every_parameter_with_its_band(tmp_path, start: bid.FitResult) -> None:  # type: ignore[no-untyped-def]
+    u, y = stepped(20_000, 12_000, seed=7)
+    r = track(u, y, start, forgetting=0.999, spacing=1500, every=20)
+    path = tmp_path / "params.png"
+    fig = r.plot(truth=TRUE, path=str(path))
+    assert len(fig.axes) == 11 and path.stat().st_size > 10_000
+    assert [ax.get_title() for ax in fig.axes] == r.names
+    assert len(fig.axes[0].collections) == 1  # the +-2 s.e. band
+    assert sum(line.get_color() == "C3" for line in fig.axes[0].lines) == len(r.alarms) == 1
+    with pytest.raises(DataError, match="shape"):
+        r.plot(truth=TRUE[:5])
+    values, se = r.parameter("c_R")
+    assert values.shape == se.shape == (1000,)
+    with pytest.raises(DataError):
+        r.parameter("c_X")
