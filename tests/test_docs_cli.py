@@ -25,7 +25,7 @@ DOC = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
 OUTPUTS = [
     "damper.json", "damper-figs/simulation.png", "damper-diagnosis.png", "damper-diagnosis.json", "damper-simulation.csv",
     "ced.json", "wh.json", "wh-figs/simulation.png", "dashboard.png", "diagnosis.json",
-    "damper-controller.h", "damper-controller.c", "damper_system.py", "piezo.json", "piezo-input.csv", "piezo-compensation.png",
+    "damper-controller.h", "damper-controller.c", "damper_system.py", "piezo.json", "piezo-input.csv", "piezo-compensation.png", "piezo-params.csv", "piezo-track/parameters.png",
 ]
 
 

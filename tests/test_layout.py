@@ -76,6 +76,7 @@ TOP_LEVEL_ALL = [
     "shared_data_folder",
     "simulate_from_samples",
     "track",
+    "track_many",
     "wiener_hammerstein_model",
 ]
 

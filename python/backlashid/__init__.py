@@ -70,7 +70,7 @@ from .models import (
 from .tracking import Tracker, TrackResult, track
 
 if TYPE_CHECKING:  # imported on first use (``__getattr__`` below); named here for type checkers
-    from .app import diagnose_many, fit_many
+    from .app import diagnose_many, fit_many, track_many
     from .benchmarks import ExampleData, example1, example2, example_data, shared_data_folder
     from .diagnosis import EFFECTS, DiagnosisReport, diagnose, fit_effect
 
@@ -82,6 +82,7 @@ if TYPE_CHECKING:  # imported on first use (``__getattr__`` below); named here f
 _LAZY = {
     "diagnose_many": "app",
     "fit_many": "app",
+    "track_many": "app",
     "ExampleData": "benchmarks",
     "example1": "benchmarks",
     "example2": "benchmarks",
@@ -159,6 +160,7 @@ __all__ = [
     "fit_effect",
     "diagnose_many",
     "fit_many",
+    "track_many",
     "fit_sandwich",
     "select_structure",
     "estimate_state",

@@ -262,6 +262,27 @@ class Dies:
 FOREIGN_SLOT, DEAD_SLOT = 3, 11
 
 
+def test_track_many_matches_one_by_one_on_the_cluster(client):
+    """track_many on the cluster gives track's trajectories bit for bit, a record's own start
+    wins over start=, and a malformed record or a missing start fails in its slot."""
+    from backlashid import track, track_many
+
+    data = [bid.example_data(bid.example1(), 3000, snr=25, seed=s) for s in (21, 22)]
+    other = bid.CascadeModel(bid.example1().linear, bid.GeneralBacklash(0.5, 0.5, [1.0, -0.3, 0.3], [1.5, 0.4, 0.2]))
+    datasets = [(data[0].u, data[0].noisy), {"u": data[1].u, "y": data[1].noisy, "start": other}, (data[0].u,)]
+    got = track_many(datasets, bid.example1(), client=client, progress=False, every=100, forgetting=0.998)
+    want = [track(data[0].u, data[0].noisy, bid.example1(), every=100, forgetting=0.998),
+            track(data[1].u, data[1].noisy, other, every=100, forgetting=0.998)]
+    for result, expected in zip(got[:2], want):
+        assert np.array_equal(result.theta, expected.theta) and np.array_equal(result.standard_errors, expected.standard_errors)
+        assert result.alarms == expected.alarms
+    assert isinstance(got[2], DataError)
+    (missing,) = track_many([(data[0].u, data[0].noisy)], scheduler="inline", progress=False)
+    assert isinstance(missing, DataError) and "start" in str(missing)
+    with pytest.raises(DataError, match="unknown option"):
+        track_many(datasets[:1], bid.example1(), client=client, window=3)
+
+
 def test_foreign_exception_and_dead_worker_keep_every_other_result(records, expected):
     """One record raises ZeroDivisionError, one kills its worker process: every other record's
     result comes back, bit for bit; the first holds its exception, the second an error naming

@@ -217,6 +217,92 @@ def _model_options(command: F) -> F:
 
 
 @main.command()
+@click.argument("data", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--input", "-i", "input_", required=True, help="Input signal (NAME, NAME[K] or a column number).")
+@click.option("--output", "-o", "output", required=True, help="Measured output.")
+@click.option("--range", "range_", help="Samples a:b of DATA to track (0-based, b excluded).")
+@click.option("--model", "model_file", type=click.Path(dir_okay=False, path_type=Path),
+              help="Start from this model (JSON from fit --json: its scaling, decimation and covariance are used).")
+@click.option("--fit-samples", default=5000, show_default=True, type=click.IntRange(min=100),
+              help="Without --model: fit a cascade on this many first samples (--scale auto) and start from it.")
+@click.option("--na", default=2, show_default=True, help="Without --model: a coefficients of the start's fit.")
+@click.option("--nb", default=2, show_default=True, help="Without --model: b coefficients.")
+@click.option("--degree", default=3, show_default=True, help="Without --model: branch degree.")
+@click.option("--forgetting", type=float, help="Forgetting factor lambda in (0, 1] [default 0.999: a window of about 1000 samples].")
+@click.option("--drift", type=float, help="Random-walk rate of every parameter (standard deviation of its change per sample).")
+@click.option("--method", type=click.Choice(["prediction_error", "regression"]), default="prediction_error", show_default=True,
+              help="The update rule: output-error prediction error (unbiased) or the paper's quasi-linear regression.")
+@click.option("--every", default=1, show_default=True, type=click.IntRange(min=1), help="Write the estimate after every N-th sample.")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="CSV to write: sample, then each parameter and its standard error (model units).")
+@click.option("--plots", "plots", type=click.Path(file_okay=False, path_type=Path), help="Write parameters.png (every parameter with its +-2 s.e. band and the alarms) here.")
+@_clean_errors
+def track(data: Path, input_: str, output: str, range_: str | None, model_file: Path | None, fit_samples: int, na: int, nb: int,
+          degree: int, forgetting: float | None, drift: float | None, method: str, every: int, out: Path, plots: Path | None) -> None:
+    """Track a cascade's parameters sample by sample (a backlash that wears), with a detector of dead-band changes.
+
+    The tracker (backlashid.track) starts from --model, or from a cascade fitted on the first
+    --fit-samples samples, and updates every parameter with each sample; its detector raises
+    an alarm when the dead-band width c_L + c_R changes. Parameters are in model units (the
+    start's scaling applied to the signals).
+    """
+    from ..identify import Scaling, fit_cascade
+    from ..tracking import track as track_record
+    from ._io import Record, _finite_record, _read_signals, decimate, parse_range
+
+    signals = _read_signals(data, [input_, output])
+    record = Record(signals[input_], signals[output], str(data))
+    if range_:
+        part = parse_range(range_, len(record), "--range")
+        record = _finite_record(record.slice(part, "--range"), input_, output, "choose a --range without it", part.start, f"--range {range_}", str(data))
+    else:
+        _finite_record(record, input_, output, "select a --range without it")
+    if model_file is not None:
+        model, scaling, described = _read_model_file(model_file)
+        record = decimate(record, int(described.get("decimate", 1)))
+        start: Any = model
+        started = f"the model of {model_file}"
+    else:
+        if len(record) <= fit_samples:
+            raise DataError(f"{record.source} has {len(record)} samples: give more than --fit-samples {fit_samples}, or a --model to start from")
+        scaling = Scaling.auto(record.u[:fit_samples], record.y[:fit_samples])
+        start = fit_cascade(scaling.input_to_model(record.u[:fit_samples]), scaling.output_to_model(record.y[:fit_samples]),
+                            na=na, nb=nb, degree=degree)
+        started = f"a cascade {na}/{nb} of degree {degree} fitted on the first {fit_samples} samples"
+    u, y = scaling.input_to_model(record.u), scaling.output_to_model(record.y)
+    options: dict[str, Any] = {"method": method}
+    if forgetting is not None:
+        options["forgetting"] = forgetting
+    if drift is not None:
+        options["drift"] = drift
+    result = track_record(u, y, start, every=every, **options)
+    columns: dict[str, Any] = {"sample": result.samples}
+    for k, name in enumerate(result.names):
+        columns[name] = result.theta[:, k]
+        columns[f"{name}_se"] = result.standard_errors[:, k]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(out, "w", encoding="utf-8") as fh:  # an interrupted write leaves the old file or none
+        np.savetxt(fh, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
+    click.echo(f"tracked {len(record)} samples of {record.source} from {started}")
+    last = {name: (result.theta[-1, k], result.standard_errors[-1, k]) for k, name in enumerate(result.names)}
+    click.echo("at the end (model units): " + ", ".join(f"{name} = {v:.6g} +- {se:.2g}" for name, (v, se) in last.items()))
+    if result.alarms:
+        for alarm in result.alarms:
+            change = "wider" if alarm.direction > 0 else "narrower"
+            click.echo(f"alarm at sample {alarm.sample}: dead band {change}, c_L + c_R = {alarm.width:.6g} (reference {alarm.reference:.6g})")
+    else:
+        click.echo("no alarm: the detector saw no change of the dead-band width c_L + c_R")
+    click.echo(f"wrote {out}")
+    if plots is not None:
+        from .._optional import pyplot
+
+        plt = pyplot()
+        plots.mkdir(parents=True, exist_ok=True)
+        fig = result.plot()
+        click.echo(f"wrote {_save(plt, fig, plots / 'parameters.png')}")
+
+
+@main.command()
 @_data_options
 @_model_options
 @click.option("--metrics-warmup", type=click.IntRange(min=0), help="Initial samples left out of the metrics of each record [default: --warmup].")

@@ -14,7 +14,8 @@ record, and a record that still fails holds a BacklashIdError naming its index. 
 deterministic, so each result equals (bit for bit) the one of a call on that record alone.
 
 :func:`diagnose_many` does the same for :func:`~backlashid.diagnose` over many (model,
-estimation, validation) cases.
+estimation, validation) cases, and :func:`track_many` for :func:`~backlashid.track` over many
+records (a fleet's parameters followed sample by sample).
 
 Needs the ``dask`` extra: ``pip install 'backlashid[dask]'``.
 """
@@ -35,7 +36,7 @@ from .._validation import check_choice
 from ..errors import BacklashIdError, DataError
 from ..identify import FitResult, fit_cascade, fit_sandwich
 
-__all__ = ["fit_many", "diagnose_many"]
+__all__ = ["fit_many", "diagnose_many", "track_many"]
 
 Kind = Literal["cascade", "sandwich"]
 Where = Literal["auto", "dask", "inline"]
@@ -128,12 +129,27 @@ def _diagnose_one(case: tuple[Any, Any, Any], options: dict[str, Any]) -> Any:
         return _portable(exc)
 
 
+def _track_one(record: tuple[Any, Any, Any], options: dict[str, Any]) -> Any:
+    """One record tracked on a worker; what it raises is returned, as in :func:`_fit_one`."""
+    from ..tracking import track
+
+    u, y, start = record
+    try:
+        return track(u, y, start, **options)
+    except BacklashIdError as exc:
+        return exc
+    except Exception as exc:
+        return _portable(exc)
+
+
 def _batch(records: list[Any], job: str, options: dict[str, Any]) -> list[Any]:
-    """The task: a few records, fitted (job "cascade" or "sandwich") or diagnosed (job
-    "diagnose") one after the other (a task costs the scheduler a few milliseconds, as much as
-    a small fit)."""
+    """The task: a few records, fitted (job "cascade" or "sandwich"), diagnosed (job
+    "diagnose") or tracked (job "track") one after the other (a task costs the scheduler a few
+    milliseconds, as much as a small fit)."""
     if job == "diagnose":
         return [_diagnose_one(case, options) for case in records]
+    if job == "track":
+        return [_track_one(record, options) for record in records]
     return [_fit_one(record, job, options) for record in records]
 
 
@@ -246,7 +262,9 @@ def _run_all(
 # costs about 7 s (measured: the README's 200 x 400-sample fleet took 10.6-15.3 s on the
 # cluster, 3.2-4.0 s in a plain loop), more than a two-core machine saves on this little work.
 # A cascade fit of the default options costs about 45 us per sample; a diagnosis far more.
-INLINE_SAMPLES = {"fit": 300_000, "diagnose": 30_000}
+# Tracking runs at several million samples per second: a cluster pays off only beyond some
+# tens of millions of samples in all (estimated from the tracker's speed, not measured).
+INLINE_SAMPLES = {"fit": 300_000, "diagnose": 30_000, "track": 50_000_000}
 
 
 def _samples(job: str, record: Any) -> int:
@@ -270,12 +288,12 @@ def _inline(scheduler: str, job: str, todo: list[tuple[int, Any]], client: Any, 
     if _cores() < 2:
         return True
     total = sum(_samples(job, record) for _, record in todo)
-    return total < INLINE_SAMPLES["diagnose" if job == "diagnose" else "fit"]
+    return total < INLINE_SAMPLES[job if job in ("diagnose", "track") else "fit"]
 
 
 def _run_inline(todo: list[tuple[int, Any]], job: str, options: dict[str, Any], progress: bool, results: list[Any]) -> None:
     """Every record one after the other in this process (the same task function as on a worker)."""
-    label = "diagnose" if job == "diagnose" else f"fit_{job}"
+    label = job if job in ("diagnose", "track") else f"fit_{job}"
     bar = _progress_bar(label, progress, len(todo))
     try:
         for i, record in todo:
@@ -390,6 +408,91 @@ def diagnose_many(
     return _run_all(cases, _case, "diagnose", options, client, address, n_workers, progress, scheduler)
 
 
+def _tracked(start: Any) -> Callable[[Any, int], tuple[Any, Any, Any]]:
+    """The parser of :func:`track_many`'s records: (u, y) pairs or dicts with keys u, y and
+    optionally start (that record's own start, else ``start``)."""
+
+    def parse(item: Any, index: int) -> tuple[Any, Any, Any]:
+        if isinstance(item, Mapping):
+            extra = sorted(map(str, set(item) - {"u", "y", "start"}))
+            if "u" not in item or "y" not in item or extra:
+                raise DataError(f"datasets[{index}] has keys {sorted(map(str, item))}: give the keys u and y (and start)")
+            own = item.get("start", start)
+            if own is None:
+                raise DataError(f"datasets[{index}] has no start: give start= or the record's key start")
+            return item["u"], item["y"], own
+        if start is None:
+            raise DataError("track_many needs a start: give start= (a FitResult, CascadeModel or Structure) or each record's key start")
+        u, y = _record(item, index)
+        return u, y, start
+
+    return parse
+
+
+@fill(cluster=_CLUSTER_DOC)
+def track_many(
+    datasets: Sequence[Any],
+    start: Any = None,
+    *,
+    client: Any = None,
+    address: str | None = None,
+    n_workers: int | None = None,
+    progress: bool = True,
+    scheduler: Where = "auto",
+    **track_options: Any,
+) -> list[Any]:
+    """Track every record's parameters on Dask distributed, as :func:`fit_many` fits.
+
+    Results come in input order, equal (bit for bit) to those of :func:`~backlashid.track` on
+    each record alone. In-process (``scheduler="auto"``) below 50 million samples in all: the
+    tracker runs at millions of samples per second, so a cluster pays off only for a large
+    fleet. With ``every=1`` (the default) a result holds two N x p arrays per record: give
+    ``every=`` (e.g. 1000) for long records.
+
+    Parameters
+    ----------
+    datasets : sequence
+        The records: (u, y) pairs, or dicts with keys ``u``, ``y`` and optionally ``start``
+        (that record's own start).
+    start : FitResult or CascadeModel or Structure, optional
+        The start of every record without its own (:class:`~backlashid.Tracker`).
+    {cluster}
+    **track_options
+        Options of :func:`~backlashid.track` (every, forgetting, drift, method, noise_std,
+        detector, threshold, ...), passed through.
+
+    Returns
+    -------
+    list of TrackResult or Exception
+        One per record, in input order; a record whose tracking raises holds that exception
+        instead of a :class:`~backlashid.TrackResult` (as in :func:`fit_many`).
+
+    Raises
+    ------
+    DataError
+        If an option or ``scheduler`` is unknown, or ``client``, ``address``, ``n_workers``
+        and ``scheduler`` contradict each other.
+    BacklashIdError
+        If the work runs on Dask and Dask distributed is not installed (the ``dask`` extra).
+
+    Examples
+    --------
+    >>> d = bid.example_data(bid.example1(), 2000, snr=25, seed=2)
+    >>> out = bid.track_many([(d.u, d.noisy), (d.u[:10], d.noisy)], bid.example1(), every=500)
+    >>> [type(r).__name__ for r in out], len(out[0])
+    (['TrackResult', 'DataError'], 4)
+    """
+    from ..tracking import Tracker, track
+
+    allowed = [name for name in inspect.signature(track).parameters if name not in ("u", "y", "model_or_structure", "options")]
+    allowed += [name for name in inspect.signature(Tracker).parameters if name != "model_or_structure"]
+    unknown = sorted(set(track_options) - set(allowed))
+    if unknown:
+        raise DataError(f"unknown option(s) {', '.join(unknown)} for track: use {', '.join(sorted(set(allowed)))}")
+    _check_where(client, address, n_workers, scheduler)
+    return _run_all(datasets, _tracked(start), "track", track_options, client, address, n_workers, progress, scheduler)
+
+
 def _run(
     distributed: Any,
     client: Any,
@@ -406,7 +509,7 @@ def _run(
     records did) is retried record by record, one at a time, each record sent with its task
     and with Dask's ``retries``; a record that still fails gets a
     :class:`~backlashid.BacklashIdError` naming its index in its slot."""
-    label = "diagnose" if job == "diagnose" else f"fit_{job}"
+    label = job if job in ("diagnose", "track") else f"fit_{job}"
     threads = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
     threads = max(threads, 4)  # a cluster still scaling up reports few workers
     n_tasks = min(len(todo), _TASKS_PER_THREAD * threads)

@@ -1,0 +1,62 @@
+"""``backlashid track LOG -i u -o y --out params.csv --plots figs`` (issue 20)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import backlashid as bx
+from backlashid.app._cli import main
+
+
+def run(*args: object):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = bx.example_data(bx.example1(), 12_000, snr=25, seed=8)
+    path = tmp_path_factory.mktemp("track") / "log.csv"
+    np.savetxt(path, np.column_stack([d.u, d.noisy]), delimiter=",", header="u,y", comments="")
+    return path
+
+
+def test_track_from_a_fit_on_the_first_samples_writes_every_parameter(log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "sub" / "params.csv"
+    res = run("track", log, "-i", "u", "-o", "y", "--fit-samples", "3000", "--every", "100", "--out", out, "--plots", tmp_path / "figs")
+    assert res.exit_code == 0, res.output
+    cols = np.genfromtxt(out, delimiter=",", names=True)
+    names = ["a1", "a2", "b1", "b2", "c_L", "m_L2", "m_L3", "m_R1", "c_R", "m_R2", "m_R3"]
+    assert list(cols.dtype.names) == ["sample"] + [v for n in names for v in (n, f"{n}_se")]
+    assert cols.size == 120 and cols["sample"][-1] == 11_999
+    # the same as backlashid.track in model units from the same start (scaling of the first samples)
+    assert "fitted on the first 3000 samples" in res.output and "no alarm" in res.output
+    assert np.all(cols["c_R_se"] > 0)
+    assert (tmp_path / "figs" / "parameters.png").stat().st_size > 20_000
+
+
+def test_track_from_a_model_file_uses_its_scaling(log: Path, tmp_path: Path) -> None:
+    data = np.loadtxt(log, delimiter=",", skiprows=1)
+    fit_file = tmp_path / "fit.json"
+    scaling = {"input_offset": 0.0, "input_scale": 1.0, "output_offset": 0.5, "output_scale": 2.0}
+    fit_file.write_text(json.dumps({"model": bx.example1().to_dict(), "scaling": scaling, "data": {"decimate": 1}}))
+    out = tmp_path / "params.csv"
+    res = run("track", log, "-i", "u", "-o", "y", "--model", fit_file, "--every", "1000", "--forgetting", "0.998", "--out", out)
+    assert res.exit_code == 0, res.output
+    cols = np.genfromtxt(out, delimiter=",", names=True)
+    want = bx.track(data[:, 0], (data[:, 1] - 0.5) / 2.0, bx.example1(), every=1000, forgetting=0.998)
+    assert np.array_equal(cols["c_L"], want.theta[:, 4]) and np.array_equal(cols["c_L_se"], want.standard_errors[:, 4])
+
+
+def test_refusals_end_with_one_error_line(log: Path, tmp_path: Path) -> None:
+    short = run("track", log, "-i", "u", "-o", "y", "--range", "0:500", "--out", tmp_path / "p.csv")
+    assert short.exit_code == 1 and "--fit-samples" in short.output and "Traceback" not in short.output
+    bad = run("track", log, "-i", "u", "-o", "y", "--fit-samples", "3000", "--forgetting", "1.5", "--out", tmp_path / "p.csv")
+    assert bad.exit_code == 1 and "forgetting" in bad.output and "Traceback" not in bad.output
+    missing = run("track", log, "-i", "u", "-o", "speed", "--out", tmp_path / "p.csv")
+    assert missing.exit_code == 1 and "no column 'speed'" in missing.output
+    assert not (tmp_path / "p.csv").exists()
