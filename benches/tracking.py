@@ -151,6 +151,7 @@ def step_case(seed: int, png: Path | None) -> tuple[int | None, int]:
     before = [a for a in r.alarms if a.sample < at]
     after = [a.sample - at for a in r.alarms if a.sample >= at]
     if png is not None:
+        png.mkdir(parents=True, exist_ok=True)
         true = np.tile(TRUE, (len(r), 1))
         true[r.samples >= at, NAMES.index("c_L")] = 0.72
         true[r.samples >= at, NAMES.index("c_R")] = 0.6
