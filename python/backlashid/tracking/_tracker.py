@@ -95,7 +95,8 @@ class Tracker:
     Kalman filter's P + Q). The covariance is kept as a square root (Potter), so it stays
     positive semi-definite; standard errors are its diagonal scaled by a running estimate of
     the noise variance. A step that would make the linear block unstable or m_R1 <= 0 is
-    rejected and a negative width projected to 0. The state is a fixed set of p x p numbers:
+    rejected and a negative width projected to 0; forgetting pauses while the covariance is
+    very large (anti-windup, for stretches without excitation). The state is a fixed set of p x p numbers:
     memory does not grow with the record, and a pickled tracker continues with the same bits.
 
     A detector watches the dead-band width c_L + c_R: every ``spacing`` samples (by default
@@ -112,7 +113,7 @@ class Tracker:
         covariance if it carries one), or a structure (a neutral start with a wide prior;
         the prediction-error method needs a good start, so prefer a fit).
     forgetting : float, optional
-        lambda in (0, 1]; default 0.999 (a window of about 1000 samples) without ``drift``, 1 (no forgetting) with it.
+        lambda in [1e-4, 1]; default 0.999 (a window of about 1000 samples) without ``drift``, 1 (no forgetting) with it.
     drift : float or dict or array_like, optional
         Random-walk rates, the standard deviation of each parameter's change per sample: one
         number for all, a mapping name -> rate (others 0), or p values.
@@ -185,7 +186,7 @@ class Tracker:
         if forgetting is None:
             lam = 1.0 if rates else _DEFAULT_FORGETTING
         else:
-            lam = check_real(forgetting, "forgetting", low=0.0, high=1.0, low_open=True)
+            lam = check_real(forgetting, "forgetting", low=1e-4, high=1.0)
         if covariance is not None:
             cov = as_signal(covariance, "covariance")
             if cov.shape != (p, p):

@@ -66,7 +66,7 @@ pub(crate) struct Engine<const W: usize> {
     /// Samples of drift (Q) not yet added to P: Q is added every `DRIFT_BATCH` samples as
     /// h Q (P + h Q re-factored), the random walk's variance over those h samples.
     q_wait: f64,
-    /// trace(P), kept beside S (`TRACE_CAP`).
+    /// trace(P) after the last update or fold (`TRACE_CAP`).
     trace: f64,
     sigma2: f64,
     noise_count: f64,
@@ -146,6 +146,11 @@ const DRIFT_BATCH: f64 = 16.0;
 /// Forgetting is suspended while trace(P) (normalised by the noise variance) would exceed
 /// this.
 const TRACE_CAP: f64 = 1e8;
+
+/// Samples between two sums of trace(P) from S (a power of 2); in between the cap reads
+/// the last sum (P grows at most lambda^-64 meanwhile: finite for lambda >= 1e-4, the
+/// least allowed).
+const TRACE_EVERY: u64 = 64;
 
 /// The lower Cholesky factor of the p x p block of a symmetric positive semi-definite
 /// matrix; a pivot <= 0 (a direction without variance) leaves its column zero.
@@ -730,16 +735,9 @@ impl<const W: usize> Engine<W> {
         } else {
             self.rejected += 1;
         }
-        let mut g2 = 0.0;
-        for v in &g {
-            g2 += v * v;
-        }
-        let kept = (self.trace - g2 * inv_s).max(0.0);
-        let c = if kept * self.inv_lambda > TRACE_CAP {
-            self.trace = kept;
+        let c = if self.trace * self.inv_lambda > TRACE_CAP {
             1.0
         } else {
-            self.trace = kept * self.inv_lambda;
             self.sqrt_inv_lambda
         };
         for i in 0..W {
@@ -747,6 +745,11 @@ impl<const W: usize> Engine<W> {
             for j in 0..W {
                 self.sm[i][j] = (self.sm[i][j] - gi * f[j]) * c;
             }
+        }
+        if self.t & (TRACE_EVERY - 1) == 0 {
+            // summed from S itself: a running recursion trace <- (trace - |g|^2 / beta) /
+            // lambda would amplify its rounding by 1 / lambda per sample
+            self.trace = self.sm.iter().flatten().map(|v| v * v).sum();
         }
         if self.has_drift {
             self.q_wait += 1.0;

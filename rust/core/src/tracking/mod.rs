@@ -20,9 +20,11 @@
 //! normalised prediction errors e^2 / (1 + psi' P psi) estimates; the standard errors are
 //! sqrt(sigma2 P_ii), times s2 / s1 with forgetting (`engine`). A step that makes the
 //! linear block unstable or m_R1 <= 0 is rejected and a negative width is projected to 0,
-//! as the batch LM's `feasible` and bounds do. Parameters in the fits' layout and names
-//! (`identify::problem::Layout`): a_1..a_na, b_1..b_nb, c_L, m_L2..m_Ln, m_R1, c_R,
-//! m_R2..m_Rn.
+//! as the batch LM's `feasible` and bounds do (and a step that makes a branch decrease at
+//! the sample's x). Forgetting is suspended while trace(P) (normalised by sigma2) would pass 1e8
+//! (anti-windup: without excitation P / lambda grows until it overflows). Parameters in the
+//! fits' layout and names (`identify::problem::Layout`): a_1..a_na, b_1..b_nb, c_L,
+//! m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn.
 
 pub mod detector;
 mod engine;
@@ -44,7 +46,7 @@ pub enum Method {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Options {
     pub method: Method,
-    /// lambda in (0, 1]; 1: no forgetting.
+    /// lambda in [1e-4, 1]; 1: no forgetting.
     pub forgetting: f64,
     /// Per-parameter drift standard deviations per sample (p values, >= 0), or empty.
     pub drift: Vec<f64>,
@@ -153,9 +155,10 @@ impl Tracker {
                 "noise variance {noise_var}: give a finite number > 0 (and a count >= 0)"
             )));
         }
-        if !(options.forgetting > 0.0 && options.forgetting <= 1.0) {
+        if !(options.forgetting >= 1e-4 && options.forgetting <= 1.0) {
             return Err(Error::Data(format!(
-                "forgetting = {}: give lambda in (0, 1]",
+                "forgetting = {}: give lambda in [1e-4, 1] (1: no forgetting; 0.999 forgets \
+                 over about 1000 samples)",
                 options.forgetting
             )));
         }
@@ -650,6 +653,20 @@ mod tests {
                 .unwrap_err();
             assert!(matches!(err, Error::Model(_)), "{method:?} {err:?}");
         }
+    }
+
+    /// With forgetting the standard errors stay at the window's level however long the
+    /// record (the anti-windup must not stop forgetting on an excited record: a running
+    /// trace(P) recursion once drifted by 1 / lambda per sample and froze the tracker).
+    #[test]
+    fn forgetting_keeps_working_on_long_records() {
+        let (u, y) = record(150_000, 14);
+        let y = noisy(&y, 15);
+        let mut t = tracker(Method::PredictionError, &TRUE, 1e-6, false);
+        let (_, se, _) = run(&mut t, &u, &y);
+        let at = |k: usize| se[k * 11 + 8];
+        let ratio = at(149_999) / at(20_000);
+        assert!((0.7..1.4).contains(&ratio), "{ratio}");
     }
 
     #[test]
