@@ -34,7 +34,7 @@ def test_track_from_a_fit_on_the_first_samples_writes_every_parameter(log: Path,
     assert list(cols.dtype.names) == ["sample"] + [v for n in names for v in (n, f"{n}_se")]
     assert cols.size == 120 and cols["sample"][-1] == 11_999
     # the same as backlashid.track in model units from the same start (scaling of the first samples)
-    assert "fitted on the first 3000 samples" in res.output and "no alarm" in res.output
+    assert "fitted on the first 3000 samples" in res.output and "no alarm, but the detector never armed" in res.output
     assert np.all(cols["c_R_se"] > 0)
     assert (tmp_path / "figs" / "parameters.png").stat().st_size > 20_000
 

@@ -247,7 +247,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     start's scaling applied to the signals).
     """
     from ..identify import Scaling, fit_cascade
-    from ..tracking import track as track_record
+    from ..tracking import Tracker
     from ._io import Record, _finite_record, _read_signals, decimate, parse_range
 
     signals = _read_signals(data, [input_, output])
@@ -275,7 +275,8 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
         options["forgetting"] = forgetting
     if drift is not None:
         options["drift"] = drift
-    result = track_record(u, y, start, every=every, **options)
+    tracker = Tracker(start, **options)
+    result = tracker.update(u, y, every=every)
     columns: dict[str, Any] = {"sample": result.samples}
     for k, name in enumerate(result.names):
         columns[name] = result.theta[:, k]
@@ -290,8 +291,12 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
         for alarm in result.alarms:
             change = "wider" if alarm.direction > 0 else "narrower"
             click.echo(f"alarm at sample {alarm.sample}: dead band {change}, c_L + c_R = {alarm.width:.6g} (reference {alarm.reference:.6g})")
-    else:
+    elif tracker.detector_armed:
         click.echo("no alarm: the detector saw no change of the dead-band width c_L + c_R")
+    else:
+        click.echo("no alarm, but the detector never armed: it reads the width every 3 / (1 - forgetting) samples and "
+                   "needs 8 readings for its reference (24,000 samples at the default forgetting 0.999); "
+                   "give a longer record or a lower --forgetting")
     click.echo(f"wrote {out}")
     if plots is not None:
         from .._optional import pyplot

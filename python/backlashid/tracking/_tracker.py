@@ -290,6 +290,26 @@ class Tracker:
         return dict(zip(self._names, map(float, np.sqrt(np.clip(np.diag(self.covariance), 0, None)))))
 
     @property
+    def detector_armed(self) -> bool | None:
+        """Whether the detector has its reference width and watches for changes (None without
+        a detector). It arms after ``reference`` readings, ``spacing`` samples apart
+        (8 x 3000 = 24,000 samples at the default forgetting 0.999): no alarm can come before.
+
+        Returns
+        -------
+        bool or None
+            True once armed.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> bid.Tracker(bid.example1()).detector_armed
+        False
+        """
+        state = self._native.detector_state()
+        return None if state is None else bool(state[2])
+
+    @property
     def model(self) -> CascadeModel:
         """The current estimate as a model."""
         return self._structure.model(self.theta)  # type: ignore[return-value]
