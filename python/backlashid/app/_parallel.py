@@ -103,43 +103,35 @@ def _portable(exc: Exception) -> Exception:
     return exc
 
 
-def _fit_one(record: tuple[Any, Any], kind: str, options: dict[str, Any]) -> Any:
-    """One fit on a worker. Whatever it raises is returned, not raised, so that it reaches the
-    caller in its dataset's slot and the other records' results are kept (results and
-    errors pickle)."""
-    u, y = record
+def _outcome(call: Callable[..., Any], *args: Any, **options: Any) -> Any:
+    """``call(*args, **options)`` on a worker, whatever it raises returned, not raised, so that
+    it reaches the caller in its record's slot and the other records' results are kept
+    (results and errors pickle)."""
     try:
-        return _FITS[kind](u, y, **options)
+        return call(*args, **options)
     except BacklashIdError as exc:
         return exc
     except Exception as exc:  # a bug or a foreign error (e.g. OverflowError): this record's only
         return _portable(exc)
 
 
+def _fit_one(record: tuple[Any, Any], kind: str, options: dict[str, Any]) -> Any:
+    """One fit on a worker (:func:`_outcome`)."""
+    return _outcome(_FITS[kind], *record, **options)
+
+
 def _diagnose_one(case: tuple[Any, Any, Any], options: dict[str, Any]) -> Any:
-    """One diagnosis on a worker; what it raises is returned, as in :func:`_fit_one`."""
+    """One diagnosis on a worker (:func:`_outcome`)."""
     from ..diagnosis import diagnose
 
-    model, estimation, validation = case
-    try:
-        return diagnose(model, estimation, validation, **options)
-    except BacklashIdError as exc:
-        return exc
-    except Exception as exc:
-        return _portable(exc)
+    return _outcome(diagnose, *case, **options)
 
 
 def _track_one(record: tuple[Any, Any, Any], options: dict[str, Any]) -> Any:
-    """One record tracked on a worker; what it raises is returned, as in :func:`_fit_one`."""
+    """One record tracked on a worker (:func:`_outcome`)."""
     from ..tracking import track
 
-    u, y, start = record
-    try:
-        return track(u, y, start, **options)
-    except BacklashIdError as exc:
-        return exc
-    except Exception as exc:
-        return _portable(exc)
+    return _outcome(track, *record, **options)
 
 
 def _batch(records: list[Any], job: str, options: dict[str, Any]) -> list[Any]:
