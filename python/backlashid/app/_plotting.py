@@ -34,6 +34,14 @@ def _with_unit(name: str, unit: str | None) -> str:
     return f"{name} [{unit}]" if unit else f"{name} (units of the record)"
 
 
+def _stacked(label: str, width: int = 30) -> str:
+    """A y-axis label broken into lines of at most about ``width`` characters, so that it
+    does not run past its panel into the next one (stacked panels of one figure)."""
+    import textwrap
+
+    return "\n".join(textwrap.wrap(label, width)) or label
+
+
 def _time(n: int, dt: float | None, time_unit: str) -> tuple[NDArray[np.float64], str]:
     """The time axis of n samples and its label (in samples when dt is None or 1)."""
     if dt is None or dt == 1.0:
@@ -394,7 +402,7 @@ def plot_simulation(
     if warmup and shown.start < warmup:
         ax.axvspan(t[shown.start], t[warmup - 1], color="0.9", zorder=0, label=f"skipped transient ({warmup} samples)")
     ax.set_xlabel(time_label)
-    ax.set_ylabel(_with_unit(ylabel, unit))
+    ax.set_ylabel(_stacked(_with_unit(ylabel, unit)))
     heading = title or "Measured and simulated output"
     if long:
         heading += (f"\nwindow of {window} of {len(ys)} samples where the error is largest (fit % and RMSE: whole record);"
@@ -425,7 +433,7 @@ def _plot_error_panels(e: NDArray[np.float64], t: NDArray[np.float64], time_labe
         pad = 0.05 * float(np.ptp(after))
         ax_err.set_ylim(float(after.min()) - pad, float(after.max()) + pad)
     ax_err.set_xlabel(time_label)
-    ax_err.set_ylabel(_with_unit(f"measured - simulated {ylabel}", unit))
+    ax_err.set_ylabel(_stacked(_with_unit(f"measured - simulated {ylabel}", unit)))
     ax_err.set_title(f"Free-run simulation error over the whole record ({len(e)} samples)")
     _legend_outside(ax_err)
     ax_err.grid(alpha=0.3)
@@ -439,7 +447,7 @@ def _plot_error_panels(e: NDArray[np.float64], t: NDArray[np.float64], time_labe
     squared = f"{unit}²" if unit else "(units of the record)²"
     ax_psd.set_xlabel(f"frequency [{f_unit}]")
     per = f_unit if f_unit == "Hz" else f"({f_unit})"
-    ax_psd.set_ylabel(f"power spectral density [{squared}/{per}]")
+    ax_psd.set_ylabel(_stacked(f"power spectral density [{squared}/{per}]"))
     ax_psd.set_title("Where the error lies in frequency (Welch spectra after the transient)")
     _legend_outside(ax_psd)
     ax_psd.grid(alpha=0.3, which="both")
