@@ -67,11 +67,18 @@ def _distributed() -> Any:
     return distributed
 
 
-def _check_options(fit: Callable[..., FitResult], options: Mapping[str, Any]) -> None:
-    allowed = [name for name in inspect.signature(fit).parameters if name not in ("u", "y", "w")]
+def _check_options(options: Mapping[str, Any], job: str, functions: Sequence[Callable[..., Any]], data: Sequence[str]) -> None:
+    """DataError naming every option that no parameter of ``functions`` (the job's function and
+    what it passes its ``**options`` to) takes, besides the record's ``data`` arguments."""
+    allowed = list(dict.fromkeys(
+        name
+        for function in functions
+        for name, parameter in inspect.signature(function).parameters.items()
+        if name not in data and parameter.kind is not inspect.Parameter.VAR_KEYWORD
+    ))
     unknown = sorted(set(options) - set(allowed))
     if unknown:
-        raise DataError(f"unknown option(s) {', '.join(unknown)} for {fit.__name__}: use {', '.join(allowed)}")
+        raise DataError(f"unknown option(s) {', '.join(unknown)} for {job}: use {', '.join(allowed)}")
 
 
 def _record(item: Any, index: int) -> tuple[Any, Any]:
@@ -217,7 +224,7 @@ def fit_many(
     fit = _FITS.get(kind) if isinstance(kind, str) else None
     if fit is None:
         raise DataError(f"kind = {kind!r}: use 'cascade' (fit_cascade) or 'sandwich' (fit_sandwich)")
-    _check_options(fit, fit_options)
+    _check_options(fit_options, fit.__name__, [fit], ("u", "y", "w"))
     _check_where(client, address, n_workers, scheduler)
     return _run_all(datasets, _record, kind, fit_options, client, address, n_workers, progress, scheduler)
 
@@ -392,10 +399,7 @@ def diagnose_many(
     """
     from ..diagnosis import diagnose
 
-    allowed = [name for name in inspect.signature(diagnose).parameters if name not in ("model", "estimation", "validation")]
-    unknown = sorted(set(options) - set(allowed))
-    if unknown:
-        raise DataError(f"unknown option(s) {', '.join(unknown)} for diagnose: use {', '.join(allowed)}")
+    _check_options(options, "diagnose", [diagnose], ("model", "estimation", "validation"))
     _check_where(client, address, n_workers, scheduler)
     return _run_all(cases, _case, "diagnose", options, client, address, n_workers, progress, scheduler)
 
@@ -476,11 +480,7 @@ def track_many(
     """
     from ..tracking import Tracker, track
 
-    allowed = [name for name in inspect.signature(track).parameters if name not in ("u", "y", "model_or_structure", "options")]
-    allowed += [name for name in inspect.signature(Tracker).parameters if name != "model_or_structure"]
-    unknown = sorted(set(track_options) - set(allowed))
-    if unknown:
-        raise DataError(f"unknown option(s) {', '.join(unknown)} for track: use {', '.join(sorted(set(allowed)))}")
+    _check_options(track_options, "track", [track, Tracker], ("u", "y", "model_or_structure"))
     _check_where(client, address, n_workers, scheduler)
     return _run_all(datasets, _tracked(start), "track", track_options, client, address, n_workers, progress, scheduler)
 
