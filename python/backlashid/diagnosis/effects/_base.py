@@ -23,10 +23,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from ... import _core
 from ..._json import json_float
+from ..._numerics import r_factor
 from ..._validation import as_signal, check_same_length
-from ...errors import BacklashIdError, ModelError
+from ...errors import BacklashIdError, DataError, ModelError
 from ...identify import Structure, levenberg_marquardt
-from ...models import CascadeModel, LinearBlock
+from ...models import LinearBlock
 
 __all__ = ["Augmentation", "AugmentedModel", "Effect", "Screening", "TIME_SCALE"]
 
@@ -97,23 +98,79 @@ def held_past(block: LinearBlock, u0: float, hold: int | None = None) -> tuple[l
     return [u0] * min(hold, block.na) + [0.0] * max(block.na - hold, 0), x_past + [0.0] * (block.nb - len(x_past))
 
 
+Start = dict[str, Any]  # a record's start as _core.simulate_augmented takes it: u_past, x_past, y_prev (, y_past, w_past)
+
+
+def start_of(state: Any) -> Start:
+    """A model state (``CascadeState``, ``SandwichState``, a ``Start`` dict or None for rest)
+    as the keywords of ``_core.simulate_augmented`` / ``_core.AugmentedProblem``.
+
+    A sandwich's ``y_past[0]`` is also the backlash memory (``SandwichState``)."""
+    if state is None:
+        return {}
+    if isinstance(state, dict):
+        return dict(state)
+    out: Start = {"u_past": [float(v) for v in state.u_past], "x_past": [float(v) for v in state.x_past]}
+    if hasattr(state, "w_past"):
+        y_past = [float(v) for v in state.y_past]
+        out.update(y_prev=y_past[0] if y_past else 0.0, y_past=y_past, w_past=[float(v) for v in state.w_past])
+    else:
+        out["y_prev"] = float(state.y_prev)
+    return out
+
+
+def _exact(v: float) -> float | str:
+    """A parameter for JSON without loss: a float (JSON keeps its 17 digits), an infinity (an
+    open clip) as "inf" / "-inf", which ``float`` reads back."""
+    f = float(v)
+    return f if np.isfinite(f) else ("inf" if f > 0 else "-inf")
+
+
+def _core_chain(structure: Structure, theta: Array) -> tuple[tuple[Any, ...], dict[str, Any]]:
+    """The chain's arguments of ``_core.simulate_augmented``: (a, b, c_L, c_R, m_L, m_R) and,
+    for a sandwich, the output block's r and s as keywords."""
+    est = structure.unpack(theta)
+    extra: dict[str, Any] = {"r": list(est.r), "s": list(est.s)} if structure.is_sandwich else {}
+    return tuple(est.chain()), extra
+
+
+def _fitted_start(structure: Structure, start: Start) -> Start:
+    """``start`` with each past cut or padded (by its oldest value) to the structure's orders: a
+    bigger structure (linear_order) starts from the nominal's state."""
+    if not start:
+        return {}
+    est_orders = {"u_past": structure.na, "x_past": structure.nb, "y_past": structure.nr, "w_past": structure.ns}
+    out = dict(start)
+    for key, n in est_orders.items():
+        if key in out:
+            v = list(out[key])
+            out[key] = (v + [v[-1] if v else 0.0] * n)[:n]
+    if not structure.is_sandwich:
+        out.pop("y_past", None)
+        out.pop("w_past", None)
+    return out
+
+
 def simulate(
-    structure: Structure, theta: Array, effects: CoreEffects, u: Array, t0: float, y_prev: float = 0.0, held: bool = False
+    structure: Structure, theta: Array, effects: CoreEffects, u: Array, t0: float, y_prev: float = 0.0, held: bool = False,
+    start: Start | None = None,
 ) -> Array:
-    """The augmented cascade's output (``_core.simulate_augmented``). ``held``: the linear block
+    """The augmented chain's output (``_core.simulate_augmented``). ``held``: the linear block
     starts at its equilibrium with u[0] (the input held before the record for ever) instead of
-    at rest; ``y_prev`` is the backlash memory y(0)."""
-    return Simulator(structure, theta, effects, t0)(u, y_prev, held)
+    at rest; ``y_prev`` is the backlash memory y(0); ``start`` an explicit state (:func:`start_of`)
+    that overrides both."""
+    return Simulator(structure, theta, effects, t0)(u, y_prev, held, start=start)
 
 
 class Simulator:
-    """One augmented cascade's simulation, unpacked once: ``(u, y_prev, held) -> output``, for
-    the many runs of one model that differ in the start only (the validation start's search).
-    ``hold``: the held start holds the input for that many samples from rest (None: for ever,
-    the equilibrium), :func:`held_past`."""
+    """One augmented chain's simulation, unpacked once: ``(u, y_prev, held, start=None) ->
+    output``, for the many runs of one model that differ in the start only (the validation
+    start's search). ``hold``: the held start holds the input for that many samples from rest
+    (None: for ever, the equilibrium), :func:`held_past`."""
 
     def __init__(self, structure: Structure, theta: Array, effects: CoreEffects, t0: float, hold: int | None = None) -> None:
-        self.chain = structure.unpack(theta).chain()
+        self.structure = structure
+        self.chain, self.output_block = _core_chain(structure, theta)
         self.effects = list(effects)
         self.t0 = float(t0)
         self.hold = hold
@@ -126,10 +183,13 @@ class Simulator:
             self._held[u0] = {"u_past": u_past, "x_past": x_past}
         return self._held[u0]
 
-    def __call__(self, u: Array, y_prev: float = 0.0, held: bool = False) -> Array:
-        state = self.held_state(float(u[0])) if held else {}
+    def __call__(self, u: Array, y_prev: float = 0.0, held: bool = False, *, start: Start | None = None) -> Array:
+        if start:
+            state = _fitted_start(self.structure, start)
+        else:
+            state = dict(self.held_state(float(u[0])) if held else {}, y_prev=float(y_prev))
         return _core.simulate_augmented(
-            *self.chain, u, effects=self.effects, t0=self.t0, time_scale=TIME_SCALE, y_prev=float(y_prev), **state
+            *self.chain, u, effects=self.effects, t0=self.t0, time_scale=TIME_SCALE, **self.output_block, **state
         )
 
 
@@ -143,25 +203,29 @@ def ar_predict(residual: Array, phi: Array) -> Array:
 
 @dataclass(frozen=True)
 class AugmentedModel:
-    """A nominal cascade refitted together with one effect.
+    """A nominal chain (cascade or sandwich) refitted together with one or more effects.
 
     Attributes
     ----------
     effect : str
-        The effect's name.
+        The effect added last (the candidate's name).
     structure : Structure
         The nominal structure (bigger for branch_degree and linear_order).
     theta : ndarray
         The refitted nominal parameters (the structure's physical vector).
     params : dict of str to float
-        The effect's own fitted parameters.
+        The last effect's own fitted parameters.
     core : tuple
-        The effect as (name, parameters) pairs of ``_core.simulate_augmented`` (empty where it
-        does not act on the simulation).
+        Every effect of the model as (name, parameters) pairs of ``_core.simulate_augmented``
+        (empty where none acts on the simulation).
     ar : ndarray
         The AR noise model's coefficients (colored_noise only).
     n_extra : int
         The number of parameters over the nominal model.
+    effects : tuple of str
+        The catalogue effects of the model in the order added (default: ``(effect,)``).
+    base_params : dict of str to dict
+        The fitted parameters of the effects added before the last one, by effect.
 
     Examples
     --------
@@ -183,8 +247,16 @@ class AugmentedModel:
     core: CoreEffects = field(default=(), repr=False)
     ar: Array = field(default_factory=lambda: np.zeros(0), repr=False)
     n_extra: int = 0
+    effects: tuple[str, ...] = ()
+    base_params: dict[str, dict[str, float]] = field(default_factory=dict, repr=False)
 
-    def simulate(self, u: ArrayLike, t0: float = 0.0, *, y_prev: float = 0.0, held: bool = False) -> Array:
+    def __post_init__(self) -> None:
+        if not self.effects and self.effect:
+            object.__setattr__(self, "effects", (self.effect,))
+
+    def simulate(
+        self, u: ArrayLike, t0: float = 0.0, *, y_prev: float = 0.0, held: bool = False, initial_state: Any = None
+    ) -> Array:
         """Free-run output for the input u.
 
         Parameters
@@ -197,6 +269,10 @@ class AugmentedModel:
             The backlash memory before the first sample.
         held : bool, default False
             Start the linear block at its equilibrium with u[0] instead of at rest.
+        initial_state : CascadeState, SandwichState or dict, optional
+            The nominal chain's state before the first sample, in the normalised model's
+            units (m_L1 = 1, r_1 = 1: :meth:`nominal`'s); overrides ``y_prev`` and ``held``.
+            The effects start at rest on it.
 
         Returns
         -------
@@ -209,24 +285,24 @@ class AugmentedModel:
             If the augmented model diverges or the linear block has a pole at 1 with ``held``.
         """
         u_arr = as_signal(u, "u").ravel()
-        return self.simulator(t0)(u_arr, y_prev, held)
+        return self.simulator(t0)(u_arr, y_prev, held, start=start_of(initial_state))
 
     def simulator(self, t0: float = 0.0, hold: int | None = None) -> Simulator:
-        """This model's simulation unpacked once, ``(u, y_prev, held) -> output`` (u checked by
-        the caller), for many runs that differ in the start.
+        """This model's simulation unpacked once, ``(u, y_prev, held, start=None) -> ndarray``
+        (u checked by the caller), for many runs that differ in the start.
 
         Parameters
         ----------
         t0 : float, default 0.0
             Time of u[0] in samples (drifts only).
         hold : int, optional
-            The held start (``held=True``) holds u[0] for this many samples from rest (the
-            diagnosis: the estimation record's length); default for ever (the equilibrium).
+            The held start (``held=True``) holds u[0] for this many samples from rest;
+            default for ever (the equilibrium).
 
         Returns
         -------
         Simulator
-            Callable ``(u, y_prev=0.0, held=False) -> ndarray``, as :meth:`simulate`.
+            Callable ``(u, y_prev=0.0, held=False, start=None) -> ndarray``, as :meth:`simulate`.
         """
         return Simulator(self.structure, self.theta, self.core, t0, hold)
 
@@ -275,15 +351,17 @@ class AugmentedModel:
         return simulated + ar_predict(y_arr - simulated, self.ar) if self.ar.size else simulated
 
     @property
-    def nominal(self) -> CascadeModel | None:
-        """The refitted nominal part as a model, None if it is not a valid backlash."""
+    def nominal(self) -> Any:
+        """The refitted nominal part as a model (CascadeModel or SandwichModel), None if it is
+        not a valid backlash."""
         try:
-            return self.structure.model(self.theta)  # type: ignore[return-value]
+            return self.structure.model(self.theta)
         except ModelError:
             return None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe description (parameters, refitted nominal model, noise model).
+        """JSON-safe description: every effect with its parameters, the refitted nominal
+        parameters and model, the noise model; :meth:`from_dict` rebuilds the model.
 
         Returns
         -------
@@ -291,15 +369,74 @@ class AugmentedModel:
             ``json.dumps`` works on it.
         """
         nominal = self.nominal
+        s = self.structure
         return {
+            "kind": "augmented",
             "effect": self.effect,
+            "effects": list(self.effects),
             "params": {k: json_float(v) for k, v in self.params.items()},
+            "base_params": {e: {k: json_float(v) for k, v in p.items()} for e, p in self.base_params.items()},
+            "core": [[name, [_exact(v) for v in values]] for name, values in self.core],
             "n_extra": self.n_extra,
-            "nominal_parameters": dict(zip(self.structure.names, map(float, self.theta))),
+            "structure": {"na": s.na, "nb": s.nb, "degree": s.degree, "nr": s.nr, "ns": s.ns},
+            "nominal_parameters": dict(zip(s.names, map(float, self.theta))),
             "nominal_model": nominal.to_dict() if nominal is not None else None,
             "ar": self.ar.tolist(),
             "time_scale": TIME_SCALE,
         }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> AugmentedModel:
+        """The model of :meth:`to_dict` (e.g. after a JSON round trip): it simulates bit for
+        bit as the original.
+
+        Parameters
+        ----------
+        d : dict
+            What :meth:`to_dict` returned.
+
+        Returns
+        -------
+        AugmentedModel
+            The model.
+
+        Raises
+        ------
+        DataError
+            If ``d`` is not such a description.
+
+        Examples
+        --------
+        >>> import json, numpy as np, backlashid as bid
+        >>> from backlashid.identify import Structure
+        >>> from backlashid.diagnosis.effects import AugmentedModel
+        >>> s = Structure(2, 2, 3)
+        >>> aug = AugmentedModel("output_offset", s, s.pack(bid.example1()), {"o_0": 0.1, "o_1": 0.0}, (("output_offset", (0.1, 0.0)),))
+        >>> back = AugmentedModel.from_dict(json.loads(json.dumps(aug.to_dict())))
+        >>> u = np.sin(0.1 * np.arange(50))
+        >>> bool(np.array_equal(back.simulate(u), aug.simulate(u)))
+        True
+        """
+        if not isinstance(d, dict) or d.get("kind") != "augmented":
+            raise DataError("not the description of an augmented model: give what AugmentedModel.to_dict() returned")
+        try:
+            st = d["structure"]
+            structure = Structure(int(st["na"]), int(st["nb"]), int(st["degree"]), int(st["nr"]), int(st["ns"]))
+            theta = np.array([float(d["nominal_parameters"][n]) for n in structure.names], dtype=np.float64)
+            core = tuple((str(name), tuple(float(v) for v in values)) for name, values in d["core"])
+            return cls(
+                effect=str(d["effect"]),
+                structure=structure,
+                theta=theta,
+                params={str(k): float(v) for k, v in d["params"].items()},
+                core=core,
+                ar=np.asarray(d.get("ar", []), dtype=np.float64),
+                n_extra=int(d["n_extra"]),
+                effects=tuple(str(e) for e in d["effects"]),
+                base_params={str(e): {str(k): float(v) for k, v in p.items()} for e, p in d.get("base_params", {}).items()},
+            )
+        except (KeyError, TypeError, ValueError) as err:
+            raise DataError(f"the augmented model's description lacks or mangles {err}: give what AugmentedModel.to_dict() returned") from None
 
 
 @dataclass(frozen=True)
@@ -346,50 +483,163 @@ class Screening:
 # -- the refits ----------------------------------------------------------------------------------
 
 
-@dataclass
 class Problem:
-    """The estimation record an effect is refitted on (output-error least squares)."""
+    """The estimation records an effect is refitted on (output-error least squares).
 
-    structure: Structure
-    u: Array
-    y: Array
-    warmup: int
-    t0: float
+    One record (u, y arrays) or several (lists of arrays: separate records of one system, each
+    started from its own state, never joined); the criterion sums over the records after each
+    one's warm-up. ``starts`` gives each record's state (:func:`start_of`; default rest) and
+    ``t0s`` each record's time (drifts); ``base`` the effects already in the model (the
+    composition's earlier steps), held at their values in every refit on this problem.
 
-    def __post_init__(self) -> None:
+    For the effects' statistics ``u`` and ``y`` are the records' samples one after the other,
+    ``simulate`` returns the records' outputs one after the other, and :meth:`scored` keeps the
+    samples after each record's warm-up.
+    """
+
+    def __init__(
+        self,
+        structure: Structure,
+        u: Array | Sequence[Array],
+        y: Array | Sequence[Array],
+        warmup: int,
+        t0: float | Sequence[float] = 0.0,
+        starts: Sequence[Start] | None = None,
+        base: CoreEffects = (),
+        base_params: dict[str, dict[str, float]] | None = None,
+    ) -> None:
+        us = [np.asarray(v, dtype=np.float64) for v in u] if isinstance(u, (list, tuple)) else [np.asarray(u, dtype=np.float64)]
+        ys = [np.asarray(v, dtype=np.float64) for v in y] if isinstance(y, (list, tuple)) else [np.asarray(y, dtype=np.float64)]
+        self.structure = structure
+        self.records = list(zip(us, ys))
+        self.warmup = int(warmup)
+        self.t0s = [float(v) for v in t0] if isinstance(t0, (list, tuple)) else [float(t0)] * len(us)
+        self.t0 = self.t0s[0]
+        self.starts: list[Start] = [dict(s) for s in starts] if starts is not None else [{} for _ in us]
+        self.base: CoreEffects = tuple(base)
+        self.base_params = dict(base_params or {})
+        self.u = np.concatenate(us)
+        self.y = np.concatenate(ys)
+        self._keep = np.concatenate([np.arange(v.size) >= self.warmup for v in us])
         self.big = 1e3 * (float(np.std(self.y)) + 1.0)  # the residual of a diverging model
 
+    @property
+    def n_scored(self) -> int:
+        """Samples in the criterion (after each record's warm-up)."""
+        return int(self._keep.sum())
+
+    def scored(self, v: Array) -> Array:
+        """The samples of a signal over the records (as ``simulate`` returns it) after each
+        record's warm-up."""
+        return np.asarray(v)[self._keep]
+
     def simulate(self, theta: Array, effects: CoreEffects = ()) -> Array:
-        """The augmented cascade on this record."""
-        return simulate(self.structure, theta, effects, self.u, self.t0)
+        """The augmented chain (the base effects, then ``effects``) on every record from its
+        start, the outputs one after the other."""
+        out = [
+            simulate(self.structure, theta, (*effects, *self.base), u, t0, start=start)
+            for (u, _), t0, start in zip(self.records, self.t0s, self.starts)
+        ]
+        return np.concatenate(out)
+
+    def linear_output(self, theta: Array) -> Array:
+        """x of the (input) linear block of theta on every record from its start, one after the other."""
+        est = self.structure.unpack(theta)
+        out = []
+        for (u, _), start in zip(self.records, self.starts):
+            st = _fitted_start(self.structure, start)
+            u_past = st.get("u_past", [0.0] * len(est.a))
+            x_past = st.get("x_past", [0.0] * len(est.b))
+            out.append(_core.LinearBlock(est.a, est.b).simulate(u, u_past, x_past))
+        return np.concatenate(out)
 
     def output_residual(self, y_hat: Array) -> Array:
-        """Output error of the output y_hat after the warm-up (a large constant where it diverges)."""
-        r = (self.y - y_hat)[self.warmup :]
+        """Output error of the output y_hat after the warm-ups (a large constant where it diverges)."""
+        r = self.scored(self.y - y_hat)
         return r if np.all(np.abs(r) < 1e3 * self.big) else np.full(r.size, self.big)
 
     def output_cost(self, y_hat: Array) -> float:
-        """Sum of squared output errors of the output y_hat after the warm-up."""
+        """Sum of squared output errors of the output y_hat after the warm-ups."""
         r = self.output_residual(y_hat)
         return float(r @ r)
 
     def cost(self, theta: Array, effects: CoreEffects) -> float:
-        """Sum of squared output errors after the warm-up (large where the model diverges)."""
+        """Sum of squared output errors after the warm-ups (large where the model diverges)."""
         try:
             y_hat = self.simulate(theta, effects)
         except BacklashIdError:
-            return float(self.big**2 * (self.y.size - self.warmup))
+            return float(self.big**2 * self.n_scored)
         return self.output_cost(y_hat)
 
-    def compiled(self, effects: CoreEffects, free: Sequence[str]) -> _core.AugmentedProblem:
+    def compiled(self, effects: CoreEffects, free: Sequence[str], structure: Structure | None = None) -> Any:
         """The core's compiled refit of the nominal parameters and the effects' parameters
-        ``free`` (the others held at their values in ``effects``): theta is the structure's
-        vector followed by the free parameters; exact sensitivities."""
-        s = self.structure
-        return _core.AugmentedProblem(
-            self.u, self.y, s.na, s.nb, s.degree, [(n, list(p)) for n, p in effects], list(free),
-            warmup=self.warmup, t0=self.t0, time_scale=TIME_SCALE,
+        ``free`` (the others, and the base effects, held at their values): theta is the
+        structure's vector followed by the free parameters; exact sensitivities. ``effects``
+        come first, so a free name that a base effect shares (lo, hi) is the new effect's. On
+        several records: their sum (:class:`Records`)."""
+        s = structure or self.structure
+        listed = [(n, list(p)) for n, p in (*effects, *self.base)]
+        parts = []
+        for (u, y), t0, start in zip(self.records, self.t0s, self.starts):
+            st = _fitted_start(s, start)
+            kw: dict[str, Any] = {k: v for k, v in st.items() if k != "y_prev"}
+            if s.is_sandwich:
+                kw.update(nr=s.nr, ns=s.ns)
+            parts.append(
+                _core.AugmentedProblem(
+                    u, y, s.na, s.nb, s.degree, listed, list(free),
+                    warmup=min(self.warmup, u.size - 1), t0=t0, time_scale=TIME_SCALE, y_prev=float(st.get("y_prev", 0.0)), **kw,
+                )
+            )  # fmt: skip
+        return parts[0] if len(parts) == 1 else Records(parts)
+
+    def model(
+        self, effect: str, structure: Structure, theta: Array, params: dict[str, float], core: CoreEffects, n_extra: int, ar: Array | None = None
+    ) -> AugmentedModel:
+        """The augmented model of a refit on this problem: the base effects, then ``effect``."""
+        effects = tuple(self.base_params) + ((effect,) if effect not in self.base_params else ())
+        return AugmentedModel(
+            effect, structure, theta, params, (*core, *self.base), np.zeros(0) if ar is None else ar,
+            n_extra + sum(len(p) for p in self.base_params.values()), effects, dict(self.base_params),
         )  # fmt: skip
+
+
+class Records:
+    """Several compiled refits of one model, one per record, as one problem for
+    :func:`levenberg_marquardt`: the costs and gradients add, the output-error factors are
+    joined exactly (the R factor of their stack); each record runs from its own start."""
+
+    def __init__(self, parts: list[Any]) -> None:
+        self.parts = parts
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.parts[0].names)
+
+    @property
+    def samples(self) -> int:
+        return int(sum(p.samples for p in self.parts))
+
+    @property
+    def warmup(self) -> int:
+        return int(sum(p.warmup for p in self.parts))
+
+    def cost(self, theta: Array) -> float:
+        return float(sum(p.cost(theta) for p in self.parts))
+
+    def oe_factor(self, theta: Array) -> tuple[Array, float]:
+        factors = [p.oe_factor(theta) for p in self.parts]
+        return r_factor(np.vstack([np.asarray(f, dtype=np.float64) for f, _ in factors])), float(sum(c for _, c in factors))
+
+    def gradient(self, theta: Array) -> tuple[Array, float]:
+        grads = [p.gradient(theta) for p in self.parts]
+        return np.sum([np.asarray(g, dtype=np.float64) for g, _ in grads], axis=0), float(sum(c for _, c in grads))
+
+    def feasible(self, theta: Array) -> bool:
+        return all(p.feasible(theta) for p in self.parts)
+
+    def bounds(self) -> tuple[list[float], list[float]]:
+        return self.parts[0].bounds()  # type: ignore[no-any-return]
 
 
 class Effect:
@@ -552,7 +802,7 @@ class Effect:
             The nominal model refitted with this effect.
         """
         theta, params, _ = self.refit(prob, theta0)
-        return AugmentedModel(self.name, prob.structure, theta, params, self.core(params), n_extra=len(self.parameters))
+        return prob.model(self.name, prob.structure, theta, params, self.core(params), len(self.parameters))
 
     def directions(self, screen: ScreenContext) -> list[Array]:
         """Changes of the nominal output that a small amount of the effect makes.
@@ -628,10 +878,11 @@ class ScreenContext:
     y: Array
     t0: float
     y_sim: Array  # the nominal simulation
+    start: Start = field(default_factory=dict)  # the record's start (rest if empty)
 
     def change(self, effects: CoreEffects) -> Array:
         """The augmented simulation minus the nominal one."""
-        return simulate(self.structure, self.theta, effects, self.u, self.t0) - self.y_sim
+        return simulate(self.structure, self.theta, effects, self.u, self.t0, start=self.start) - self.y_sim
 
 
 class StructureEffect(Effect):
@@ -652,22 +903,25 @@ class StructureEffect(Effect):
         raise NotImplementedError
 
     def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
-        """Refit in the bigger structure, the new terms from 0: the cascade's compiled problem
-        searched by the package's Levenberg-Marquardt (exact sensitivities)."""
+        """Refit in the bigger structure, the new terms from 0: the core's compiled refit of
+        that structure (with the base effects held, on every record from its start) searched
+        by the package's Levenberg-Marquardt (exact sensitivities)."""
         s, bigger = prob.structure, self.bigger(prob.structure)
         old = dict(zip(s.names, theta0))
         start = np.array([old.get(name, 0.0) for name in bigger.names])
         try:
-            theta = levenberg_marquardt(bigger.problem(prob.u, prob.y, prob.warmup), start, max_iter=MAX_ITER).theta
+            theta = levenberg_marquardt(prob.compiled((), (), structure=bigger), start, max_iter=MAX_ITER).theta
         except BacklashIdError:  # the start diverges: the nominal model with the new terms at 0
             theta = start
-        return AugmentedModel(self.name, bigger, theta, dict(self.extra), n_extra=self.n_extra)
+        return prob.model(self.name, bigger, theta, dict(self.extra), (), self.n_extra)
 
     def directions(self, screen: ScreenContext) -> list[Array]:
         """Derivatives in the first new terms, by finite differences."""
         est = screen.structure.unpack(screen.theta)
+        block = {"r": list(est.r), "s": list(est.s)} if screen.structure.is_sandwich else {}
         out = []
         for a, b, m_l, m_r in self.first_terms(est, self.step):
-            y = _core.simulate_augmented(a, b, est.c_left, est.c_right, m_l, m_r, screen.u, t0=screen.t0)
+            st = _fitted_start(Structure(len(a), len(b), len(m_l), screen.structure.nr, screen.structure.ns), screen.start)
+            y = _core.simulate_augmented(a, b, est.c_left, est.c_right, m_l, m_r, screen.u, t0=screen.t0, **block, **st)
             out.append((y - screen.y_sim) / self.step)
         return out

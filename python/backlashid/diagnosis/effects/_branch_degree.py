@@ -18,7 +18,7 @@ class BranchDegree(StructureEffect, rank=5, augmentation=AUGMENTATION, simulated
 
     def bigger(self, s: Structure) -> Structure:
         """Degree n + 2."""
-        return Structure(s.na, s.nb, s.degree + 2)
+        return Structure(s.na, s.nb, s.degree + 2, s.nr, s.ns)
 
     def first_terms(self, est: Any, h: float) -> list[tuple[list[float], list[float], list[float], list[float]]]:
         """The next power of each branch."""

@@ -12,7 +12,7 @@ MAX_AR = 4  # highest order of the AR model
 
 def fit_ar(prob: Problem, theta0: Array) -> tuple[Array, float]:
     """AR(p) model of the nominal output error, p <= MAX_AR chosen by BIC (least squares)."""
-    r = (prob.y - prob.simulate(theta0))[prob.warmup :]
+    r = prob.scored(prob.y - prob.simulate(theta0))
     n = r.size
     best: tuple[float, Array] = (n * np.log(np.mean(r * r) + 1e-300), np.zeros(0))
     for p in range(1, MAX_AR + 1):
@@ -39,7 +39,7 @@ class ColoredNoise(Effect, rank=10, augmentation=AUGMENTATION, simulated=False):
         """The AR model of the nominal output error; the nominal parameters are kept."""
         phi, _ = fit_ar(prob, theta0)
         params = {f"phi_{k}": float(phi[k - 1]) if k <= phi.size else 0.0 for k in range(1, MAX_AR + 1)}
-        return AugmentedModel(self.name, prob.structure, theta0, params, ar=phi, n_extra=int(phi.size))
+        return prob.model(self.name, prob.structure, theta0, params, (), int(phi.size), ar=phi)
 
     def directions(self, screen: ScreenContext) -> list[Array]:
         """The residual's own past (a Ljung-Box-like LM test)."""

@@ -21,11 +21,11 @@ class Compliance(Effect, rank=7, augmentation=AUGMENTATION):
         linear in k (y = y_nom + k (H f - f)): fit k to the nominal residual on a grid, then
         start from the best three grid points."""
         y_nom = prob.simulate(theta0)
-        r0 = (prob.y - y_nom)[prob.warmup :]
+        r0 = prob.scored(prob.y - y_nom)
         scored = []
         for omega in np.geomspace(0.04, 2.8, 16):
             for zeta in (0.02, 0.06, 0.15, 0.35):
-                d = (prob.simulate(theta0, self.core({"k": 1.0, "omega": omega, "zeta": zeta})) - y_nom)[prob.warmup :]
+                d = prob.scored(prob.simulate(theta0, self.core({"k": 1.0, "omega": omega, "zeta": zeta})) - y_nom)
                 k = float(np.clip((d @ r0) / max(float(d @ d), 1e-300), 0.0, 1.5))
                 scored.append((float(np.sum((r0 - k * d) ** 2)), (max(k, 1e-3), float(omega), zeta)))
         scored.sort()

@@ -10,7 +10,6 @@ import math
 import numpy as np
 
 from ...errors import BacklashIdError
-from ...models import LinearBlock
 from ._base import MAX_ITER, Array, Augmentation, AugmentedModel, CoreEffects, Effect, Fitted, Problem, ScreenContext
 
 STEP = 1e-4  # relative finite-difference step of the screening
@@ -72,7 +71,7 @@ class Friction(Effect, rank=2, augmentation=AUGMENTATION):
         AugmentedModel
             Parameters F_c, F_v (and F_s, v_s, stick = 1 for the stick-slip forms).
         """
-        n = max(prob.y.size - prob.warmup, 1)
+        n = max(prob.n_scored, 1)
 
         def bic(cost: float, k: int) -> float:
             return n * math.log(max(cost, 1e-300) / n) + k * math.log(n)
@@ -87,13 +86,12 @@ class Friction(Effect, rank=2, augmentation=AUGMENTATION):
             params = {**params, "stick": 1.0}
             if k == 2:
                 params = {n_: v for n_, v in params.items() if n_ not in ("F_s", "v_s")}
-        return AugmentedModel(self.name, prob.structure, theta, params, core, n_extra=k)
+        return prob.model(self.name, prob.structure, theta, params, core, k)
 
     def _stick_slip(self, prob: Problem, theta0: Array) -> list[tuple[Fitted, int]]:
         """The stick-slip refits: Coulomb and viscous (F_s = 0 held), then a Stribeck dip."""
         s = float(np.std(prob.u)) + 1e-12
-        x = prob.structure.unpack(theta0)
-        v_scale = float(np.std(np.diff(_linear(x.a, x.b, prob.u)))) + 1e-12
+        v_scale = float(np.std(np.diff(prob.linear_output(theta0)))) + 1e-12
         lb = np.array([0.0, 0.0, 0.0, 1e-3 * v_scale])
         ub = np.array([2.0 * s, 2.0, 2.0 * s, 10.0 * v_scale])
         out: list[tuple[Fitted, int]] = []
@@ -126,7 +124,3 @@ class Friction(Effect, rank=2, augmentation=AUGMENTATION):
         """Derivatives in F_c (scaled by std(u)) and F_v, by finite differences."""
         h, su = STEP, float(np.std(screen.u)) + 1e-12
         return [screen.change(self.core({"F_c": h * su, "F_v": 0.0})) / h, screen.change(self.core({"F_c": 0.0, "F_v": h})) / h]
-
-
-def _linear(a: Array, b: Array, u: Array) -> Array:
-    return LinearBlock(a, b).simulate(u)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ... import _core
 from ..._numerics import lstsq, r_factor
 from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
 
@@ -24,9 +23,8 @@ class HysteresisMemory(Effect, rank=9, augmentation=AUGMENTATION):
 
     @staticmethod
     def _x(prob: Problem, theta0: Array) -> Array:
-        """x of the nominal linear block from rest."""
-        est = prob.structure.unpack(theta0)
-        return _core.LinearBlock(est.a, est.b).simulate(prob.u, [0.0] * len(est.a), [0.0] * len(est.b))
+        """x of the nominal linear block on every record from its start."""
+        return prob.linear_output(theta0)
 
     def refit(self, prob: Problem, theta0: Array) -> Fitted:
         """The weights enter linearly at fixed half-widths: pick the pairs of half-widths whose
@@ -37,10 +35,10 @@ class HysteresisMemory(Effect, rank=9, augmentation=AUGMENTATION):
         r0 = prob.y - y_nom
         radii = sx * np.geomspace(0.01, 2.0, 10)
         # play_r(x) of weight 1 on top of the nominal output, by the augmented simulator
-        plays = [(prob.simulate(theta0, self.core({"r_1": r, "w_1": 1.0, "r_2": 0.0, "w_2": 0.0})) - y_nom)[prob.warmup :] for r in radii]
+        plays = [prob.scored(prob.simulate(theta0, self.core({"r_1": r, "w_1": 1.0, "r_2": 0.0, "w_2": 0.0})) - y_nom) for r in radii]
         # every pair's least squares on the R factor of [plays | residual] (same solution and
         # residual norm as on the record's columns, 11 rows instead of N)
-        r = r_factor(np.column_stack([*plays, r0[prob.warmup :]]))
+        r = r_factor(np.column_stack([*plays, prob.scored(r0)]))
         target = r[:, -1]
         pairs = []
         for i in range(len(radii)):

@@ -17,8 +17,8 @@ class LinearOrder(StructureEffect, rank=6, augmentation=AUGMENTATION, simulated=
     n_extra = 2
 
     def bigger(self, s: Structure) -> Structure:
-        """Orders na + 1, nb + 1."""
-        return Structure(s.na + 1, s.nb + 1, s.degree)
+        """Orders na + 1, nb + 1 of the (input) linear block; a sandwich's output block kept."""
+        return Structure(s.na + 1, s.nb + 1, s.degree, s.nr, s.ns)
 
     def first_terms(self, est: Any, h: float) -> list[tuple[list[float], list[float], list[float], list[float]]]:
         """The next a and the next b coefficient."""

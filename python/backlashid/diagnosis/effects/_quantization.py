@@ -125,7 +125,7 @@ class Quantization(Effect, rank=8, augmentation=AUGMENTATION):
             return theta0, {"q": found.q}, prob.output_cost(quantise(y_sim, found.q))
         spread = float(np.std(y_sim)) + 1e-12
         grid = spread * np.geomspace(0.005, 1.0, 3000)
-        score = cos_scores(prob.y[prob.warmup :], grid)
+        score = cos_scores(prob.scored(prob.y), grid)
         peaks = grid[np.argsort(score)[-3:]]
         coarse = spread * np.geomspace(0.005, 1.0, 60)
         candidates = list(peaks) + [coarse[int(np.argmin([prob.output_cost(quantise(y_sim, q)) for q in coarse]))]]
