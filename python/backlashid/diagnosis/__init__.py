@@ -1,4 +1,4 @@
-"""Sim-to-real gap diagnosis: given a fitted cascade and new data, where the simulation error
+"""Sim-to-real gap diagnosis: given a fitted model (cascade, sandwich, input backlash) and new data, where the simulation error
 lies, which unmodelled effect causes it, and how far adding that effect shrinks it.
 
 :func:`diagnose` runs the residual analyses (:mod:`backlashid.diagnosis.analyses`), screens and
@@ -9,11 +9,12 @@ a :class:`DiagnosisReport`.
 from __future__ import annotations
 
 from ._diagnose import default_warmup, diagnose, estimated_start, held_state
-from ._report import Candidate, DiagnosisDetails, DiagnosisReport
+from ._report import Candidate, CompositionStep, DiagnosisDetails, DiagnosisReport
 from .effects import EFFECTS, REGISTRY, Effect, fit_effect, screen
 
 __all__ = [
     "Candidate",
+    "CompositionStep",
     "DiagnosisDetails",
     "DiagnosisReport",
     "EFFECTS",

@@ -23,7 +23,7 @@ from .._json import jsonable
 from .analyses import FrequencyAnalysis, RegimeShares, ResidualTests, TimeAnalysis
 from .effects import Screening
 
-__all__ = ["Candidate", "DiagnosisDetails", "DiagnosisReport"]
+__all__ = ["Candidate", "CompositionStep", "DiagnosisDetails", "DiagnosisReport"]
 CLOSES_HALF = 0.5  # a candidate "explains" the gap when it closes at least this share
 
 
@@ -76,6 +76,10 @@ class Candidate:
         Information criterion used in the ranking (lower is better).
     signature_removed : bool
         The residual signature the effect predicts is gone after augmentation.
+    prediction_rmse : float
+        One-step prediction RMSE on the validation records (noise models only; NaN else).
+    validation_output : ndarray or None
+        Its free-run simulation of the validation records (records one after the other).
 
     Examples
     --------
@@ -97,6 +101,8 @@ class Candidate:
     validation_rmse: float
     criterion: float
     signature_removed: bool
+    prediction_rmse: float = float("nan")
+    validation_output: NDArray[np.float64] | None = field(default=None, repr=False, compare=False)
 
     @property
     def explains(self) -> bool:
@@ -122,9 +128,50 @@ class Candidate:
                 "validation_rmse": self.validation_rmse,
                 "criterion": self.criterion,
                 "signature_removed": self.signature_removed,
+                "prediction_rmse": self.prediction_rmse,
                 "model": _model_dict(self.model),
             }
         )
+        return out
+
+
+@dataclass(frozen=True)
+class CompositionStep:
+    """One effect named by the composition, in the order added.
+
+    Attributes
+    ----------
+    effect : str
+        The effect.
+    gap_closed : float
+        The share of the remaining gap (the previous step's validation MSE above the noise
+        floor) it closed, within [-10, 1].
+    validation_rmse : float
+        The free-run validation RMSE of the model with it and every earlier effect.
+    p_value : float
+        p-value of its improvement over the previous step's model.
+
+    Examples
+    --------
+    >>> from backlashid.diagnosis import CompositionStep
+    >>> CompositionStep("dead_time", 0.97, 0.02, 1e-30).to_dict()["effect"]
+    'dead_time'
+    """
+
+    effect: str
+    gap_closed: float
+    validation_rmse: float
+    p_value: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+            effect, gap_closed, validation_rmse, p_value.
+        """
+        out: dict[str, Any] = jsonable({k: getattr(self, k) for k in self.__dataclass_fields__})
         return out
 
 
@@ -167,6 +214,11 @@ class DiagnosisDetails:
     nominal_fit : str
         "converged", or that the nominal model is the best iterate of a fit that did not
         converge; empty when not stated.
+    records : tuple of int
+        The numbers of estimation and validation records.
+    floor_exceeded : tuple of str
+        Candidates whose validation MSE is below the estimated noise floor (their share of the
+        gap is clipped to 1: the floor may be high).
 
     Examples
     --------
@@ -189,6 +241,8 @@ class DiagnosisDetails:
     closing_not_named: dict[str, str] = field(default_factory=dict)
     lattice: str = ""
     nominal_fit: str = ""
+    records: tuple[int, int] = (1, 1)
+    floor_exceeded: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict of the fields (the screenings as dicts).
@@ -243,6 +297,17 @@ class DiagnosisReport:
         Seconds the diagnosis took.
     details : DiagnosisDetails or None
         The diagnoser's intermediate numbers (None for a report built by hand).
+    effects : tuple of str
+        The effects named, in the order the composition added them (empty for "none" and
+        "unexplained"); ``best_effect`` is the first.
+    model : AugmentedModel or None
+        The nominal model (normalised: m_L1 = 1, r_1 = 1) with every named effect, refitted:
+        ``model.simulate(u, initial_state=...)``, ``model.to_dict()`` and
+        ``AugmentedModel.from_dict`` (JSON round trip). Without a named effect, the nominal
+        model itself. For a nominal block with a lag-0 term, it is driven by the input one
+        sample ahead per such block.
+    steps : tuple of CompositionStep
+        Per named effect: the share of the remaining gap it closed and the validation RMSE.
 
     Examples
     --------
@@ -271,6 +336,9 @@ class DiagnosisReport:
     y_best: NDArray[np.float64]
     elapsed: float
     details: DiagnosisDetails | None = None
+    effects: tuple[str, ...] = ()
+    model: Any = None
+    steps: tuple[CompositionStep, ...] = ()
 
     # ------------------------------------------------------------------ derived
     @property
@@ -335,7 +403,16 @@ class DiagnosisReport:
             return f"unexplained: a significant gap that {first}{tail}"
         if best is None:
             return f"{self.best_effect}"
-        sig = "its signature is gone" if best.signature_removed else "its signature remains"
+        if len(self.steps) > 1:
+            parts = [
+                f"{st.effect} closes {_pct(st.gap_closed).strip()} of the {'gap' if i == 0 else 'rest'} (p = {_p(st.p_value)})"
+                for i, st in enumerate(self.steps)
+            ]
+            return (
+                f"{' + '.join(self.effects)}: " + ", then ".join(parts)
+                + f"; validation RMSE {self.nominal_validation_rmse:.4g} -> {self.steps[-1].validation_rmse:.4g}"
+            )
+        sig = "its signature is gone" if best.signature_removed else "the change it predicts still correlates with its residual"
         return f"{best.effect}: closes {_pct(best.gap_closed).strip()} of the gap (p = {_p(best.p_value)}); {sig}"
 
     def _not_noise(self) -> str:
@@ -404,15 +481,17 @@ class DiagnosisReport:
         if self.ranking:
             lines += [
                 "",
-                "Candidates, best first (validation; RMSE of the free-run simulation, one-step for colored_noise)",
+                "Candidates, best first (validation RMSE of the free-run simulation; colored_noise, a noise model, "
+                "is judged by its one-step prediction RMSE, shown in brackets)",
                 f"  {'#':>2}  {'effect':18s} {'gap closed':>10s} {'p-value':>8s} {'+par':>4s} {'est RMSE':>9s} "
                 f"{'val RMSE':>9s} {'criterion':>10s}  signature",
             ]
             for i, c in enumerate(self.ranking[:12], 1):
+                extra = f"  (one-step {c.prediction_rmse:.4g})" if math.isfinite(c.prediction_rmse) else ""
                 lines.append(
                     f"  {i:2d}  {c.effect:18s} {_pct(c.gap_closed):>10s} {_p(c.p_value):>8s} {c.n_extra:4d} "
                     f"{c.estimation_rmse:9.4g} {c.validation_rmse:9.4g} {c.criterion:10.4g}  "
-                    f"{'removed' if c.signature_removed else 'remains'}"
+                    f"{'removed' if c.signature_removed else 'remains'}{extra}"
                 )
         lines += ["", "Where the nominal model's validation error lies"]
         lines += self._where()
@@ -444,6 +523,9 @@ class DiagnosisReport:
                 "spectrum": self.spectrum.to_dict() if self.spectrum is not None else None,
                 "drift": self.drift.to_dict() if self.drift is not None else None,
                 "details": self.details.to_dict() if self.details is not None else {},
+                "effects": list(self.effects),
+                "steps": [st.to_dict() for st in self.steps],
+                "model": _model_dict(self.model),
             }
         )
         return out

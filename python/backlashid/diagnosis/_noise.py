@@ -1,0 +1,143 @@
+"""The noise floor of the diagnosis and the black-box tests of the nominal residual.
+
+The gap a candidate closes is measured above the noise floor: the part of the nominal model's
+validation error that no model of the noise-free output can remove.
+
+With ``noise_std`` unknown the floor is the validation MSE of a one-step predictor of the
+nominal residual: a linear regression on the input's lags, the nominal model's internal signal
+x and its velocity, powers of the nominal output, and the residual's own last ``RESIDUAL_LAGS``
+values, fitted on the estimation records and scored on the validation records (so over-fitting
+cannot lower it). A model error is a deterministic function of the input's past, which those
+regressors follow one step ahead, so what is left is the noise's innovation: on a noise-free
+record the floor reads near zero, on white noise it reads the noise variance. It never exceeds
+the nominal MSE. It is not the best of the candidates' errors, so a candidate's share of the gap
+is not 1 by construction; where a candidate beats the floor, its share is clipped to 1 and the
+report says the floor may be high (a model error the predictor could not follow).
+
+For colored noise the floor is the innovation variance, below the noise's variance: its
+predictable part counts as gap, which no deterministic candidate closes; the verdict rule names
+colored_noise from the residual's own properties instead.
+
+The same regressors without the residual's past (the input alone) and with it test whether the
+residual depends on the input and whether anything beats the nominal model at all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._numerics import lstsq
+
+__all__ = ["RESIDUAL_LAGS", "Signals", "black_box_residuals", "noise_floor"]
+
+RESIDUAL_LAGS = 10  # the residual's own past in the one-step predictor of the floor
+INPUT_LAGS = 10  # lags of u in the black-box regressors
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Signals:
+    """One record as the nominal model sees it.
+
+    Attributes
+    ----------
+    u : ndarray
+        The input (advanced by the chain's shift).
+    y : ndarray
+        The measured output.
+    x : ndarray
+        The nominal (input) linear block's output from the record's start.
+    y_nom : ndarray
+        The nominal free-run simulation from the record's start.
+    warmup : int
+        Samples left out at the start.
+    """
+
+    u: Array
+    y: Array
+    x: Array
+    y_nom: Array
+    warmup: int
+
+    @property
+    def residual(self) -> Array:
+        """Measured minus the nominal simulation."""
+        return self.y - self.y_nom
+
+    def scored(self, v: Array) -> Array:
+        """v after the warm-up."""
+        return v[self.warmup :]
+
+
+def _lag(s: Array, k: int) -> Array:
+    return np.concatenate([np.zeros(k), s[:-k]]) if k else s
+
+
+def _features(s: Signals, residual_lags: int) -> Array:
+    """Regressors of one record (after its warm-up): input lags, x and its velocity, powers of
+    the nominal output, and the residual's past."""
+    dx = s.x - _lag(s.x, 1)
+    cols = [np.ones(s.u.size), s.y_nom, s.y_nom**2, s.y_nom**3, dx, np.sign(dx), np.abs(dx)]
+    cols += [_lag(s.u, k) for k in range(0, INPUT_LAGS + 1)] + [_lag(s.x, k) for k in range(0, 3)]
+    r = s.residual
+    cols += [_lag(r, k) for k in range(1, residual_lags + 1)]
+    return s.scored(np.column_stack(cols))
+
+
+def _fit_score(est: list[Signals], val: list[Signals], residual_lags: int) -> Array:
+    """Validation residual (after the warm-ups, records one after the other) of the regression
+    of the nominal residual fitted on the estimation records."""
+    a_e = np.vstack([_features(s, residual_lags) for s in est])
+    r_e = np.concatenate([s.scored(s.residual) for s in est])
+    scale = np.maximum(np.std(a_e, axis=0), 1e-12)
+    scale[0] = 1.0
+    coef = lstsq(a_e / scale, r_e)
+    a_v = np.vstack([_features(s, residual_lags) for s in val])
+    r_v = np.concatenate([s.scored(s.residual) for s in val])
+    return np.asarray(r_v - (a_v / scale) @ coef, dtype=np.float64)
+
+
+def black_box_residuals(est: list[Signals], val: list[Signals]) -> tuple[Array, Array]:
+    """The validation residuals of the black-box model of the input alone and of the one-step
+    predictor with the residual's past (after the warm-ups).
+
+    Parameters
+    ----------
+    est, val : list of Signals
+        The estimation and validation records.
+
+    Returns
+    -------
+    input_only, one_step : ndarray
+        Their validation residuals.
+    """
+    return _fit_score(est, val, 0), _fit_score(est, val, RESIDUAL_LAGS)
+
+
+def noise_floor(one_step: Array, mse0: float) -> float:
+    """The noise floor (MSE) from the one-step predictor's validation residual: its MSE, at
+    most the nominal MSE.
+
+    Parameters
+    ----------
+    one_step : ndarray
+        :func:`black_box_residuals`' second output.
+    mse0 : float
+        The nominal model's validation MSE.
+
+    Returns
+    -------
+    float
+        The floor.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.diagnosis._noise import noise_floor
+    >>> noise_floor(np.full(4, 0.1), 0.5)
+    0.010000000000000002
+    """
+    return float(min(float(one_step @ one_step) / max(one_step.size, 1), mse0))

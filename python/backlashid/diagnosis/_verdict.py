@@ -1,0 +1,204 @@
+"""The diagnosis's decision rule, on numbers alone (no model, no record), so it can be read and
+tested by itself.
+
+At each step of the composition the candidates are scored against the model of that step (the
+nominal model, then the nominal with the effects named so far): each candidate's validation MSE,
+the one-sided p-value of its improvement over the step's model (paired test on the squared
+free-run errors, Newey-West standard error), its BIC n ln(MSE) + k ln(n), and the share of the
+remaining gap (the step's MSE above the noise floor) it closes. The family-wise level is
+``ALPHA`` with Bonferroni over the candidates and the black-box test.
+
+:func:`decide`:
+
+- "none" if nothing improves on the step's model significantly, or the remaining gap is under
+  ``MATERIAL_GAP`` of the noise variance (a consistent but immaterial improvement);
+- else the significant deterministic candidate of lowest BIC, if it closes at least
+  ``CLOSE_ENOUGH`` of the gap (and, when the step's residual is a slowly modulated copy of the
+  output, leaves no such modulation in its own residual);
+- else (first step only) colored_noise if no significant deterministic candidate closes
+  ``MATERIAL`` of the gap, its noise model predicts the residual significantly better one step
+  ahead, and the residual is neither explained by the input (a cross-validated black box of input
+  features), nor modulated by the model's output, nor a function of the drive's position;
+- else "unexplained".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+__all__ = ["ALPHA", "CLOSE_ENOUGH", "MATERIAL", "MATERIAL_GAP", "Evidence", "Score", "Verdict", "decide", "gap_share"]
+
+ALPHA = 0.01  # family-wise significance level of "the validation error improved"
+CLOSE_ENOUGH = 0.5  # a candidate must close at least this fraction of the gap
+MATERIAL = 0.25  # a significant deterministic candidate closing this much rules out colored noise
+MATERIAL_GAP = 0.01  # a gap under this fraction of the noise variance is "none", however significant
+SHARE_RANGE = (-10.0, 1.0)  # a gap share is reported within this range
+
+
+@dataclass(frozen=True)
+class Score:
+    """One candidate scored against the step's model.
+
+    Attributes
+    ----------
+    effect : str
+        Its name.
+    mse : float
+        Its validation MSE (free run).
+    p_value : float
+        One-sided p-value of its improvement over the step's model.
+    criterion : float
+        Its BIC on the validation records.
+    gap_closed : float
+        Share of the step's gap it closes (:func:`gap_share`).
+    modulation_left_p : float
+        p-value of the output modulation left in its residual (NaN: not tested).
+    deterministic : bool
+        False for a noise model (colored_noise).
+    """
+
+    effect: str
+    mse: float
+    p_value: float
+    criterion: float
+    gap_closed: float
+    modulation_left_p: float = float("nan")
+    deterministic: bool = True
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What the rule knows of the step's residual besides the candidates.
+
+    Attributes
+    ----------
+    level : float
+        The Bonferroni-corrected level.
+    gap : float
+        The step's validation MSE above the noise floor.
+    floor : float
+        The noise floor (MSE).
+    black_box_p : float
+        p-value of the black-box one-step predictor's improvement (is there anything to find?).
+    input_p, modulation_p, position_p : float
+        p-values of the residual depending on the input, on the output's slow modulation, on
+        the drive's position.
+    first_step : bool
+        Whether the step's model is the nominal model (colored_noise is judged there only).
+    """
+
+    level: float
+    gap: float
+    floor: float
+    black_box_p: float = 1.0
+    input_p: float = 1.0
+    modulation_p: float = 1.0
+    position_p: float = 1.0
+    first_step: bool = True
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The rule's answer at one step.
+
+    Attributes
+    ----------
+    best : str
+        An effect's name, "none" or "unexplained".
+    not_named : dict of str to str
+        Candidates that close half the gap yet were not named, and why.
+    ruled_out : tuple of str
+        Why colored_noise was not named (first step).
+    """
+
+    best: str
+    not_named: dict[str, str] = field(default_factory=dict)
+    ruled_out: tuple[str, ...] = ()
+
+
+def gap_share(mse_step: float, mse: float, gap: float) -> float:
+    """The share of the gap a model of validation MSE ``mse`` closes, clipped to
+    ``SHARE_RANGE`` (0 where there is no gap).
+
+    Examples
+    --------
+    >>> from backlashid.diagnosis._verdict import gap_share
+    >>> gap_share(2.0, 1.5, 1.0), gap_share(2.0, 0.5, 1.0), gap_share(2.0, 2.0, 0.0)
+    (0.5, 1.0, 0.0)
+    """
+    if not gap > 0 or not math.isfinite(mse):
+        return 0.0
+    lo, hi = SHARE_RANGE
+    return float(min(max((mse_step - mse) / gap, lo), hi))
+
+
+def decide(scores: list[Score], ev: Evidence) -> Verdict:
+    """The verdict of one step (see the module doc).
+
+    Parameters
+    ----------
+    scores : list of Score
+        Every candidate scored against the step's model.
+    ev : Evidence
+        The rest of what the rule reads.
+
+    Returns
+    -------
+    Verdict
+        The effect named (or "none" / "unexplained") and the reasons.
+
+    Examples
+    --------
+    >>> from backlashid.diagnosis._verdict import Evidence, Score, decide
+    >>> ev = Evidence(level=0.001, gap=1.0, floor=0.1)
+    >>> decide([Score("dead_time", 0.2, 1e-20, -500.0, 0.9), Score("friction", 0.8, 1e-5, -100.0, 0.3)], ev).best
+    'dead_time'
+    >>> decide([Score("friction", 0.8, 1e-5, -100.0, 0.3)], ev).best
+    'unexplained'
+    >>> decide([Score("friction", 1.05, 0.4, -100.0, 0.0)], ev).best
+    'none'
+    """
+    level = ev.level
+    significant = {s.effect for s in scores if s.p_value < level}
+    if not (significant or ev.black_box_p < level) or not ev.gap > MATERIAL_GAP * ev.floor:
+        return Verdict("none")
+    deterministic = sorted((s for s in scores if s.deterministic and s.effect in significant), key=lambda s: s.criterion)
+    not_named: dict[str, str] = {}
+    closing = [s for s in deterministic if s.gap_closed >= CLOSE_ENOUGH]
+    if closing and ev.modulation_p < level:
+        # the residual is a slowly modulated copy of the output: the effect named must leave no
+        # such modulation behind (a drifting gain is no width drift)
+        kept = []
+        for s in closing:
+            if math.isnan(s.modulation_left_p) or s.modulation_left_p >= level:
+                kept.append(s)
+            else:
+                not_named[s.effect] = f"its residual is still modulated by the output (p {s.modulation_left_p:.2g})"
+        closing = kept
+    if closing and closing[0] is deterministic[0]:
+        return Verdict(closing[0].effect, not_named)
+    if closing:
+        not_named[closing[0].effect] = f"{deterministic[0].effect} has the lower BIC"
+    for s in scores:
+        if s.deterministic and s.effect not in significant and s.gap_closed >= CLOSE_ENOUGH:
+            not_named[s.effect] = f"its improvement is not significant (p {s.p_value:.2g} >= {level:.2g})"
+    noise = [s for s in scores if not s.deterministic]
+    ruled_out: list[str] = []
+    if ev.first_step and noise:
+        material = [s.effect for s in deterministic if s.gap_closed >= MATERIAL]
+        if noise[0].effect not in significant:
+            ruled_out.append("its noise model does not predict significantly better")
+        if ev.input_p < level:
+            ruled_out.append(f"the residual depends on the input (p {ev.input_p:.2g})")
+        if ev.modulation_p < level:
+            ruled_out.append(f"the residual is modulated by the output (p {ev.modulation_p:.2g})")
+        if ev.position_p < level:
+            ruled_out.append(f"the residual depends on the drive's position (p {ev.position_p:.2g})")
+        if material:
+            ruled_out.append(f"{material[0]} closes over a quarter of the gap")
+        if not ruled_out and not closing:
+            # no "closes half" here: a noise model predicts only the predictable part of colored
+            # noise, its innovations are as unpredictable as white noise
+            return Verdict(noise[0].effect, not_named)
+    return Verdict("unexplained", not_named, tuple(ruled_out))
