@@ -621,7 +621,8 @@ def compensate(model_file: Path, reference_file: Path, column: str, range_: str 
 
 @main.command()
 @_data_options
-@click.option("--model-file", "--model", "model_file", type=click.Path(dir_okay=False, path_type=Path), help="Model JSON (from fit --json); its scaling and decimation are used.")
+@click.option("--model-file", "--model", "model_file", type=click.Path(dir_okay=False, path_type=Path),
+              help="Model JSON (from fit --json: a cascade, sandwich or input-backlash model); its scaling and decimation are used.")
 @click.option("--fit-cascade", is_flag=True, help="Fit a cascade on the estimation record instead of reading --model.")
 @click.option("--na", default=2, show_default=True, help="With --fit-cascade: a coefficients.")
 @click.option("--nb", default=2, show_default=True, help="With --fit-cascade: b coefficients.")
@@ -629,7 +630,7 @@ def compensate(model_file: Path, reference_file: Path, column: str, range_: str 
 @click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="With --fit-cascade: samples left out of the fit.")
 @click.option("--noise-std", type=float, help="Measurement noise std in output units if known [default: estimated].")
 @click.option("--initial-state", type=click.Choice(["estimate", "rest"]), default="estimate", show_default=True,
-              help="How every model starts the validation record: estimated (linear block at equilibrium, backlash memory fitted) or from rest.")
+              help="How every model starts each record: estimated from the record's first samples (as evaluate's init_samples), or from rest.")
 @click.option("--png", "png", type=click.Path(dir_okay=False, path_type=Path), help="Write the diagnosis dashboard here.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON here.")
 @_unit_options
@@ -662,6 +663,9 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
             scaling = _scaling(sel.estimation, scale, dict(input_offset=input_offset, input_scale=input_scale, output_offset=output_offset, output_scale=output_scale))
         est = (scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y))
         val = (scaling.input_to_model(sel.validation.u), scaling.output_to_model(sel.validation.y))
+        # several --estimation-file / --validation-file records: each starts from its own state
+        est_records = [(scaling.input_to_model(r.u), scaling.output_to_model(r.y)) for r in sel.estimation_parts] or est
+        val_records = [(scaling.input_to_model(r.u), scaling.output_to_model(r.y)) for r in sel.validation_parts] or val
         converged = True
         if fit_cascade:
             stage("fitting the cascade")
@@ -676,7 +680,7 @@ def diagnose(data: Path | None, input_: str, output: str, split: float | None, e
         from ..diagnosis import diagnose as run_diagnosis
 
         noise = None if noise_std is None else noise_std / abs(scaling.output_scale)
-        report = run_diagnosis(model, estimation=est, validation=val, noise_std=noise, initial_state=initial_state,
+        report = run_diagnosis(model, estimation=est_records, validation=val_records, noise_std=noise, initial_state=initial_state,
                                **({} if converged else {"nominal_converged": False}))
     if not scaling.is_identity:
         click.echo("(the diagnosis works in model units: " + ", ".join(f"{k} {v:.6g}" for k, v in scaling.to_dict().items()) + ")")

@@ -292,6 +292,9 @@ def _shown_candidate(report: Any) -> tuple[Any, Any, str]:
     if top is None:
         return None, None, ""
     u, y = np.asarray(report.u_val, dtype=float), np.asarray(report.y_val, dtype=float)
+    kept = getattr(top, "validation_output", None)
+    if kept is not None and np.asarray(kept).size == n:  # the ranking's own run, each record from its start
+        return top, np.asarray(kept, dtype=float), f"best candidate, not named: {top.effect}"
     try:
         if hasattr(top.model, "simulator"):
             from ..diagnosis import estimated_start

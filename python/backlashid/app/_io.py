@@ -594,12 +594,16 @@ class Selection:
     estimation_parts : tuple of Record
         The estimation files' records one by one (``estimation`` joins them), for a joint fit
         of several records; empty for one file.
+    validation_parts : tuple of Record
+        The validation files' records one by one (``validation`` joins them), for a diagnosis
+        that starts each from its own state; empty for one file or a range across files.
     """
 
     estimation: Record
     validation: Record | None
     description: dict[str, object]
     estimation_parts: tuple[Record, ...] = ()
+    validation_parts: tuple[Record, ...] = ()
 
 
 def select_records(
@@ -676,11 +680,16 @@ def select_records(
         part = parse_range(text, len(rec), label)
         return _finite_record(rec.slice(part, label), input, output, hint, part.start, f"{label} {text}", rec.source)
 
+    val_parts: list[Record] = []
+
     def joined(files: Sequence[str | Path], text: str | None, label: str) -> Record:
         records = [_load_unchecked(f, input, output) for f in files]
         if text:
             return pick(concatenate(records), text, label)
-        return concatenate([_finite_record(r, input, output, hint) for r in records])
+        checked = [_finite_record(r, input, output, hint) for r in records]
+        if len(checked) > 1:
+            val_parts.extend(checked)
+        return concatenate(checked)
 
     val: Record | None = None
     parts: list[Record] = []
@@ -725,4 +734,4 @@ def select_records(
         "decimate": decimate_by,
     }
     parts = tuple(decimate(p, decimate_by) for p in parts) if estimation_files else ()
-    return Selection(est, val, description, parts)
+    return Selection(est, val, description, parts, tuple(decimate(p, decimate_by) for p in val_parts))
