@@ -219,6 +219,9 @@ class DiagnosisDetails:
     floor_exceeded : tuple of str
         Candidates whose validation MSE is below the estimated noise floor (their share of the
         gap is clipped to 1: the floor may be high).
+    model_error : object or None
+        For a gap no catalogue effect explains: the model-error model of the nominal's residual
+        (``closable_share``, the signals it needs, ``summary``); None otherwise.
 
     Examples
     --------
@@ -243,6 +246,7 @@ class DiagnosisDetails:
     nominal_fit: str = ""
     records: tuple[int, int] = (1, 1)
     floor_exceeded: tuple[str, ...] = ()
+    model_error: Any = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict of the fields (the screenings as dicts).
@@ -252,7 +256,8 @@ class DiagnosisDetails:
         dict
             ``json.dumps`` works on it.
         """
-        out: dict[str, Any] = jsonable({k: getattr(self, k) for k in self.__dataclass_fields__})
+        out: dict[str, Any] = jsonable({k: getattr(self, k) for k in self.__dataclass_fields__ if k != "model_error"})
+        out["model_error"] = _model_dict(self.model_error)
         return out
 
 
@@ -400,6 +405,9 @@ class DiagnosisReport:
             if self.ranking and self.ranking[0].effect == "colored_noise":
                 tail += "; colored_noise predicts the residual one step ahead but is not named" + self._not_noise()
             first = "no deterministic candidate explains" if held else "no deterministic candidate closes by half"
+            mem = self.details.model_error if self.details is not None else None
+            if mem is not None and getattr(mem, "summary", ""):
+                tail += f"; {mem.summary}"
             return f"unexplained: a significant gap that {first}{tail}"
         if best is None:
             return f"{self.best_effect}"
