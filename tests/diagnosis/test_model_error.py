@@ -170,7 +170,7 @@ def test_records_are_not_joined():
     # and another fit
     est, val, _ = nominal_records("creep", 7)
     m = model_error(est, val, warmup=WARMUP, noise_floor=NOISE**2)
-    basis = m._basis
+    basis = m.basis
     both = _features([NominalSignals(**r) for r in val], basis, WARMUP)
     each = np.vstack([_features([NominalSignals(**r)], basis, WARMUP) for r in val])
     np.testing.assert_array_equal(both, each)
