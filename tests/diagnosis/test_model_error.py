@@ -10,6 +10,7 @@ group of signals the effect lives in. A residual of white noise must not be over
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 import warnings
@@ -20,7 +21,7 @@ from scipy.signal import lfilter
 
 import backlashid as bid
 from backlashid.diagnosis.analyses import GROUPS, ModelErrorModel, NominalSignals, model_error
-from backlashid.diagnosis.analyses._model_error import _features
+from backlashid.diagnosis.analyses._model_error import HINTS, _features
 from backlashid.errors import DataError
 
 N = 4000
@@ -136,6 +137,18 @@ def test_the_hints_read_the_groups_physically(fitted):
     assert "friction" in fitted["friction state"][0].summary
     assert "cogging" in fitted["cogging"][0].summary
     assert "creep" in fitted["creep"][0].summary
+
+
+def test_the_sentence_follows_the_share_and_the_test(fitted):
+    # the same result read with other shares, tests and groups (the wording, not the fit)
+    m = fitted["friction state"][0]
+    weak = dataclasses.replace(m, closable_share=0.3, raw_share=0.3, p_value=0.2, groups=())
+    assert "not significantly (p = 0.2): nothing it can predict is missing" in weak.summary
+    partial = dataclasses.replace(m, closable_share=0.3, raw_share=0.3, groups=("the velocity",))
+    assert "closes only 30 % of the gap: part of the error suggests a state driven by the velocity" in partial.summary
+    both = dataclasses.replace(m, groups=("the velocity", "the direction of motion", "time"))
+    assert both.hints == (HINTS["the velocity"], HINTS["time"])  # one hint for velocity and direction
+    assert "the velocity, the direction of motion and time closes" in both.summary and "are missing" in both.summary
 
 
 def test_relevance_is_the_share_lost_without_the_group(fitted):

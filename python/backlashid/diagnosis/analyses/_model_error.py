@@ -388,8 +388,9 @@ class ModelErrorModel:
             return f"the nominal model is at the noise floor on validation: there is no gap to close{tail}"
         pct = f"{100.0 * self.closable_share:.0f} %"
         if not self.groups:
+            weak = "" if self.closable_share < NOTHING else f", not significantly (p = {self.p_value:.2g})"
             return (
-                f"a model of the residual in the nominal model's signals closes {pct} of the gap: nothing it can "
+                f"a model of the residual in the nominal model's signals closes {pct} of the gap{weak}: nothing it can "
                 f"predict is missing (the rest is noise or a disturbance independent of the input){tail}"
             )
         where = _words(self.groups)
