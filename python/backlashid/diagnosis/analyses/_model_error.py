@@ -43,9 +43,11 @@ Scores on validation: the nominal MSE, the corrected MSE, and the closable share
 share lost when it is dropped (refit on estimation without it, scored on validation); ``alone``
 is the share the group closes by itself. Correlated groups can stand in for each other (a
 velocity is a filter of the input, the held direction is a slow reversal memory), so drop-one
-relevances can all be small while the whole closes much. The groups named are found by backward
-elimination: drop the group whose loss is smallest while that loss stays under ``MATTERS`` and
-the share kept at least ``KEEP`` of the whole; what is left is ordered by its loss. Nothing is
+relevances can all be small while the whole closes much. The groups named are the fewest that
+keep ``KEEP`` of the share of all groups: the best single group if it does, else the best pair,
+else those left by backward elimination (drop the group whose loss is smallest while that loss
+stays under ``MATTERS`` and the share kept at least ``KEEP`` of the whole; what is left is ordered
+by its loss). Nothing is
 named unless the share is at least ``NOTHING`` and the improvement significant (paired test of
 the squared validation errors, ``ALPHA``).
 
@@ -634,7 +636,7 @@ def model_error(
     p_value = _improvement_p(e_val, e_val - phi_val @ coef)
     groups: tuple[str, ...] = ()
     if np.isfinite(raw_share) and raw_share >= NOTHING and p_value < ALPHA:
-        groups = _backward(lambda kept: share(columns_of(kept))[0], raw_share, relevance)
+        groups = _groups_that_matter(lambda kept: share(columns_of(kept))[0], raw_share, relevance, alone)
     return ModelErrorModel(
         nominal_mse=nominal_mse,
         corrected_mse=corrected_mse,
@@ -654,6 +656,19 @@ def model_error(
         coefficients=_full(coef, every, len(columns)),
         basis=basis,
     )
+
+
+def _groups_that_matter(share: Any, full: float, relevance: dict[str, float], alone: dict[str, float]) -> tuple[str, ...]:
+    """The fewest groups that keep ``KEEP`` of the share of all: the best single group, else the
+    best pair (ordered by the share each closes alone), else by backward elimination."""
+    best = max(GROUPS, key=lambda g: alone[g])
+    if alone[best] >= KEEP * full:
+        return (best,)
+    pairs = {(g, h): share([g, h]) for i, g in enumerate(GROUPS) for h in GROUPS[i + 1 :]}
+    pair = max(pairs, key=lambda k: pairs[k])
+    if pairs[pair] >= KEEP * full:
+        return tuple(sorted(pair, key=lambda g: -alone[g]))
+    return _backward(share, full, relevance)
 
 
 def _backward(share: Any, full: float, relevance: dict[str, float]) -> tuple[str, ...]:
