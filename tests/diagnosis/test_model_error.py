@@ -151,6 +151,24 @@ def test_the_sentence_follows_the_share_and_the_test(fitted):
     assert "the velocity, the direction of motion and time closes" in both.summary and "are missing" in both.summary
 
 
+def test_three_effects_at_once_are_all_named():
+    # an offset drifting over the record, a cogging ripple and creep together, the true cascade as
+    # nominal: no single group nor pair keeps 90 % of the share, backward elimination keeps the
+    # three (and the sentence gives their three hints)
+    rng, truth = np.random.default_rng(11), bid.example1()
+    records = []
+    for _ in range(4):
+        u = slow_input(rng)
+        x, y0 = truth.linear.simulate(u), truth.simulate(u)
+        d, t_r = reversal_memory(x)
+        effect = 0.1 * np.arange(N) / N + 0.05 * np.sin(2.0 * np.pi * 4.0 * x / np.ptp(x)) - 0.1 * d * np.exp(-t_r / 10.0)
+        records.append({"u": u, "x": x, "y_sim": y0, "residual": effect + NOISE * rng.standard_normal(N)})
+    m = model_error(records[:2], records[2:], warmup=WARMUP, noise_floor=NOISE**2)
+    assert m.closable_share > 0.9
+    assert set(m.groups) == {"time", "the internal position x", "time since the last reversal"}, m.groups
+    assert all(word in m.summary for word in ("drift", "cogging", "creep")), m.summary
+
+
 def test_relevance_is_the_share_lost_without_the_group(fitted):
     # the cogging term lives in x alone: dropping the position loses nearly all of it, dropping
     # any other group almost nothing; alone, the position closes nearly what all groups close

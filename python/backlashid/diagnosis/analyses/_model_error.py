@@ -44,10 +44,10 @@ share lost when it is dropped (refit on estimation without it, scored on validat
 is the share the group closes by itself. Correlated groups can stand in for each other (a
 velocity is a filter of the input, the held direction is a slow reversal memory), so drop-one
 relevances can all be small while the whole closes much. The groups named are the fewest that
-keep ``KEEP`` of the share of all groups: the best single group if it does, else the best pair,
-else those left by backward elimination (drop the group whose loss is smallest while that loss
-stays under ``MATTERS`` and the share kept at least ``KEEP`` of the whole; what is left is ordered
-by its loss). Nothing is
+close the share of all groups but less than ``MATTERS`` (of the gap): the best single group if it
+does, else the best pair, else those left by backward elimination (drop the group whose loss is
+smallest while the share kept stays within ``MATTERS`` of the whole; what is left is ordered by
+its loss). Nothing is
 named unless the share is at least ``NOTHING`` and the improvement significant (paired test of
 the squared validation errors, ``ALPHA``).
 
@@ -109,8 +109,7 @@ NOTHING = 0.1  # a share below this: nothing predictable is missing
 ALPHA = 0.01  # level of the test that the validation error improved
 HAC_LAGS = 20  # Newey-West lags of that test
 CLOSE_ENOUGH = 0.5  # a share at least this: the model-error model explains the gap
-MATTERS = 0.05  # a group matters when dropping it loses this share of the gap
-KEEP = 0.9  # the groups named keep at least this fraction of the share closed by all
+MATTERS = 0.05  # the groups named close the share of all groups but less than this
 MIN_ROWS_PER_COLUMN = 5  # estimation samples after the warm-up per feature
 
 
@@ -659,29 +658,29 @@ def model_error(
 
 
 def _groups_that_matter(share: Any, full: float, relevance: dict[str, float], alone: dict[str, float]) -> tuple[str, ...]:
-    """The fewest groups that keep ``KEEP`` of the share of all: the best single group, else the
-    best pair (ordered by the share each closes alone), else by backward elimination."""
+    """The fewest groups whose share is within ``MATTERS`` of the share of all: the best single
+    group, else the best pair (ordered by the share each closes alone), else by backward
+    elimination."""
     best = max(GROUPS, key=lambda g: alone[g])
-    if alone[best] >= KEEP * full:
+    if alone[best] > full - MATTERS:
         return (best,)
     pairs = {(g, h): share([g, h]) for i, g in enumerate(GROUPS) for h in GROUPS[i + 1 :]}
     pair = max(pairs, key=lambda k: pairs[k])
-    if pairs[pair] >= KEEP * full:
+    if pairs[pair] > full - MATTERS:
         return tuple(sorted(pair, key=lambda g: -alone[g]))
     return _backward(share, full, relevance)
 
 
 def _backward(share: Any, full: float, relevance: dict[str, float]) -> tuple[str, ...]:
     """The groups that matter, most relevant first: backward elimination from all groups, each
-    step dropping the group whose loss is smallest, while that loss is under ``MATTERS`` and the
-    share kept at least ``KEEP`` of the full one (correlated groups that stand in for each
-    other: one is dropped, the other then carries the loss). Ordered by the loss when each is
-    dropped from the groups kept."""
+    step dropping the group whose loss is smallest while the share kept stays within ``MATTERS``
+    of the share of all (correlated groups that stand in for each other: one is dropped, the
+    other then carries the loss). Ordered by the loss when each is dropped from the groups kept."""
     kept, current, losses = list(GROUPS), full, dict(relevance)
     while len(kept) > 1:
         trial = {g: share([h for h in kept if h != g]) for g in kept}
         cheapest = max(kept, key=lambda g: trial[g])
-        if current - trial[cheapest] >= MATTERS or trial[cheapest] < KEEP * full:
+        if full - trial[cheapest] >= MATTERS:
             losses = {g: current - trial[g] for g in kept}
             break
         kept.remove(cheapest)
