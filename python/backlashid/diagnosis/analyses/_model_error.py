@@ -71,7 +71,7 @@ from ... import _core
 from ..._docstrings import TO_DICT, fill
 from ..._json import json_float
 from ..._numerics import r_factor
-from ..._validation import check_finite, check_real, check_warmup, shown
+from ..._validation import as_signal, check_finite, check_real, check_warmup, shown
 from ...errors import DataError
 
 __all__ = ["GROUPS", "ModelErrorModel", "NominalSignals", "model_error"]
@@ -496,8 +496,6 @@ def _record(record: Any, name: str, *, need_residual: bool) -> NominalSignals:
     missing = [k for k in keys if raw.get(k) is None]
     if missing:
         raise DataError(f"{name} has no {', '.join(repr(k) for k in missing)}: give the nominal model's {', '.join(keys)}")
-    from ..._validation import as_signal
-
     arrays = {}
     for k in keys:
         arr = as_signal(raw[k], f"{name}[{k!r}]")
