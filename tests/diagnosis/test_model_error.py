@@ -17,6 +17,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.signal import lfilter
 
 import backlashid as bid
@@ -287,3 +289,28 @@ def test_predict_checks_its_record(fitted):
         m.predict({"u": np.zeros(10), "x": np.r_[np.zeros(3), np.nan, np.zeros(6)], "y_sim": np.zeros(10)})
     with pytest.raises(DataError, match=r"record has no 'y_sim'"):
         m.predict({"u": np.zeros(10), "x": np.zeros(10)})
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@given(
+    lengths=st.lists(st.integers(1, 700), min_size=1, max_size=3),
+    warmup=st.integers(0, 60),
+    scale=st.sampled_from([1e-150, 1e-3, 1.0, 1e3, 1e150]),
+    constant=st.sampled_from([None, "u", "x", "y_sim", "residual"]),
+    seed=st.integers(0, 2**16),
+)
+def test_any_records_give_a_result_or_a_data_error(lengths, warmup, scale, constant, seed):
+    # short, long, constant or badly scaled records: a DataError, or finite scores and a JSON-safe dict
+    rng = np.random.default_rng(seed)
+    records = [{k: (np.ones(n) if k == constant else scale * rng.standard_normal(n)) for k in ("u", "x", "y_sim", "residual")} for n in lengths]
+    copies = [{k: v.copy() for k, v in r.items()} for r in records]
+    try:
+        m = model_error(records, records[::-1], warmup=warmup)
+    except DataError:
+        return
+    finally:
+        assert all(np.array_equal(r[k], c[k]) for r, c in zip(records, copies) for k in r)  # inputs untouched
+    assert np.isfinite(m.nominal_mse) and np.isfinite(m.corrected_mse)
+    assert np.all(np.isfinite(m.coefficients))
+    assert json.loads(json.dumps(m.to_dict())) == m.to_dict()

@@ -691,7 +691,8 @@ def _backward(share: Any, full: float, relevance: dict[str, float]) -> tuple[str
 def _improvement_p(r0: Array, r1: Array) -> float:
     """One-sided p-value of E[r0^2 - r1^2] > 0, Newey-West standard error (``HAC_LAGS`` lags),
     the diagnosis' paired test of an improvement."""
-    d = r0 * r0 - r1 * r1
+    scale = float(np.max(np.abs(r0))) or 1.0  # in units of the largest error: no overflow in d^2
+    d = (r0 / scale) ** 2 - (r1 / scale) ** 2
     n = d.size
     dc = d - d.mean()
     var = float(dc @ dc) / n
