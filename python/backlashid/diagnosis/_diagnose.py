@@ -37,7 +37,7 @@ from ._report import Candidate, CompositionStep, DiagnosisDetails, DiagnosisRepo
 from ._start import INITIAL_STATES, describe, estimated_start, held_state, nominal_start, refined_start
 from ._statistics import modulation_p, paired_p, position_p, signature_removed
 from ._verdict import ALPHA, Evidence, Score, decide, gap_share
-from .analyses import frequency_analysis, regime_shares, residual_tests, time_analysis
+from .analyses import NominalSignals, frequency_analysis, model_error, regime_shares, residual_tests, time_analysis
 from .effects import EFFECTS, REGISTRY, AugmentedModel
 from .effects._base import CoreEffects, Problem, ScreenContext, Simulator, Start, simulate
 from .effects._colored_noise import fit_ar
@@ -506,6 +506,14 @@ def diagnose(
     if best == "colored_noise":
         final = scored["colored_noise"].model
         effects = ("colored_noise",)
+    # a gap the catalogue leaves: how much any model of the nominal's own signals closes, and which
+    mem = None
+    if best == "unexplained":
+        mem = model_error(
+            [NominalSignals(s.u, s.x, s.y_nom, s.residual) for s in sig_e],
+            [NominalSignals(s.u, s.x, s.y_nom, s.residual) for s in sig_v],
+            warmup=w, noise_floor=floor,
+        )  # fmt: skip
     report_model = final if final is not None else _nominal_model(nominal)
 
     ranking = []
@@ -550,6 +558,7 @@ def diagnose(
         nominal_fit="converged" if nominal_converged else NOT_CONVERGED,
         records=(len(est), len(val)),
         floor_exceeded=tuple(s.effect for s in scored.values() if gap > 0 and s.mse < floor),
+        model_error=mem,
     )
     first_val = val[0]
     state0 = _state(nominal, d.starts_val[0])
