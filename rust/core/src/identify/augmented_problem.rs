@@ -747,7 +747,10 @@ mod tests {
                 err = err.max((j - (a - b) / h).abs());
                 norm = norm.max(j.abs());
             }
-            assert!(norm > 0.1 && err < 1e-5 * norm, "{name}: {err:e} of {norm:e}");
+            assert!(
+                norm > 0.1 && err < 1e-5 * norm,
+                "{name}: {err:e} of {norm:e}"
+            );
         }
     }
 
