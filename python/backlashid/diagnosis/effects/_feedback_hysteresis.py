@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...errors import ModelError
 from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext, linear_x
 
 AUGMENTATION = Augmentation(
@@ -41,12 +42,13 @@ class FeedbackHysteresis(Effect, rank=12, augmentation=AUGMENTATION):
 
     def box(self, prob: Problem, theta0: Array) -> tuple[Array, Array]:
         """The refit's box on the nominal loop's scales (k, s_x, v_max of :func:`_scales`): 0 <=
-        alpha <= 2 k (a stiffness up to twice the loop's), beta + |gamma| <= 1.8 / v_max (the
-        explicit step's factor 1 - beta |v| - gamma v sign(z) stays in [-0.8, 1]: z bounded),
-        |k_3| <= 2 k / s_x^2."""
+        alpha <= 2 k (a stiffness up to twice the loop's), beta, |gamma| <= 0.9 / v_max (with
+        the core's |gamma| <= beta the explicit step's factor 1 - beta |v| - gamma v sign(z)
+        stays in [-0.8, 1]: z bounded), 0 <= k_3 <= 2 k / s_x^2 (a hardening spring: a
+        softening one runs away once x is large)."""
         k, sx, vmax = _scales(prob, theta0)
         lb, ub = self.bounds(prob)
-        lo = np.array([0.0, 0.0, -0.9 / vmax, -2.0 * k / sx**2])
+        lo = np.array([0.0, 0.0, -0.9 / vmax, 0.0])
         hi = np.array([2.0 * k, 0.9 / vmax, 0.9 / vmax, 2.0 * k / sx**2])
         return np.maximum(lo, lb), np.minimum(hi, ub)
 
@@ -57,17 +59,22 @@ class FeedbackHysteresis(Effect, rank=12, augmentation=AUGMENTATION):
         convergence, within :meth:`box`."""
         k, sx, _ = _scales(prob, theta0)
         lb, ub = self.box(prob, theta0)
-        starts = [np.array([a * k, 1.0 / (c * sx), 0.0, 0.0]) for a in (0.05, 0.3) for c in (0.3, 1.0)]
+        starts = [np.array([a * k, 1.0 / (c * sx), 0.0, 0.0]) for a in (0.05, 0.3) for c in (0.3, 1.0)]  # clipped to the box
         starts.append(np.array([0.0, 1.0 / sx, 0.0, 0.1 * k / sx**2]))
         return self._multi_start(prob, theta0, [(np.clip(e0, lb, ub), {}) for e0 in starts], lb, ub)
 
     def directions(self, screen: ScreenContext) -> list[Array]:
         """Finite-size changes (1 % of the loop's stiffness): a hysteretic force saturating after
-        0.3 std(x) of travel, and a cubic stiffness."""
+        0.3 std(x) of travel (beta at most 0.9 / max |v|, where the step stays bounded), and a
+        cubic stiffness."""
         prob = Problem(screen.structure, screen.u, screen.y, 0, screen.t0)
-        k, sx, _ = _scales(prob, screen.theta)
+        k, sx, vmax = _scales(prob, screen.theta)
         h = 0.01
-        return [
-            screen.change(self.core({"alpha": h * k, "beta": 1.0 / (0.3 * sx), "gamma": 0.0, "k_3": 0.0})) / h,
-            screen.change(self.core({"alpha": 0.0, "beta": 0.0, "gamma": 0.0, "k_3": h * k / sx**2})) / h,
-        ]
+        beta = min(1.0 / (0.3 * sx), 0.9 / vmax)
+        out = []
+        for params in ({"alpha": h * k, "beta": beta, "gamma": 0.0, "k_3": 0.0}, {"alpha": 0.0, "beta": 0.0, "gamma": 0.0, "k_3": h * k / sx**2}):
+            try:
+                out.append(screen.change(self.core(params)) / h)
+            except ModelError:  # a feedback that runs away on this record: no direction from it
+                continue
+        return out

@@ -109,6 +109,11 @@ impl Effect for FeedbackHysteresis {
             _ => (f64::NEG_INFINITY, f64::INFINITY),
         }
     }
+    /// Where the refit may take it: |gamma| <= beta, Bouc-Wen's condition for a bounded z
+    /// (|z| <= alpha / (beta - |gamma|) under any motion; at beta = gamma = 0 a linear spring).
+    fn feasible(&self) -> bool {
+        self.check().is_ok() && self.gamma.abs() <= self.beta
+    }
     fn start_tangent(&self, x0: f64, y0: f64, dx0: &[f64], _cols: &Columns) -> Self {
         let mut e = self.start(x0, y0);
         e.dz = vec![0.0; dx0.len()];
