@@ -133,8 +133,8 @@ impl Effect for DynamicFriction {
         e
     }
     /// kappa = |v| / z_s + lambda: d kappa = sign(v) dv / z_s - |v| / z_s^2 dz_s + dlambda
-    /// (sign(0) = 0, the one-sided derivative of |v| at rest); d w = e^-kappa dw(t-1)
-    /// + (v / z_s phi' - e^-kappa w(t-1)) d kappa + phi (dv / z_s - v / z_s^2 dz_s);
+    /// (sign(0) = 0, the one-sided derivative of |v| at rest); d w = e^-kappa dw(t-1) +
+    /// (v / z_s phi' - e^-kappa w(t-1)) d kappa + phi (dv / z_s - v / z_s^2 dz_s);
     /// d out += k_f dw + w dk_f. The state runs at k_f = 0 too (w is the derivative in k_f).
     #[inline]
     fn output_tangent(

@@ -119,8 +119,8 @@ impl Effect for FeedbackHysteresis {
         e.dz = vec![0.0; dx0.len()];
         e
     }
-    /// dz = (1 - beta |v|) dz1 - gamma v d|z1| + (alpha - beta sign(v) z1 - gamma |z1|) dv
-    /// + v dalpha - |v| z1 dbeta - v |z1| dgamma, dv = dx(t) - dx(t-1), with the one-sided
+    /// dz = (1 - beta |v|) dz1 - gamma v d|z1| + (alpha - beta sign(v) z1 - gamma |z1|) dv +
+    /// v dalpha - |v| z1 dbeta - v |z1| dgamma, dv = dx(t) - dx(t-1), with the one-sided
     /// derivatives of |.| at 0: d|v| = sign(v) dv with sign(0) = 0 (v = 0 is a standstill, not
     /// a crossing), and d|z1| = |dz1| at z1 = 0 (the derivative as theta_j grows: at alpha = 0,
     /// the edge of its domain, z = alpha zeta(t) for alpha >= 0, and that is zeta);
