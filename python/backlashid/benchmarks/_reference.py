@@ -306,7 +306,8 @@ def augmented_cascade(
     fh = p.get("feedback_hysteresis", (0.0, 0.0, 0.0, 0.0))
     restoring = bouc_wen(*fh) if fh[0] != 0.0 or fh[3] != 0.0 else None
     if "stick_slip" in p:
-        x = linear_with_stick_slip(a, b, v, *p["stick_slip"], u_past, x_past, restoring)
+        f_c, f_v, f_s, v_s = p["stick_slip"]
+        x = linear_with_stick_slip(a, b, v, f_c, f_v, f_s, v_s, u_past, x_past, restoring)
     else:
         f_c, f_v = p.get("friction", (0.0, 0.0))
         x = linear_with_friction(a, b, v, f_c, f_v, u_past, x_past, restoring)
@@ -318,7 +319,8 @@ def augmented_cascade(
     if "compliance" in p and p["compliance"][0] != 0.0:
         y = compliance(y, *p["compliance"], f0=y_prev)
     if "dynamic_friction" in p and p["dynamic_friction"][0] != 0.0:
-        y = dahl_friction(y, x, *p["dynamic_friction"], x0=x0)
+        k_f, z_s, lam = p["dynamic_friction"]
+        y = dahl_friction(y, x, k_f, z_s, lam, x0=x0)
     if "hysteresis_memory" in p:
         hm = p["hysteresis_memory"]
         y = plays(y, x, list(zip(hm[0::2], hm[1::2])), x0)
