@@ -41,7 +41,8 @@ from backlashid.benchmarks import ALL_EFFECTS, CATALOGUE, OUT_OF_CATALOGUE, Case
 SHORT = {
     "dead_time": "dt", "saturation": "sat", "friction": "fri", "width_drift": "wd", "output_offset": "off",
     "branch_degree": "deg", "linear_order": "ord", "compliance": "cmp", "quantization": "qnt",
-    "hysteresis_memory": "hys", "colored_noise": "cn", "none": "none", "unexplained": "unex",
+    "hysteresis_memory": "hys", "colored_noise": "cn", "dynamic_friction": "dyf", "feedback_hysteresis": "fbh",
+    "creep": "crp", "none": "none", "unexplained": "unex",
     "fit_error": "fitE", "diagnose_error": "diaE",
 }  # fmt: skip
 

@@ -64,7 +64,7 @@ def test_default_set_has_every_effect_at_every_level():
     assert count[("none", 0.0)] == 10
     assert len({s.seed for s in specs}) == len(specs)
     assert "output_gain_drift" in W.OUT_OF_CATALOGUE and not set(W.OUT_OF_CATALOGUE) & set(W.CATALOGUE)
-    assert len(W.CATALOGUE) == 11
+    assert len(W.CATALOGUE) == 14
     assert W.CATALOGUE == bid.EFFECTS  # the diagnoser's names, each with its own generator here
     assert set(W.CATALOGUE + W.OUT_OF_CATALOGUE) == set(W._GENERATORS)
 
@@ -118,6 +118,9 @@ ZERO = {
     "output_gain_drift": lambda u: {"cycles": 1.0, "phase": 0.3, "s": 0.0},
     "input_gain_drift": lambda u: {"cycles": 1.0, "phase": 0.3, "s": 0.0},
     "quantization": lambda u: {"q": 1e-13},
+    "dynamic_friction": lambda u: {"F_c": 0.0, "z_s": 0.1, "tau": 50.0},
+    "feedback_hysteresis": lambda u: {"alpha": 0.0, "beta": 0.5, "gamma": 0.1, "k_3": 0.0},
+    "creep": lambda u: {"shares": [0.0, 0.0], "taus": [50.0, 500.0]},
 }
 
 

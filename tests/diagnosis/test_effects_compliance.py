@@ -160,6 +160,23 @@ def _hysteresis(case: Case, prob: _base.Problem) -> list[float]:
     return [r[0], w[0], r[1], w[1]]
 
 
+def _dynamic_friction(case: Case, prob: _base.Problem) -> list[float]:
+    k_f, z_s, lam = _within(case.rng, *fx.REGISTRY["dynamic_friction"].bounds(prob))
+    return [k_f, z_s, lam or 0.01]
+
+
+def _feedback_hysteresis(case: Case, prob: _base.Problem) -> list[float]:
+    """A restoring force up to half the drive's scale, saturating within about one std(x);
+    some cases run away (the core's refusal is then checked)."""
+    alpha, beta = case.rng.uniform(0.01, 0.5), case.rng.uniform(0.0, 2.0)
+    gamma, k_3 = case.rng.uniform(-0.5, 0.5) * beta, case.rng.uniform(-0.05, 0.2)
+    return [alpha, beta or 0.5, gamma or 0.1, k_3 or 0.01]
+
+
+def _creep(case: Case, prob: _base.Problem) -> list[float]:
+    return list(_within(case.rng, *fx.REGISTRY["creep"].bounds(prob)))
+
+
 def _quantization(case: Case, prob: _base.Problem) -> list[float]:
     spread = float(np.std(prob.y)) + 0.05
     return [spread * float(np.exp(case.rng.uniform(np.log(0.005), 0.0)))]
@@ -199,6 +216,9 @@ PUT: dict[str, Callable[[Case], None]] = {
     "quantization": _simulated("quantization", _quantization),
     "hysteresis_memory": _simulated("hysteresis_memory", _hysteresis),
     "colored_noise": _colored_noise,
+    "dynamic_friction": _simulated("dynamic_friction", _dynamic_friction),
+    "feedback_hysteresis": _simulated("feedback_hysteresis", _feedback_hysteresis),
+    "creep": _simulated("creep", _creep),
 }
 
 

@@ -17,14 +17,15 @@ and drift, quantiser); ``ar_prediction`` is the colored-noise model's one-step p
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
-    "ar_prediction", "augmented_cascade", "backlash", "branch", "compliance", "dead_time", "difference_equation",
-    "linear_with_friction", "linear_with_stick_slip", "output_offset", "play", "plays", "quantiser", "saturation", "width_drift",
+    "ar_prediction", "augmented_cascade", "backlash", "bouc_wen", "branch", "compliance", "creep", "dahl_friction", "dead_time",
+    "difference_equation", "linear_with_friction", "linear_with_stick_slip", "output_offset", "play", "plays", "quantiser",
+    "saturation", "width_drift",
 ]  # fmt: skip
 
 Array = NDArray[np.float64]
@@ -55,11 +56,13 @@ def linear_with_friction(
     f_v: float,
     u_past: Sequence[float] = (),
     x_past: Sequence[float] = (),
+    restoring: Callable[[float, float, float], float] | None = None,
 ) -> Array:
     """Eq (16) driven by u_eff(t) = u(t) - F_c sign(v(t)) - F_v v(t), v(t) = x(t) - x(t-1)
     (sign(0) = 0): x(t) needs u_eff up to t - 1 only, so u_eff(t) follows x(t). From rest, or
     from the past u_past = [u(-1), u(-2), ..] and x_past = [x(-1), x(-2), ..] (x(-1) is also
-    x(t-1) of v at t = 0; 0 without it)."""
+    x(t-1) of v at t = 0; 0 without it). ``restoring(drive, x(t), x(t-1))``: the drive less a
+    restoring force, after the friction (:func:`bouc_wen`)."""
     a, b = [float(v) for v in a], [float(v) for v in b]
     na, nb = len(a), len(b)
     ue = [float(v) for v in reversed(u_past)] if len(u_past) else [0.0] * na  # u_eff(t-na) .. u_eff(t-1), oldest first
@@ -73,7 +76,8 @@ def linear_with_friction(
             x -= b[j - 1] * xx[-j]
         v = x - xx[-1]
         sign = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
-        ue.append(ut - f_c * sign - f_v * v)
+        drive = ut - f_c * sign - f_v * v if f_c != 0.0 or f_v != 0.0 else ut
+        ue.append(restoring(drive, x, xx[-1]) if restoring is not None else drive)
         xx.append(x)
         out[t] = x
     return out
@@ -89,13 +93,14 @@ def linear_with_stick_slip(
     v_s: float,
     u_past: Sequence[float] = (),
     x_past: Sequence[float] = (),
+    restoring: Callable[[float, float, float], float] | None = None,
 ) -> Array:
     """Eq (16) with stick-slip friction in its force balance (Karnopp's rule, a Stribeck dip):
     x(t+1) = a_1 u_eff(t) + x_free; w = u(t) - F_v v, v = x(t) - x(t-1); u_stay = (x(t) -
     x_free) / a_1 holds x(t+1) = x(t), F_hold = w - u_stay; stuck (u_eff = u_stay) while
     abs(F_hold) <= F_c + F_s, else u_eff = w - (F_c + F_s exp(-(v / v_s)^2)) sign(F_hold). At
     F_c = F_v = F_s = 0 (or a_1 = 0: no sticking) u_eff = w. From rest or from the past, as
-    :func:`linear_with_friction`."""
+    :func:`linear_with_friction`; ``restoring`` subtracted after the friction, as there."""
     a, b = [float(v) for v in a], [float(v) for v in b]
     na, nb = len(a), len(b)
     ue = [float(v) for v in reversed(u_past)] if len(u_past) else [0.0] * na  # oldest first
@@ -109,6 +114,7 @@ def linear_with_stick_slip(
         for j in range(1, nb + 1):
             x -= b[j - 1] * xx[-j]
         v = x - xx[-1]
+        x_prev = xx[-1]
         xx.append(x)
         w = ut - f_v * v
         if not active:
@@ -128,6 +134,8 @@ def linear_with_stick_slip(
                 ue.append(stay)
             else:
                 ue.append(w - (f_c + f_s * math.exp(-((v / v_s) ** 2))) * math.copysign(1.0, hold))
+        if restoring is not None:
+            ue[-1] = restoring(ue[-1], x, x_prev)
         out[t] = x
     return out
 
@@ -218,6 +226,50 @@ def quantiser(y: Array, q: float) -> Array:
     return q * np.copysign(np.floor(np.abs(z) + 0.5), z)
 
 
+def bouc_wen(alpha: float, beta: float, gamma: float, k_3: float) -> Callable[[float, float, float], float]:
+    """The drive less the restoring force z(t) + k_3 x(t)^3 of a Bouc-Wen element (nu = 1)
+    stepped once a sample, as a function of (drive, x(t), x(t-1)) called once a sample in
+    order: z(t) = z(t-1) + alpha v - beta |v| z(t-1) - gamma v |z(t-1)|, v = x(t) - x(t-1),
+    z at rest (0) first."""
+    z = 0.0
+
+    def drive_less(drive: float, x: float, x_prev: float) -> float:
+        nonlocal z
+        v = x - x_prev
+        z = z + alpha * v - beta * abs(v) * z - gamma * v * abs(z)
+        return drive - z - k_3 * x * x * x
+
+    return drive_less
+
+
+def dahl_friction(y: Array, x: Array, k_f: float, z_s: float, lam: float, x0: float = 0.0) -> Array:
+    """y + k_f w, w the normalised bristle state of dw/dtau = x'/z_s - (|x'|/z_s + lambda) w
+    with x moving at constant speed v(t) = x(t) - x(t-1) over the sample: w(t) = e^-kappa
+    w(t-1) + (v / z_s)(1 - e^-kappa) / kappa, kappa = |v| / z_s + lambda; w at rest and
+    x(-1) = x0 before the record."""
+    out, w, prev = y.copy(), 0.0, float(x0)
+    for t, xt in enumerate(x.tolist()):
+        v = xt - prev
+        kappa = abs(v) / z_s + lam
+        gain = -math.expm1(-kappa) / kappa if kappa > 0.0 else 1.0
+        w = math.exp(-kappa) * w + v / z_s * gain
+        out[t] += k_f * w
+        prev = xt
+    return out
+
+
+def creep(y: Array, modes: Sequence[tuple[float, float]], y0: float = 0.0) -> Array:
+    """y + sum_k g_k (c_k - y), c_k(t) = p_k c_k(t-1) + (1 - p_k) y(t), p_k = exp(-exp(-l_k))
+    for the modes (g_k, l_k), each at rest on y0 before the record."""
+    out = y.copy()
+    for g, log_t in modes:
+        p, c = math.exp(-math.exp(-log_t)), float(y0)
+        for t, yt in enumerate(y.tolist()):
+            c = p * c + (1.0 - p) * yt
+            out[t] += g * (c - yt)
+    return out
+
+
 def augmented_cascade(
     a: Sequence[float],
     b: Sequence[float],
@@ -235,11 +287,15 @@ def augmented_cascade(
 ) -> Array:
     """The nominal cascade (eq 16 -> eq 1) with the catalogue's effects, each given as
     (name, parameters) in the Python catalogue's order: u(t - d), clipped to [lo, hi], through
-    friction (or stick-slip friction) into eq (16) from its past; the backlash (eq 1) on x(t) with the widths
+    friction (or stick-slip friction) and the Bouc-Wen restoring force into eq (16) from its past; the backlash (eq 1) on x(t) with the widths
     c + dc tau(t), tau(t) = (t0 + t) / time_scale, from y(0) = y_prev; then compliance, the
-    extra plays (at rest on x_past[0]), the output offset and drift, and the quantiser."""
+    dynamic (Dahl) friction, the extra plays (at rest on x_past[0]), creep (at rest on y_prev), the output
+    offset and drift, and the quantiser."""
     p = {name: [float(v) for v in params] for name, params in effects}
-    known = {"dead_time", "saturation", "friction", "stick_slip", "width_drift", "compliance", "hysteresis_memory", "output_offset", "quantization"}
+    known = {
+        "dead_time", "saturation", "friction", "stick_slip", "feedback_hysteresis", "width_drift", "compliance",
+        "dynamic_friction", "hysteresis_memory", "creep", "output_offset", "quantization",
+    }  # fmt: skip
     if set(p) - known:
         raise ValueError(
             f"no reference for {sorted(set(p) - known)}: add each effect's function here, from its definition, and its place below"
@@ -247,25 +303,36 @@ def augmented_cascade(
     tau = (t0 + np.arange(len(u), dtype=np.float64)) / time_scale
     v = dead_time(u, int(p["dead_time"][0])) if "dead_time" in p else u
     v = saturation(v, *p["saturation"]) if "saturation" in p else v
+    fh = p.get("feedback_hysteresis", (0.0, 0.0, 0.0, 0.0))
+    restoring = bouc_wen(*fh) if fh[0] != 0.0 or fh[3] != 0.0 else None
     if "stick_slip" in p:
-        x = linear_with_stick_slip(a, b, v, *p["stick_slip"], u_past, x_past)
+        f_c, f_v, f_s, v_s = p["stick_slip"]
+        x = linear_with_stick_slip(a, b, v, f_c, f_v, f_s, v_s, u_past, x_past, restoring)
     else:
         f_c, f_v = p.get("friction", (0.0, 0.0))
-        x = linear_with_friction(a, b, v, f_c, f_v, u_past, x_past)
+        x = linear_with_friction(a, b, v, f_c, f_v, u_past, x_past, restoring)
+    x0 = float(x_past[0]) if len(x_past) else 0.0
     dc_l, dc_r = p.get("width_drift", (0.0, 0.0))
     left = branch(m_left, x + width_drift(c_left, dc_l, tau))
     right = branch(m_right, x - width_drift(c_right, dc_r, tau))
     y = backlash(left, right, y_prev)
     if "compliance" in p and p["compliance"][0] != 0.0:
         y = compliance(y, *p["compliance"], f0=y_prev)
+    if "dynamic_friction" in p and p["dynamic_friction"][0] != 0.0:
+        k_f, z_s, lam = p["dynamic_friction"]
+        y = dahl_friction(y, x, k_f, z_s, lam, x0=x0)
     if "hysteresis_memory" in p:
         hm = p["hysteresis_memory"]
-        y = plays(y, x, list(zip(hm[0::2], hm[1::2])), float(x_past[0]) if len(x_past) else 0.0)
+        y = plays(y, x, list(zip(hm[0::2], hm[1::2])), x0)
+    if "creep" in p:
+        cr = p["creep"]
+        y = creep(y, [(g, log_t) for g, log_t in zip(cr[0::2], cr[1::2]) if g != 0.0], y_prev)
     if "output_offset" in p:
         y = output_offset(y, *p["output_offset"], tau)
     if "quantization" in p:
         y = quantiser(y, p["quantization"][0])
-    return y
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(x), y, np.nan)  # a diverged x (eq (1) would hold on NaN)
 
 
 def ar_prediction(residual: Array, phi: Sequence[float]) -> Array:

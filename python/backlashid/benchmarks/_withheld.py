@@ -39,7 +39,10 @@ from ..diagnosis import EFFECTS
 from ..errors import DataError, ModelError
 from ..models import CascadeModel, GeneralBacklash, LinearBlock
 from ._reference import backlash as _backlash
+from ._reference import bouc_wen as _bouc_wen
 from ._reference import branch as _branch
+from ._reference import creep as _creep
+from ._reference import dahl_friction as _dahl_friction
 from ._reference import difference_equation as _filter
 from ._reference import linear_with_friction as _linear_with_friction
 from ._reference import play as _play
@@ -490,6 +493,48 @@ def _params_hysteresis_memory(sh: dict[str, Any], s: float) -> dict[str, Any]:
     return {"radii": sh["radii"], "weights": [s * w for w in sh["shape"]]}
 
 
+def _shape_dynamic_friction(ctx: _Context) -> tuple[dict[str, Any], float, float]:
+    """A Dahl friction force on the output: presliding travel 5-50 % of std(x), relaxation time
+    20-300 samples; size s: the sliding force in std(y)."""
+    x_std, y_std = float(ctx.x_nom[ctx.rec].std()), float(ctx.y_nom[ctx.rec].std())
+    return {"y_std": y_std, "z_s": float(ctx.rng.uniform(0.05, 0.5)) * x_std, "tau": float(ctx.rng.uniform(20.0, 300.0))}, 0.05, 3.0
+
+
+def _params_dynamic_friction(sh: dict[str, Any], s: float) -> dict[str, Any]:
+    return {"F_c": s * sh["y_std"], "z_s": sh["z_s"], "tau": sh["tau"]}
+
+
+def _shape_feedback_hysteresis(ctx: _Context) -> tuple[dict[str, Any], float, float]:
+    """A Bouc-Wen restoring force (nu = 1, |gamma| < beta) and a hardening cubic spring in the
+    drive's balance; size s: their stiffness in the loop's (1 / |static gain|)."""
+    a, b = np.array(ctx.nom.a), np.array(ctx.nom.b)
+    gain = abs(float(a.sum() / (1.0 + b.sum())))
+    x = ctx.x_nom[ctx.rec]
+    x_std, v_max = float(x.std()), float(np.max(np.abs(np.diff(x)))) + 1e-12
+    beta = float(ctx.rng.uniform(0.2, 0.8)) / v_max
+    shape = {
+        "k": 1.0 / max(gain, 1e-6), "beta": beta, "gamma": float(ctx.rng.uniform(-0.5, 0.5)) * beta,
+        "cubic": float(ctx.rng.uniform(0.0, 0.5)) / x_std**2,
+    }  # fmt: skip
+    return shape, 0.05, 1.0
+
+
+def _params_feedback_hysteresis(sh: dict[str, Any], s: float) -> dict[str, Any]:
+    return {"alpha": s * sh["k"], "beta": sh["beta"], "gamma": sh["gamma"], "k_3": s * sh["k"] * sh["cubic"]}
+
+
+def _shape_creep(ctx: _Context) -> tuple[dict[str, Any], float, float]:
+    """Two creep modes, 20-200 and 300-3000 samples, the slow one's share 30-100 % of the fast
+    one's; size s: the fast mode's share."""
+    ratio = float(ctx.rng.uniform(0.3, 1.0))
+    taus = [float(ctx.rng.uniform(20.0, 200.0)), float(ctx.rng.uniform(300.0, 3000.0))]
+    return {"ratio": ratio, "taus": taus}, 0.02, 0.9 / (1.0 + ratio)
+
+
+def _params_creep(sh: dict[str, Any], s: float) -> dict[str, Any]:
+    return {"shares": [s, s * sh["ratio"]], "taus": sh["taus"]}
+
+
 def _shape_gain_drift(ctx: _Context) -> tuple[dict[str, Any], float, float]:
     return {"cycles": float(ctx.rng.uniform(0.4, 1.2)), "phase": float(ctx.rng.uniform(0.0, 2.0 * np.pi))}, 0.05, 0.8
 
@@ -525,6 +570,10 @@ def _friction_linear(a: list[float], b: list[float], u: Array, p: dict[str, Any]
     return _linear_with_friction(a, b, u, p["F_c"], p["F_v"])
 
 
+def _feedback_hysteresis_linear(a: list[float], b: list[float], u: Array, p: dict[str, Any]) -> Array:
+    return _linear_with_friction(a, b, u, 0.0, 0.0, restoring=_bouc_wen(p["alpha"], p["beta"], p["gamma"], p["k_3"]))
+
+
 def _width_drift_branches(nom: _Nominal, p: dict[str, Any], t: Array, horizon: float) -> tuple[Any, Any, list[float], list[float]]:
     c_l = nom.c_left + p["dc_L"] * t / horizon
     c_r = nom.c_right + p["dc_R"] * t / horizon
@@ -545,6 +594,14 @@ def _hysteresis_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon:
 def _compliance_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
     num, den = _resonance(p["omega"], p["zeta"])
     return y + p["s"] * (_filter(num, den, y) - y)
+
+
+def _dynamic_friction_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    return _dahl_friction(y, x, p["F_c"], p["z_s"], 1.0 / p["tau"]) if p["F_c"] != 0.0 else y
+
+
+def _creep_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    return _creep(y, [(g, float(np.log(tau))) for g, tau in zip(p["shares"], p["taus"]) if g != 0.0])
 
 
 def _offset_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
@@ -680,6 +737,9 @@ _GENERATORS: dict[str, _Generator] = {
     "quantization": _Generator(_shape_quantization, _params_quantization, output=_quantization_output),
     "hysteresis_memory": _Generator(_shape_hysteresis_memory, _params_hysteresis_memory, output=_hysteresis_output),
     "colored_noise": _Generator(draw=_draw_colored_noise),
+    "dynamic_friction": _Generator(_shape_dynamic_friction, _params_dynamic_friction, output=_dynamic_friction_output),
+    "feedback_hysteresis": _Generator(_shape_feedback_hysteresis, _params_feedback_hysteresis, linear=_feedback_hysteresis_linear),
+    "creep": _Generator(_shape_creep, _params_creep, output=_creep_output),
     "output_gain_drift": _Generator(_shape_gain_drift, _params_gain_drift, output=_output_gain_output),
     "input_gain_drift": _Generator(_shape_gain_drift, _params_gain_drift, drive=_input_gain_drive),
 }

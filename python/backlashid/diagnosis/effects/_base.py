@@ -193,6 +193,13 @@ class Simulator:
         )
 
 
+def linear_x(structure: Structure, theta: Array, u: Array) -> Array:
+    """x, the output of the nominal linear block (16) of ``theta`` on the input u, from rest
+    (the signal on which the effects of x act: their scales)."""
+    est = structure.unpack(theta)
+    return np.asarray(_core.LinearBlock(est.a, est.b).simulate(u, [0.0] * len(est.a), [0.0] * len(est.b)), dtype=np.float64)
+
+
 def ar_predict(residual: Array, phi: Array) -> Array:
     """One-step prediction of an AR process from its past (zero before the record)."""
     pred = np.zeros_like(residual)

@@ -33,7 +33,7 @@ pub fn from_parameters(p: &[f64]) -> Result<HysteresisMemory> {
 }
 
 impl Effect for HysteresisMemory {
-    place!(Output, 5);
+    place!(Output, 6);
     fn check(&self) -> Result<()> {
         for &(r, w) in &self.plays {
             if !(r.is_finite() && r >= 0.0 && w.is_finite()) {

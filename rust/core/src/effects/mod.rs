@@ -339,4 +339,7 @@ registry!(
     hysteresis_memory::HysteresisMemory,
     output_offset::OutputOffset,
     quantization::Quantization,
+    dynamic_friction::DynamicFriction,
+    feedback_hysteresis::FeedbackHysteresis,
+    creep::Creep,
 );

@@ -25,7 +25,7 @@ pub fn from_parameters(p: &[f64]) -> Result<OutputOffset> {
 }
 
 impl Effect for OutputOffset {
-    place!(Output, 6);
+    place!(Output, 8);
     fn check(&self) -> Result<()> {
         finite("o_0", self.offset, "give a finite offset")?;
         finite("o_1", self.rate, "give a finite offset drift")

@@ -21,7 +21,7 @@ pub fn from_parameters(p: &[f64]) -> Result<Quantization> {
 
 impl Effect for Quantization {
     // last: the sensor's resolution
-    place!(Output, 7);
+    place!(Output, 9);
     fn check(&self) -> Result<()> {
         if !(self.quantum.is_finite() && self.quantum >= 0.0) {
             return Err(Error::Model(format!(

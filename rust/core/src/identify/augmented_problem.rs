@@ -553,6 +553,30 @@ mod tests {
             ),
             (&[("hysteresis_memory", &[0.1, 0.0])], &["r_1", "w_1"]),
             (&[("output_offset", &[0.1, 0.3])], &["o_0", "o_1"]),
+            (
+                &[("dynamic_friction", &[0.2, 0.05, 0.01])],
+                &["k_f", "z_s", "lambda"],
+            ),
+            (
+                &[("dynamic_friction", &[0.0, 0.05, 0.01])],
+                &["k_f", "z_s", "lambda"],
+            ),
+            (
+                &[("feedback_hysteresis", &[0.3, 0.5, 0.2, 0.05])],
+                &["alpha", "beta", "gamma", "k_3"],
+            ),
+            // at alpha = 0 and gamma != 0, z = alpha zeta is not linear in alpha (|z|), so
+            // central differences straddle a kink: there the one-sided derivative is checked
+            // (`feedback_hysteresis_at_zero_size_has_the_one_sided_derivative`)
+            (
+                &[("feedback_hysteresis", &[0.0, 0.5, 0.0, 0.0])],
+                &["alpha", "beta", "gamma", "k_3"],
+            ),
+            (
+                &[("creep", &[0.15, 3.4, -0.05, 5.7])],
+                &["g_1", "l_1", "g_2", "l_2"],
+            ),
+            (&[("creep", &[0.0, 3.0])], &["g_1", "l_1"]),
             (&[("dead_time", &[2.0])], &[]),
             (
                 &[
@@ -567,6 +591,21 @@ mod tests {
                 &[
                     "lo", "hi", "F_c", "F_v", "dc_L", "dc_R", "k", "omega", "zeta", "r_1", "w_1",
                     "o_0", "o_1",
+                ],
+            ),
+            (
+                &[
+                    ("friction", &[0.04, 0.15]),
+                    ("feedback_hysteresis", &[0.2, 0.4, -0.1, 0.03]),
+                    ("compliance", &[0.3, 0.9, 0.2]),
+                    ("dynamic_friction", &[-0.1, 0.08, 0.02]),
+                    ("hysteresis_memory", &[0.25, 0.2]),
+                    ("creep", &[0.1, 3.0]),
+                    ("output_offset", &[-0.1, 0.2]),
+                ],
+                &[
+                    "F_c", "F_v", "alpha", "beta", "gamma", "k_3", "k", "omega", "zeta", "k_f",
+                    "z_s", "lambda", "r_1", "w_1", "g_1", "l_1", "o_0", "o_1",
                 ],
             ),
         ];
@@ -595,7 +634,17 @@ mod tests {
             let co = [r(0.1, 1.0), r(0.1, 2.5), r(0.05, 0.8)];
             let hy = [r(0.0, 0.5), r(-0.5, 0.5), r(0.0, 0.8), r(-0.5, 0.5)];
             let oo = [r(-1.0, 1.0), r(-1.0, 1.0)];
-            let each: [(&str, &[f64], &[&str]); 6] = [
+            let df = [r(-0.5, 0.5), r(0.01, 0.5), r(0.0, 0.1)];
+            let fh = [r(0.0, 0.5), r(0.0, 0.5), r(-0.3, 0.3), r(-0.1, 0.1)];
+            let cr = [r(-0.3, 0.3), r(2.4, 11.5), r(-0.3, 0.3), r(2.4, 11.5)];
+            let each: [(&str, &[f64], &[&str]); 9] = [
+                ("dynamic_friction", &df, &["k_f", "z_s", "lambda"]),
+                (
+                    "feedback_hysteresis",
+                    &fh,
+                    &["alpha", "beta", "gamma", "k_3"],
+                ),
+                ("creep", &cr, &["g_1", "l_1", "g_2", "l_2"]),
                 ("saturation", &sat, &["lo", "hi"]),
                 ("friction", &fr, &["F_c", "F_v"]),
                 ("width_drift", &wd, &["dc_L", "dc_R"]),
@@ -610,6 +659,98 @@ mod tests {
                     check_jacobian(&p, &theta(&p), 1e-6, &what);
                 }
             }
+        }
+    }
+
+    /// Dynamic friction, feedback hysteresis and creep at zero size (k_f = 0; alpha = k_3 =
+    /// 0; g_k = 0) with any other parameters: the nominal model bit for bit, from rest and
+    /// held, and their tangent passes' values too.
+    #[test]
+    fn zero_size_dynamic_friction_feedback_hysteresis_and_creep_are_the_nominal_model() {
+        let zero: &[(&str, &[f64])] = &[
+            ("dynamic_friction", &[0.0, 0.03, 0.2]),
+            ("feedback_hysteresis", &[0.0, 0.7, -0.4, 0.0]),
+            ("creep", &[0.0, 2.5, 0.0, 9.0]),
+        ];
+        for (name, u) in inputs(700) {
+            for held in [false, true] {
+                let nominal = problem(&[], &[], &u, start(held));
+                let want = nominal.simulate(&THETA).unwrap();
+                for e in zero {
+                    let p = problem(&[*e], &[], &u, start(held));
+                    assert_eq!(p.simulate(&THETA).unwrap(), want, "{e:?} on {name}");
+                    assert_eq!(p.sensitivity(&THETA).unwrap().output, want);
+                }
+                let all = problem(zero, &[], &u, start(held));
+                assert_eq!(all.simulate(&THETA).unwrap(), want, "all on {name}");
+            }
+        }
+    }
+
+    /// Parameters outside the domains of the three, and a feedback whose state runs away,
+    /// are ModelErrors naming what to give, not panics or non-finite outputs.
+    #[test]
+    fn dynamic_friction_feedback_hysteresis_and_creep_refuse_bad_parameters() {
+        use crate::effects::from_parameters;
+        let bad: &[(&str, &[f64])] = &[
+            ("dynamic_friction", &[0.1, 0.0, 0.0]),
+            ("dynamic_friction", &[0.1, 0.1, -0.1]),
+            ("dynamic_friction", &[f64::NAN, 0.1, 0.0]),
+            ("dynamic_friction", &[0.1, 0.1]),
+            ("feedback_hysteresis", &[0.1, 0.1, 0.1]),
+            ("feedback_hysteresis", &[0.1, f64::INFINITY, 0.1, 0.0]),
+            ("creep", &[0.1, 1.0]),
+            ("creep", &[0.1, 12.0]),
+            ("creep", &[0.1]),
+            ("creep", &[f64::NAN, 3.0]),
+        ];
+        for (name, p) in bad {
+            assert!(
+                matches!(from_parameters(name, p), Err(Error::Model(_))),
+                "{name} {p:?}"
+            );
+        }
+        // a softening cubic stiffness and a Bouc-Wen loop of negative damping run away
+        let u = smooth_input(3000);
+        for params in [[0.0, 0.0, 0.0, -20.0], [1.0, 0.0, -5.0, 0.0]] {
+            let p = problem(&[("feedback_hysteresis", &params)], &[], &u, start(false));
+            let err = p.simulate(&THETA).unwrap_err();
+            assert!(
+                matches!(&err, Error::Model(m) if m.contains("diverged")),
+                "{err:?}"
+            );
+        }
+    }
+
+    /// At alpha = 0 (the edge of its domain) with gamma != 0 the output is homogeneous, not
+    /// linear, in alpha: the Jacobian's column is the derivative as alpha grows, a forward
+    /// difference (its error O(h)).
+    #[test]
+    fn feedback_hysteresis_at_zero_size_has_the_one_sided_derivative() {
+        for (name, u) in inputs(600) {
+            let p = problem(
+                &[("feedback_hysteresis", &[0.0, 0.5, 0.3, 0.0])],
+                &["alpha"],
+                &u,
+                start(false),
+            );
+            let mut th = THETA.to_vec();
+            th.push(0.0);
+            let sens = p.sensitivity(&th).unwrap();
+            let y0 = p.simulate(&th).unwrap();
+            let h = 1e-7;
+            th[11] = h;
+            let yh = p.simulate(&th).unwrap();
+            let (mut err, mut norm) = (0.0f64, 0.0f64);
+            for (t, (a, b)) in yh.iter().zip(&y0).enumerate() {
+                let j = sens.jacobian[t * sens.cols + 11];
+                err = err.max((j - (a - b) / h).abs());
+                norm = norm.max(j.abs());
+            }
+            assert!(
+                norm > 0.1 && err < 1e-5 * norm,
+                "{name}: {err:e} of {norm:e}"
+            );
         }
     }
 
