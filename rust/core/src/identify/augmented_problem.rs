@@ -1,13 +1,15 @@
-//! The diagnosis's refit compiled once: the nominal cascade's structure, effects of the
+//! The diagnosis's refit compiled once: the nominal chain's structure (a cascade, or a
+//! sandwich: the input backlash is the sandwich with na = 1, nb = 0), effects of the
 //! catalogue ([`crate::effects`]) with the names of their parameters that the refit frees,
-//! and the record (u, y, warm-up, its time t0 and time scale, the start: rest or the input
-//! held at u(0), and the backlash memory y(0)), checked on construction. theta is the
-//! cascade's parameter vector (`Structure`'s layout and names) followed by the free effect
+//! and the record (u, y, warm-up, its time t0 and time scale, the start: rest, the input
+//! held at u(0), or an explicit physical state; and the backlash memory y(0)), checked on
+//! construction. theta is the chain's parameter vector (`Structure`'s layout and names: the
+//! sandwich's with r_1 = 1 fixed, as `fit_sandwich`'s refinement) followed by the free effect
 //! parameters in the order given; the other effect parameters (an integer dead time, a
 //! quantiser's step, any not freed) keep their given values. The output-error factor and
 //! gradient carry the exact sensitivities of `augmented_sensitivity`.
 
-use crate::augmented::simulate_augmented;
+use crate::augmented::{check_time, simulate_augmented_chain, AugmentedChain, AugmentedState};
 use crate::effects::{from_parameters, AnyEffect};
 use crate::error::{Error, Result};
 use crate::identify::augmented_sensitivity::{
@@ -22,12 +24,26 @@ use crate::model::backlash::check_memory;
 use crate::model::cascade::{CascadeModel, CascadeState};
 use crate::model::linear::{LinearBlock, LinearState};
 
+/// An explicit physical state before the record, each past most recent first: the input
+/// block's past inputs u_past (na) and outputs x_past (nb), and for the sandwich its output
+/// block's past inputs y_past (nr; y_past[0] is the backlash memory y(0)) and outputs w_past
+/// (ns). The sensitivities take it as a constant.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Past {
+    pub u_past: Vec<f64>,
+    pub x_past: Vec<f64>,
+    pub y_past: Vec<f64>,
+    pub w_past: Vec<f64>,
+}
+
 /// Where the record starts.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RecordStart {
     /// The linear block at its equilibrium with u(0) (the input held before the record)
-    /// instead of at rest.
+    /// instead of at rest; a sandwich's output block at its equilibrium with y(0) held.
     pub held: bool,
+    /// The explicit state (None: rest or held); not with `held`.
+    pub past: Option<Past>,
     /// The backlash memory y(0).
     pub y_prev: f64,
     /// The time of u(0) in the continuous record, in samples (drifts only).
@@ -53,14 +69,15 @@ pub struct AugmentedProblem {
 
 /// The model, effects and their columns of one theta.
 struct At {
-    model: CascadeModel,
+    model: AugmentedChain,
     effects: Vec<(AnyEffect, Vec<Option<usize>>)>,
 }
 
 impl AugmentedProblem {
-    /// `structure` a cascade without feedthrough; `effects` (name, parameters) pairs of the
-    /// catalogue, each name at most once; `free` names of their parameters, each once and
-    /// differentiable; u, y non-empty, finite, one length; 0 <= warmup < len(u).
+    /// `structure` a cascade or sandwich without feedthroughs or initial state; `effects`
+    /// (name, parameters) pairs of the catalogue, each name at most once; `free` names of
+    /// their parameters, each once and differentiable; u, y non-empty, finite, one length;
+    /// 0 <= warmup < len(u); an explicit start's pasts of the structure's orders.
     pub fn new(
         structure: Structure,
         effects: &[(String, Vec<f64>)],
@@ -70,10 +87,10 @@ impl AugmentedProblem {
         warmup: usize,
         start: RecordStart,
     ) -> Result<Self> {
-        if structure.is_sandwich() || structure.feedthrough {
+        if structure.feedthrough || structure.output_feedthrough || structure.initial_state {
             return Err(Error::Data(
-                "the augmented cascade takes a cascade structure without feedthrough (the \
-                 diagnosis delays the record instead)"
+                "the augmented chain takes a cascade or sandwich structure without feedthrough \
+                 (the diagnosis delays the record instead) nor initial state (give the start)"
                     .into(),
             ));
         }
@@ -85,19 +102,11 @@ impl AugmentedProblem {
                 u.len()
             )));
         }
-        if !(start.time_scale.is_finite() && start.time_scale > 0.0) {
-            return Err(Error::Data(format!(
-                "time_scale = {}: give a positive number of samples per time unit",
-                start.time_scale
-            )));
-        }
-        if !start.t0.is_finite() {
-            return Err(Error::Data(format!(
-                "t0 = {}: give the record's start time in samples",
-                start.t0
-            )));
-        }
+        check_time(start.t0, start.time_scale)?;
         check_memory(start.y_prev)?;
+        if let Some(past) = &start.past {
+            check_past(&structure, past, start.y_prev, start.held)?;
+        }
         let mut built: Vec<AnyEffect> = Vec::with_capacity(effects.len());
         for (name, p) in effects {
             let e = from_parameters(name, p)?;
@@ -212,28 +221,44 @@ impl AugmentedProblem {
             .map(|((e, p), c)| Ok((from_parameters(e.name(), &p)?, c)))
             .collect::<Result<_>>()?;
         Ok(At {
-            model: CascadeModel::new(blocks.linear, blocks.backlash),
+            model: AugmentedChain {
+                cascade: CascadeModel::new(blocks.linear, blocks.backlash),
+                output: blocks.output,
+            },
             effects,
         })
     }
 
-    /// The state before the record and d x_past / d theta (nb rows of p): rest, or the
-    /// input held at u(0) with x at its equilibrium sum a / (1 + sum b) u(0).
-    fn state(&self, linear: &LinearBlock) -> Result<(CascadeState, Vec<f64>)> {
+    /// The state before the record, d x_past / d theta (nb rows of p) and d w_past / d theta
+    /// (ns rows, or empty for zeros): the explicit start (constants); rest (a sandwich's
+    /// y_past = [y(0), 0, ..]); or the input held at u(0) with x at its equilibrium
+    /// sum a / (1 + sum b) u(0), and a sandwich's output block at its equilibrium with y(0)
+    /// held, w = sum r / (1 + sum s) y(0).
+    fn state(&self, chain: &AugmentedChain) -> Result<(AugmentedState, Vec<f64>, Vec<f64>)> {
+        let linear = &chain.cascade.linear;
         let (na, nb, p) = (linear.na(), linear.nb(), self.names.len());
+        let y0 = self.start.y_prev;
         let mut dx_past = vec![0.0; nb * p];
+        let mut dw_past = Vec::new();
+        if let Some(past) = &self.start.past {
+            let state = AugmentedState {
+                cascade: CascadeState {
+                    linear: LinearState {
+                        u_past: past.u_past.clone(),
+                        x_past: past.x_past.clone(),
+                    },
+                    y_prev: y0,
+                },
+                output: chain.output.as_ref().map(|_| LinearState {
+                    u_past: past.y_past.clone(),
+                    x_past: past.w_past.clone(),
+                }),
+            };
+            return Ok((state, dx_past, dw_past));
+        }
         let linear_state = if self.start.held {
             let u0 = self.u[0];
-            let den = 1.0 + linear.b().iter().sum::<f64>();
-            if den == 0.0 {
-                return Err(Error::Model(format!(
-                    "the linear block {:?}, {:?} has a pole at z = 1, so no equilibrium holds it \
-                     at a constant input: start from rest (initial_state='rest')",
-                    linear.a(),
-                    linear.b()
-                )));
-            }
-            let x_eq = linear.a().iter().sum::<f64>() / den * u0;
+            let (x_eq, den) = equilibrium(linear, u0)?;
             for row in dx_past.chunks_exact_mut(p) {
                 for v in &mut row[..na] {
                     *v = u0 / den;
@@ -249,38 +274,69 @@ impl AugmentedProblem {
         } else {
             linear.rest_state()
         };
+        let output = match &chain.output {
+            None => None,
+            Some(block) if self.start.held => {
+                // r_1 = 1 fixed: d w_eq / d r_i = y0 / den (i >= 2), d / d s_j = -w_eq / den
+                let (nr, ns) = (block.na(), block.nb());
+                let (w_eq, den) = equilibrium(block, y0)?;
+                let (col_r, col_s) = (
+                    self.structure.layout().r(),
+                    self.structure.layout().r() + nr - 1,
+                );
+                dw_past = vec![0.0; ns * p];
+                for row in dw_past.chunks_exact_mut(p) {
+                    row[col_r..col_s].fill(y0 / den);
+                    row[col_s..col_s + ns].fill(-w_eq / den);
+                }
+                Some(LinearState {
+                    u_past: vec![y0; nr],
+                    x_past: vec![w_eq; ns],
+                })
+            }
+            Some(block) => {
+                let mut rest = block.rest_state();
+                rest.u_past[0] = y0;
+                Some(rest)
+            }
+        };
         Ok((
-            CascadeState {
-                linear: linear_state,
-                y_prev: self.start.y_prev,
+            AugmentedState {
+                cascade: CascadeState {
+                    linear: linear_state,
+                    y_prev: y0,
+                },
+                output,
             },
             dx_past,
+            dw_past,
         ))
     }
 
     /// `pass` on theta's model and effects from the record's start state and its derivatives
-    /// (rest, or held at u[0]): what every sensitivity pass begins with.
+    /// (rest, held at u[0], or explicit): what every sensitivity pass begins with.
     fn with_start<T>(
         &self,
         theta: &[f64],
         pass: impl FnOnce(&At, &Start) -> Result<T>,
     ) -> Result<T> {
         let at = self.at(theta)?;
-        let (state, dx_past) = self.state(&at.model.linear)?;
+        let (state, dx_past, dw_past) = self.state(&at.model)?;
         let start = Start {
             state: &state,
             dx_past: &dx_past,
+            dw_past: &dw_past,
         };
         pass(&at, &start)
     }
 
-    /// The free-run output at theta (`simulate_augmented`).
+    /// The free-run output at theta (`simulate_augmented_chain`).
     pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
         let at = self.at(theta)?;
-        let (state, _) = self.state(&at.model.linear)?;
+        let (state, _, _) = self.state(&at.model)?;
         let effects: Vec<AnyEffect> = at.effects.into_iter().map(|(e, _)| e).collect();
         let s = &self.start;
-        simulate_augmented(&at.model, &effects, &self.u, s.t0, s.time_scale, &state)
+        simulate_augmented_chain(&at.model, &effects, &self.u, s.t0, s.time_scale, &state)
     }
 
     /// sum (y - y_sim)^2 over t >= warmup.
@@ -352,7 +408,7 @@ impl AugmentedProblem {
         })
     }
 
-    /// The refit's guard: the linear block stable and every effect with a free parameter
+    /// The refit's guard: the linear blocks stable and every effect with a free parameter
     /// inside its domain (`Effect::feasible`); an error only for a theta of the wrong length.
     pub fn feasible(&self, theta: &[f64]) -> Result<bool> {
         if theta.len() != self.names.len() {
@@ -360,7 +416,8 @@ impl AugmentedProblem {
         }
         Ok(match self.at(theta) {
             Ok(at) => {
-                at.model.linear.is_stable()
+                at.model.cascade.linear.is_stable()
+                    && at.model.output.as_ref().is_none_or(LinearBlock::is_stable)
                     && at
                         .effects
                         .iter()
@@ -386,6 +443,71 @@ impl AugmentedProblem {
         }
         (lower, upper)
     }
+}
+
+/// x_eq = sum a / (1 + sum b) v of `block` held at the input v, and 1 + sum b.
+fn equilibrium(block: &LinearBlock, v: f64) -> Result<(f64, f64)> {
+    let den = 1.0 + block.b().iter().sum::<f64>();
+    if den == 0.0 {
+        return Err(Error::Model(format!(
+            "the linear block {:?}, {:?} has a pole at z = 1, so no equilibrium holds it at a \
+             constant input: start from rest (initial_state='rest') or give the state",
+            block.a(),
+            block.b()
+        )));
+    }
+    Ok((block.a().iter().sum::<f64>() / den * v, den))
+}
+
+/// An explicit start's pasts of the structure's orders (the core's block: u_past na, x_past
+/// nb, a sandwich's y_past nr with y_past[0] = y(0) and w_past ns; a cascade's empty), finite,
+/// and not with a held start.
+fn check_past(structure: &Structure, past: &Past, y_prev: f64, held: bool) -> Result<()> {
+    if held {
+        return Err(Error::Data(
+            "held=True and an explicit start (u_past, x_past, y_past, w_past) both given: give \
+             one of them"
+                .into(),
+        ));
+    }
+    let sandwich = structure.is_sandwich();
+    let want = [
+        ("u_past", &past.u_past, structure.n_a(), "na"),
+        ("x_past", &past.x_past, structure.nb, "nb"),
+        ("y_past", &past.y_past, structure.n_r(), "nr"),
+        (
+            "w_past",
+            &past.w_past,
+            if sandwich { structure.ns } else { 0 },
+            "ns",
+        ),
+    ];
+    for (name, v, n, order) in want {
+        if v.len() != n {
+            let what = if n == 0 && !sandwich {
+                "none for a cascade".to_string()
+            } else {
+                format!("{order} = {n} of them, most recent first")
+            };
+            return Err(Error::Data(format!(
+                "{name} has {} values: give {what}",
+                v.len()
+            )));
+        }
+        if let Some(x) = v.iter().find(|x| !x.is_finite()) {
+            return Err(Error::Data(format!(
+                "{name} holds {x}: give finite past values"
+            )));
+        }
+    }
+    if sandwich && past.y_past[0] != y_prev {
+        return Err(Error::Data(format!(
+            "y_past[0] = {} but y_prev = {y_prev}: the output block's newest past input is the \
+             backlash memory y(0); give the same value",
+            past.y_past[0]
+        )));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -430,6 +552,7 @@ mod tests {
     fn start(held: bool) -> RecordStart {
         RecordStart {
             held,
+            past: None,
             y_prev: if held { 0.3 } else { 0.0 },
             t0: if held { 700.0 } else { 0.0 },
             time_scale: 250.0,
