@@ -513,8 +513,9 @@ fn check_past(structure: &Structure, past: &Past, y_prev: f64, held: bool) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::identify::sensitivity::cascade_sensitivity;
-    use crate::test_params::{input, lcg_unit, noisy, smooth_input};
+    use crate::identify::sensitivity::{cascade_sensitivity, sandwich_sensitivity};
+    use crate::model::sandwich::{SandwichModel, SandwichState};
+    use crate::test_params::{input, lcg_unit, noisy, perturbed, smooth_input, EXAMPLE2_THETA};
 
     /// Example 1's orders (na = nb = 2, cubic branches) at an estimate off the true values.
     const THETA: [f64; 11] = [
@@ -973,5 +974,322 @@ mod tests {
         assert!(matches!(wild.cost(&th), Err(Error::Model(_))));
         assert!(matches!(wild.oe_factor(&th), Err(Error::Model(_))));
         assert!(matches!(wild.gradient(&th), Err(Error::Model(_))));
+    }
+
+    /// The chains of the tests: (name, structure, theta off the true values): Example 1's
+    /// cascade, Example 2's sandwich and the input backlash (Hammerstein: na = 1, nb = 0)
+    /// with Example 2's backlash and output block.
+    fn chains() -> Vec<(&'static str, Structure, Vec<f64>)> {
+        let ex2 = perturbed(EXAMPLE2_THETA).to_vec();
+        let mut hammerstein = vec![1.0];
+        hammerstein.extend_from_slice(&ex2[4..]);
+        vec![
+            ("cascade", structure(), THETA.to_vec()),
+            (
+                "sandwich",
+                Structure::new(2, 2, 3, 2, 2, false, false).unwrap(),
+                ex2,
+            ),
+            (
+                "hammerstein",
+                Structure::new(1, 0, 3, 2, 2, false, false).unwrap(),
+                hammerstein,
+            ),
+        ]
+    }
+
+    /// The nominal chain of a structure's theta.
+    fn nominal(s: &Structure, th: &[f64]) -> AugmentedChain {
+        let b = s.unpack(th).unwrap();
+        AugmentedChain {
+            cascade: CascadeModel::new(b.linear, b.backlash),
+            output: b.output,
+        }
+    }
+
+    /// How a test record starts.
+    #[derive(Clone, Copy, Debug)]
+    enum From {
+        Rest,
+        Held,
+        /// The state the nominal chain left after 250 samples of the input (explicit).
+        Busy,
+    }
+
+    /// The problem of `effects` with `free` parameters on `u` (y: noise) for a chain; the
+    /// held start takes y(0) inside the dead band at x_eq and u(0) = 0 with friction (see
+    /// `problem`).
+    fn chain_problem(
+        s: Structure,
+        th: &[f64],
+        effects: &[(&str, &[f64])],
+        free: &[&str],
+        u: &[f64],
+        from: From,
+    ) -> AugmentedProblem {
+        let mut u = u.to_vec();
+        let chain = nominal(&s, th);
+        let mut start = RecordStart {
+            held: false,
+            past: None,
+            y_prev: 0.0,
+            t0: 300.0,
+            time_scale: 250.0,
+        };
+        match from {
+            From::Rest => {}
+            From::Held => {
+                start.held = true;
+                if effects.iter().any(|(n, _)| *n == "friction") {
+                    u[0] = 0.0;
+                }
+                let (x_eq, _) = equilibrium(&chain.cascade.linear, u[0]).unwrap();
+                let bl = &chain.cascade.backlash;
+                start.y_prev = 0.5 * (bl.left().value(x_eq) + bl.right().value(x_eq));
+            }
+            From::Busy => {
+                let pre: Vec<f64> = smooth_input(250).iter().map(|v| 1.3 * v).collect();
+                let (past, y_prev) = match &chain.output {
+                    None => {
+                        let m = &chain.cascade;
+                        let st = m.simulate_internals(&pre, &m.rest_state()).unwrap();
+                        let st = st.final_state;
+                        let past = Past {
+                            u_past: st.linear.u_past,
+                            x_past: st.linear.x_past,
+                            ..Past::default()
+                        };
+                        (past, st.y_prev)
+                    }
+                    Some(out) => {
+                        let m = SandwichModel::new(
+                            chain.cascade.linear.clone(),
+                            chain.cascade.backlash.clone(),
+                            out.clone(),
+                        );
+                        let st = m.simulate_internals(&pre, &m.rest_state()).unwrap();
+                        let st = st.final_state;
+                        let y_prev = st.output.u_past[0];
+                        let past = Past {
+                            u_past: st.input.u_past,
+                            x_past: st.input.x_past,
+                            y_past: st.output.u_past,
+                            w_past: st.output.x_past,
+                        };
+                        (past, y_prev)
+                    }
+                };
+                start.past = Some(past);
+                start.y_prev = y_prev;
+            }
+        }
+        let effects: Vec<(String, Vec<f64>)> = effects
+            .iter()
+            .map(|(n, p)| (n.to_string(), p.to_vec()))
+            .collect();
+        let free: Vec<String> = free.iter().map(|n| n.to_string()).collect();
+        let y = noisy(&vec![0.0; u.len()], 4);
+        AugmentedProblem::new(s, &effects, &free, u, y, 5, start).unwrap()
+    }
+
+    /// theta of a chain's problem: the chain's, then the free parameters' given values.
+    fn chain_theta(p: &AugmentedProblem, th: &[f64]) -> Vec<f64> {
+        let mut th = th.to_vec();
+        for &(i, k) in &p.free {
+            th.push(p.effects[i].parameters()[k]);
+        }
+        th
+    }
+
+    /// Every effect (existing and new) alone, and a mix of all stages, on the cascade, the
+    /// sandwich and the input backlash, on every input, from rest, held and from a busy
+    /// explicit start: the exact Jacobian is the central differences'.
+    #[test]
+    fn chain_sensitivities_are_central_differences_for_every_effect_and_start() {
+        type Case<'a> = (&'a str, Vec<f64>, &'a [&'a str]);
+        let mut worst: f64 = 0.0;
+        for (chain_name, s, th) in chains() {
+            for (input_name, u) in inputs(500) {
+                // the sensor's clip at 70 % of the nominal output's range
+                let y0 = chain_problem(s, &th, &[], &[], &u, From::Rest)
+                    .simulate(&th)
+                    .unwrap();
+                let (lo, hi) = y0
+                    .iter()
+                    .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
+                let cases: Vec<Case> = vec![
+                    ("saturation", vec![-0.9, 1.0], &["lo", "hi"]),
+                    ("state_saturation", vec![-0.7, 0.8], &["lo", "hi"]),
+                    ("friction", vec![0.05, 0.1], &["F_c", "F_v"]),
+                    (
+                        "stick_slip",
+                        vec![0.03, 0.1, 0.02, 0.1],
+                        &["F_c", "F_v", "F_s", "v_s"],
+                    ),
+                    ("width_drift", vec![0.3, -0.2], &["dc_L", "dc_R"]),
+                    ("compliance", vec![0.4, 0.6, 0.15], &["k", "omega", "zeta"]),
+                    (
+                        "hysteresis_memory",
+                        vec![0.2, 0.3, 0.5, -0.2],
+                        &["r_1", "w_1", "r_2", "w_2"],
+                    ),
+                    ("output_offset", vec![0.1, 0.3], &["o_0", "o_1"]),
+                    ("sensor_saturation", vec![0.7 * lo, 0.7 * hi], &["lo", "hi"]),
+                    ("dead_time", vec![2.0], &[]),
+                    ("quantization", vec![0.0], &[]),
+                ];
+                for (name, params, free) in &cases {
+                    for from in [From::Rest, From::Held, From::Busy] {
+                        let p = chain_problem(s, &th, &[(name, params)], free, &u, from);
+                        let what =
+                            format!("{chain_name}: {name} {params:?} on {input_name}, {from:?}");
+                        let th = chain_theta(&p, &th);
+                        worst = worst.max(check_jacobian(&p, &th, 1e-6, &what));
+                    }
+                }
+                let mix: &[(&str, &[f64])] = &[
+                    ("state_saturation", &[-0.75, 0.85]),
+                    ("dead_time", &[1.0]),
+                    ("friction", &[0.04, 0.15]),
+                    ("width_drift", &[0.2, 0.1]),
+                    ("compliance", &[0.3, 0.9, 0.2]),
+                    ("hysteresis_memory", &[0.25, 0.2]),
+                    ("output_offset", &[-0.1, 0.2]),
+                    ("sensor_saturation", &[0.8 * lo, 0.8 * hi]),
+                ];
+                let free = [
+                    "lo", "F_c", "F_v", "dc_L", "dc_R", "k", "omega", "zeta", "r_1", "w_1", "o_0",
+                    "o_1",
+                ];
+                for from in [From::Rest, From::Held, From::Busy] {
+                    let p = chain_problem(s, &th, mix, &free, &u, from);
+                    let what = format!("{chain_name}: all stages on {input_name}, {from:?}");
+                    let th = chain_theta(&p, &th);
+                    worst = worst.max(check_jacobian(&p, &th, 1e-6, &what));
+                }
+            }
+        }
+        eprintln!("worst relative error {worst:e}");
+    }
+
+    /// Without effects the sandwich's (and the input backlash's) Jacobian is the sandwich
+    /// refinement's (`identify::sensitivity`), and its output `SandwichModel`'s.
+    #[test]
+    fn without_effects_the_jacobian_is_the_sandwichs() {
+        let u = smooth_input(800);
+        for (name, s, th) in chains().into_iter().skip(1) {
+            let p = chain_problem(s, &th, &[], &[], &u, From::Rest);
+            let got = p.sensitivity(&th).unwrap();
+            let b = s.unpack(&th).unwrap();
+            let out = b.output.unwrap();
+            let want = sandwich_sensitivity(&b.linear, &b.backlash, &out, &u).unwrap();
+            assert_eq!(got.cols, want.cols, "{name}");
+            assert_eq!(got.output, want.output, "{name}");
+            let m = SandwichModel::new(b.linear, b.backlash, out);
+            assert_eq!(got.output, m.simulate(&u, &m.rest_state()).unwrap());
+            let scale = want.jacobian.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            let mut worst: f64 = 0.0;
+            for (k, (a, b)) in got.jacobian.iter().zip(&want.jacobian).enumerate() {
+                worst = worst.max((a - b).abs() / scale);
+                assert!(
+                    (a - b).abs() <= 1e-10 * scale,
+                    "{name} row {} col {}: {a} {b}",
+                    k / got.cols,
+                    k % got.cols
+                );
+            }
+            eprintln!("{name}: max |J - J_sandwich| / max |J| = {worst:e}");
+            // the cost of the factor and of the gradient pass agree
+            let (_, cost) = p.oe_factor(&th).unwrap();
+            let g = p.gradient(&th).unwrap();
+            assert!((g.cost - cost).abs() <= 1e-12 * cost);
+        }
+    }
+
+    /// An explicit start's pasts are checked on construction: lengths of the structure's
+    /// orders, finite, y_past[0] the memory, not with held; feedthroughs are refused.
+    #[test]
+    fn explicit_starts_and_sandwich_structures_are_checked() {
+        let u = smooth_input(50);
+        let sandwich = Structure::new(2, 2, 3, 2, 2, false, false).unwrap();
+        let make = |s: Structure, past: Past, y_prev: f64, held: bool| {
+            let start = RecordStart {
+                held,
+                past: Some(past),
+                y_prev,
+                t0: 0.0,
+                time_scale: 1000.0,
+            };
+            AugmentedProblem::new(s, &[], &[], u.clone(), u.clone(), 0, start)
+        };
+        let good = Past {
+            u_past: vec![0.1, 0.2],
+            x_past: vec![0.3, 0.4],
+            y_past: vec![0.5, 0.6],
+            w_past: vec![0.7, 0.8],
+        };
+        assert!(make(sandwich, good.clone(), 0.5, false).is_ok());
+        let data = |r: Result<AugmentedProblem>, word: &str| {
+            assert!(
+                matches!(&r, Err(Error::Data(m)) if m.contains(word)),
+                "{word}: {r:?}"
+            )
+        };
+        data(make(sandwich, good.clone(), 0.4, false), "y_past[0]");
+        data(make(sandwich, good.clone(), 0.5, true), "held");
+        let names = ["u_past", "x_past", "y_past", "w_past"];
+        for (field, name) in names.iter().enumerate() {
+            fn pick(p: &mut Past, field: usize) -> &mut Vec<f64> {
+                match field {
+                    0 => &mut p.u_past,
+                    1 => &mut p.x_past,
+                    2 => &mut p.y_past,
+                    _ => &mut p.w_past,
+                }
+            }
+            let mut bad = good.clone();
+            pick(&mut bad, field).push(0.0);
+            data(make(sandwich, bad, 0.5, false), name);
+            let mut bad = good.clone();
+            pick(&mut bad, field)[1] = f64::INFINITY;
+            data(make(sandwich, bad, 0.5, false), name);
+        }
+        // a cascade has no output block's past
+        let cascade_past = Past {
+            y_past: vec![0.5],
+            w_past: vec![],
+            ..good.clone()
+        };
+        data(make(structure(), cascade_past, 0.5, false), "y_past");
+        // feedthroughs and an initial state in theta are refused
+        for s in [
+            Structure::new(2, 2, 3, 2, 2, true, false).unwrap(),
+            Structure::new(2, 2, 3, 2, 2, false, true).unwrap(),
+            sandwich.with_initial_state(true),
+        ] {
+            let r = AugmentedProblem::new(s, &[], &[], u.clone(), u.clone(), 0, start(false));
+            assert!(matches!(r, Err(Error::Data(_))), "{s:?}");
+        }
+        // the explicit start is used as given: the plain sandwich from that state
+        let p = make(sandwich, good.clone(), 0.5, false).unwrap();
+        let th = perturbed(EXAMPLE2_THETA);
+        let (lin, bl, out) = crate::test_params::sandwich_from(&th);
+        let m = SandwichModel::new(lin, bl, out);
+        let state = SandwichState {
+            input: LinearState {
+                u_past: good.u_past.clone(),
+                x_past: good.x_past.clone(),
+            },
+            output: LinearState {
+                u_past: good.y_past.clone(),
+                x_past: good.w_past.clone(),
+            },
+        };
+        assert_eq!(p.simulate(&th).unwrap(), m.simulate(&u, &state).unwrap());
+        // an unstable output block is infeasible
+        let mut wild = th;
+        wild[13] = 1.5;
+        assert!(!p.feasible(&wild).unwrap());
+        assert!(p.feasible(&th).unwrap());
     }
 }
