@@ -146,17 +146,22 @@ class Problem:
     def bounds(self) -> tuple[list[float], list[float]]: ...  # (lower, upper): c_L, c_R >= 0
 
 # The diagnosis's refit compiled once (rust/core/src/identify/augmented_problem.rs): the nominal
-# cascade (na, nb, degree; no feedthrough) with effects (name, parameters) of the catalogue, theta
-# = the cascade's parameters then the effect parameters named in free (each differentiable: not
-# dead_time's d nor quantization's q), on (u, y) from rest or held at u[0] (held=True) with the
-# backlash memory y_prev; the protocol of the one Levenberg-Marquardt. The defaults shown as ...
-# are effects = free = [] and time_scale = 1000.0.
+# chain (na, nb, degree; with nr >= 1 the sandwich's output block of orders nr, ns, r_1 = 1 fixed;
+# the input backlash is na = 1, nb = 0; no feedthrough) with effects (name, parameters) of the
+# catalogue, theta = the chain's parameters (Problem.layout's names) then the effect parameters
+# named in free (each differentiable: not dead_time's d nor quantization's q), on (u, y) from
+# rest, held at u[0] (held=True; a sandwich's output block at its equilibrium with y_prev) or an
+# explicit state (any of u_past, x_past, y_past, w_past given, most recent first, the others at
+# rest; y_past[0] must equal y_prev, its default [y_prev, 0, ..]) with the backlash memory
+# y_prev; the protocol of the one Levenberg-Marquardt. The defaults shown as ... are effects =
+# free = [] and time_scale = 1000.0.
 @final
 class AugmentedProblem:
     def __new__(
         cls, u: _F, y: _F, na: int, nb: int, degree: int, effects: list[tuple[str, list[float]]] = ...,
-        free: list[str] = ..., *, warmup: int | None = None, t0: float = 0.0, time_scale: float = ...,
-        held: bool = False, y_prev: float = 0.0,
+        free: list[str] = ..., *, nr: int = 0, ns: int = 0, warmup: int | None = None, t0: float = 0.0,
+        time_scale: float = ..., held: bool = False, y_prev: float = 0.0, u_past: list[float] | None = None,
+        x_past: list[float] | None = None, y_past: list[float] | None = None, w_past: list[float] | None = None,
     ) -> Self: ...
     @property
     def names(self) -> list[str]: ...
@@ -169,7 +174,7 @@ class AugmentedProblem:
     def oe_factor(self, theta: _F) -> tuple[_F, float]: ...  # (R_aug, cost), exact sensitivities
     def gradient(self, theta: _F) -> tuple[_F, float]: ...  # (J^T r, cost)
     def sensitivity(self, theta: _F) -> tuple[_F, _F]: ...  # (y_sim, dense J, N x p)
-    def feasible(self, theta: _F) -> bool: ...  # linear block stable, free effects in their domain
+    def feasible(self, theta: _F) -> bool: ...  # linear blocks stable, free effects in their domain
     def bounds(self) -> tuple[list[float], list[float]]: ...  # c_L, c_R >= 0 as Problem, effects: their domain
 
 # The Wiener-Hammerstein problem compiled once (rust/core/src/identify/wiener_hammerstein.rs):
@@ -204,15 +209,19 @@ def arx(u: _F, y: _F, na: int, nb: int, delay: int, warmup: int) -> _LS: ...
 def arx_records(u: list[_F], y: list[_F], na: int, nb: int, delay: int, warmup: int) -> _LS: ...  # rows of all records stacked
 def spectral_radius(den: list[float]) -> float: ...
 
-# Augmented cascade of the diagnosis (rust/core/src/augmented.rs): the nominal cascade plus the
+# Augmented chain of the diagnosis (rust/core/src/augmented.rs): the nominal cascade, or with r
+# (and s) the sandwich whose output block (eq 29, no feedthrough) follows the load stage, plus the
 # catalogue's effects, each exactly nominal at zero size. Time of u[0] in the continuous record
-# is t0 (drifts: tau = (t0 + t) / time_scale). Empty pasts (None) mean rest. effects is a
-# sequence of (name, parameters) built by the core's effect registry (rust/core/src/effects/).
-# The defaults shown as ... are effects = [] (the nominal cascade) and time_scale = 1000.0.
+# is t0 (drifts: tau = (t0 + t) / time_scale). Pasts not given (None) are at rest; a sandwich's
+# y_past (the output block's past inputs) defaults to [y_prev, 0, ..] and must start with y_prev.
+# effects is a sequence of (name, parameters) built by the core's effect registry
+# (rust/core/src/effects/). The defaults shown as ... are effects = [] (the nominal chain) and
+# time_scale = 1000.0.
 def simulate_augmented(
     a: list[float], b: list[float], c_left: float, c_right: float, m_left: list[float], m_right: list[float],
-    u: _F, *, effects: list[tuple[str, list[float]]] = ..., t0: float = 0.0, time_scale: float = ...,
-    u_past: list[float] | None = None, x_past: list[float] | None = None, y_prev: float = 0.0,
+    u: _F, *, r: list[float] | None = None, s: list[float] | None = None, effects: list[tuple[str, list[float]]] = ...,
+    t0: float = 0.0, time_scale: float = ..., y_prev: float = 0.0, u_past: list[float] | None = None,
+    x_past: list[float] | None = None, y_past: list[float] | None = None, w_past: list[float] | None = None,
 ) -> _F: ...
 
 # Compensation (rust/core/src/compensation): model is a CascadeModel or SandwichModel of this

@@ -32,13 +32,13 @@ pub mod tracking;
 #[cfg(test)]
 extern crate self as backlashid_core;
 
-pub use augmented::simulate_augmented;
+pub use augmented::{simulate_augmented, simulate_augmented_chain, AugmentedChain, AugmentedState};
 pub use compensation::{compensate, Chain, ChainState, Compensator};
 pub use effects::{AnyEffect, Effect};
 pub use error::{Error, Result};
 pub use identify::{
     cascade_oe_factor, cascade_oe_gradient, sandwich_oe_factor, sandwich_oe_gradient, solve_factor,
-    ArxRegression, AugmentedProblem, CascadeRegression, Iteration, OeGradient, Problem,
+    ArxRegression, AugmentedProblem, CascadeRegression, Iteration, OeGradient, Past, Problem,
     RecordStart, SandwichRegression, Structure, WhStructure, WienerHammersteinProblem,
 };
 pub use linalg::{fold_parallel, LeastSquares, TriangularFactor};

@@ -1,13 +1,15 @@
-//! `_core.AugmentedProblem`: the diagnosis's refit of the nominal cascade with effects of the
-//! catalogue, compiled once (structure, effects, the names of the effect parameters the refit
+//! `_core.AugmentedProblem`: the diagnosis's refit of the nominal chain (the cascade, or with
+//! nr > 0 the sandwich; the input backlash is the sandwich with na = 1, nb = 0) with effects of
+//! the catalogue, compiled once (structure, effects, the names of the effect parameters the refit
 //! frees, and the record, checked on construction; `backlashid_core::AugmentedProblem`). Its
-//! methods take only theta (the cascade's parameters, then the free effect parameters) and
+//! methods take only theta (the chain's parameters, then the free effect parameters) and
 //! follow the protocol of the one Levenberg-Marquardt: names, samples, warmup, simulate,
 //! cost, oe_factor, gradient, feasible, bounds.
 
 use backlashid_core as core;
 use pyo3::prelude::*;
 
+use crate::augmented::{past, rest_y_past};
 use crate::convert::{
     factor_out, owned_signal, vec_f64, FactorOut, MatrixOut, SignalIn, SignalOut,
 };
@@ -15,8 +17,9 @@ use crate::errors::run;
 use crate::problem::{warmup_of, whole};
 use numpy::{IntoPyArray, PyArrayMethods};
 
-/// The nominal cascade (orders na, nb, branch degree) with `effects`, their parameters
-/// `free` in theta after the cascade's, on the record (u, y) from rest or held at u[0].
+/// The nominal chain (orders na, nb, branch degree; nr, ns of a sandwich's output block) with
+/// `effects`, their parameters `free` in theta after the chain's, on the record (u, y) from
+/// rest, held at u[0], or an explicit state (u_past, x_past, y_past, w_past).
 #[pyclass(frozen, name = "AugmentedProblem", module = "backlashid._core")]
 pub(crate) struct PyAugmentedProblem {
     inner: core::AugmentedProblem,
@@ -26,8 +29,9 @@ pub(crate) struct PyAugmentedProblem {
 impl PyAugmentedProblem {
     #[new]
     #[pyo3(signature = (
-        u, y, na, nb, degree, effects = vec![], free = vec![], *, warmup = None, t0 = 0.0,
-        time_scale = core::augmented::TIME_SCALE, held = false, y_prev = 0.0
+        u, y, na, nb, degree, effects = vec![], free = vec![], *, nr = 0, ns = 0,
+        warmup = None, t0 = 0.0, time_scale = core::augmented::TIME_SCALE, held = false,
+        y_prev = 0.0, u_past = None, x_past = None, y_past = None, w_past = None
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -39,36 +43,67 @@ impl PyAugmentedProblem {
         degree: &Bound<'_, PyAny>,
         effects: Vec<(String, Vec<f64>)>,
         free: Vec<String>,
+        nr: i64,
+        ns: i64,
         warmup: Option<&Bound<'_, PyAny>>,
         t0: f64,
         time_scale: f64,
         held: bool,
         y_prev: f64,
+        u_past: Option<Vec<f64>>,
+        x_past: Option<Vec<f64>>,
+        y_past: Option<Vec<f64>>,
+        w_past: Option<Vec<f64>>,
     ) -> PyResult<Self> {
         let (na, nb, degree) = (
             whole(na, "na", 1)?,
             whole(nb, "nb", 0)?,
             whole(degree, "degree", 1)?,
         );
+        let order = |v: i64, name: &str| {
+            usize::try_from(v).map_err(|_| {
+                crate::errors::DataError::new_err(format!("{name} = {v}: give a whole number >= 0"))
+            })
+        };
+        let (nr, ns) = (order(nr, "nr")?, order(ns, "ns")?);
         let (u, y) = (owned_signal("u", &u)?, owned_signal("y", &y)?);
         let warmup = match warmup {
             Some(w) => warmup_of(w, u.len())?,
             None => 0,
         };
-        let start = core::RecordStart {
-            held,
-            y_prev,
-            t0,
-            time_scale,
-        };
+        let explicit = u_past.is_some() || x_past.is_some() || y_past.is_some() || w_past.is_some();
         let inner = run(py, || {
-            let s = core::Structure::new(na, nb, degree, 0, 0, false, false)?;
+            if nr == 0 && (ns > 0 || y_past.is_some() || w_past.is_some()) {
+                return Err(core::Error::Data(
+                    "ns, y_past and w_past are the sandwich's output block's: give nr >= 1 \
+                     (nr = 0 is the cascade)"
+                        .into(),
+                ));
+            }
+            let s = core::Structure::new(na, nb, degree, nr, ns, false, false)?;
+            let past = if explicit {
+                Some(core::Past {
+                    u_past: past("u_past", u_past, na, || vec![0.0; na])?,
+                    x_past: past("x_past", x_past, nb, || vec![0.0; nb])?,
+                    y_past: past("y_past", y_past, nr, || rest_y_past(nr, y_prev))?,
+                    w_past: past("w_past", w_past, ns, || vec![0.0; ns])?,
+                })
+            } else {
+                None
+            };
+            let start = core::RecordStart {
+                held,
+                past,
+                y_prev,
+                t0,
+                time_scale,
+            };
             core::AugmentedProblem::new(s, &effects, &free, u, y, warmup, start)
         })?;
         Ok(Self { inner })
     }
 
-    /// The parameter names: the cascade's, then the free effect parameters'.
+    /// The parameter names: the chain's, then the free effect parameters'.
     #[getter]
     fn names(&self) -> Vec<String> {
         self.inner.names().to_vec()
@@ -121,13 +156,13 @@ impl PyAugmentedProblem {
         Ok((vec_f64(py, s.output), jac))
     }
 
-    /// The stability guard: the linear block stable, every effect with a free parameter
+    /// The stability guard: the linear blocks stable, every effect with a free parameter
     /// inside its domain.
     fn feasible(&self, py: Python<'_>, theta: Vec<f64>) -> PyResult<bool> {
         run(py, || self.inner.feasible(&theta))
     }
 
-    /// (lower, upper): the cascade's as Problem.bounds (c_L, c_R >= 0), the effects' domains
+    /// (lower, upper): the chain's as Problem.bounds (c_L, c_R >= 0), the effects' domains
     /// for theirs.
     fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
         self.inner.bounds()

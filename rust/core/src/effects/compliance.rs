@@ -1,5 +1,8 @@
 //! Compliance: y = (1 - k) f + k H(q) f, H a unit-DC-gain 2nd-order resonance with natural
 //! frequency omega (rad/sample) and damping zeta (k = 1: the pure resonance).
+//!
+//! Stage: Load. The resonance is the elastic transmission between the backlash's output and
+//! the load it moves, so in a sandwich it filters f(t) before the output block (eq 29).
 
 use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
@@ -75,8 +78,8 @@ pub fn from_parameters(p: &[f64]) -> Result<Compliance> {
 }
 
 impl Effect for Compliance {
-    // on the backlash output f itself: first of the output stage
-    place!(Output, 4);
+    // on the backlash output f itself: first of the load stage
+    place!(Load, 4);
     fn check(&self) -> Result<()> {
         let (k, omega, zeta) = (self.share, self.omega, self.zeta);
         finite("compliance share k", k, "give a finite share (0 for none)")?;

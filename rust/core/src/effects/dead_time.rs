@@ -1,4 +1,6 @@
 //! Dead time: the linear block sees u(t - d), d extra samples (rest before the record).
+//!
+//! Stage: Drive (a transport delay of the command, before the input block).
 
 use super::{arity, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};

@@ -1,5 +1,7 @@
 //! Friction: u_eff(t) = u(t) - F_c sign(v(t)) - F_v v(t), v(t) = x(t) - x(t-1), sign(0) = 0
 //! (x(t) depends on u_eff up to t-1 only, so this is causal).
+//!
+//! Stage: Drive (the friction force opposes the motor's drive, fed back from x).
 
 use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::Result;

@@ -1,4 +1,7 @@
 //! Extra plays on x: y += sum_k w_k play_{r_k}(x).
+//!
+//! Stage: Load. The plays are further hysteresis of the mechanism, in parallel with the
+//! backlash on the same x(t), so their sum joins f(t) before a sandwich's output block.
 
 use super::{add_at, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
@@ -33,7 +36,7 @@ pub fn from_parameters(p: &[f64]) -> Result<HysteresisMemory> {
 }
 
 impl Effect for HysteresisMemory {
-    place!(Output, 6);
+    place!(Load, 5);
     fn check(&self) -> Result<()> {
         for &(r, w) in &self.plays {
             if !(r.is_finite() && r >= 0.0 && w.is_finite()) {

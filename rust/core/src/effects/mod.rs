@@ -1,4 +1,6 @@
-//! The diagnosis catalogue's effects on the nominal cascade (eq 16 -> eq 1), one module each.
+//! The diagnosis catalogue's effects on the nominal chain, one module each: the cascade (eq 16
+//! -> eq 1) or the sandwich (eq 16 -> eq 1 -> eq 29; the input backlash is the sandwich whose
+//! input block is 1).
 //!
 //! Every effect is an [`Effect`]: its parameters (as the Python catalogue orders them), their
 //! check, and the hooks by which it enters the fused one-pass simulation of
@@ -18,14 +20,22 @@ use std::fmt::Debug;
 
 use crate::error::{Error, Result};
 
-/// Where an effect enters the sample-by-sample simulation.
+/// Where an effect enters the sample-by-sample simulation, in the order of the pass. For a
+/// cascade (no output block) Load and Output are the same place, Load first.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stage {
+    /// On x(t) itself, before the linear block's recursion stores it and the backlash sees
+    /// it ([`Effect::state`]).
+    State,
     /// On the drive input of the linear block, before x(t+1) sees it ([`Effect::drive`]).
     Drive,
     /// On the dead-band widths of the backlash ([`Effect::widths`]).
     Widths,
-    /// On the output after the backlash ([`Effect::output`]).
+    /// On the backlash's output, the load it drives, before the sandwich's output block
+    /// ([`Effect::output`] on f(t)).
+    Load,
+    /// On the measured output, the sensor's side: after the sandwich's output block (eq 29),
+    /// after the load for a cascade ([`Effect::output`]).
     Output,
 }
 
@@ -36,11 +46,11 @@ pub struct Sample<'a> {
     pub t: usize,
     /// The record's input u.
     pub u: &'a [f64],
-    /// x(t), the linear block's output.
+    /// x(t), the linear block's output (after the State stage; its input there).
     pub x: f64,
     /// x(t-1) (x(0) of the state before the record).
     pub x_prev: f64,
-    /// f(t), the backlash output (Output stage only; 0 before).
+    /// f(t), the backlash output (Load and Output stages only; 0 before).
     pub f: f64,
     /// (t0 + t) / time_scale, the time of the drifts.
     pub tau: f64,
@@ -59,7 +69,7 @@ pub struct Tangent<'a> {
     pub dx: &'a [f64],
     /// d x(t-1) / d theta.
     pub dx_prev: &'a [f64],
-    /// d f(t) / d theta (Output stage only; empty before).
+    /// d f(t) / d theta, the backlash output's (Load and Output stages only; empty before).
     pub df: &'a [f64],
     /// d x_free / d theta (Drive stage of a pass with an effect that [`Effect::needs_free`];
     /// empty otherwise). The gain a_1 is column 0 of theta.
@@ -92,6 +102,10 @@ pub trait Effect: Clone + Debug + Send + Sync {
     fn start(&self, _x0: f64, _y0: f64) -> Self {
         self.clone()
     }
+    /// State stage: x(t) as the recursion stores it, given the value `x` so far.
+    fn state(&mut self, x: f64, _s: &Sample) -> f64 {
+        x
+    }
     /// Drive stage: the linear block's input at t, given the value `v` so far.
     fn drive(&mut self, v: f64, _s: &Sample) -> f64 {
         v
@@ -100,7 +114,7 @@ pub trait Effect: Clone + Debug + Send + Sync {
     fn widths(&self, _c_left: f64, _c_right: f64, _s: &Sample) -> Option<(f64, f64)> {
         None
     }
-    /// Output stage: the output at t, given the value `out` so far.
+    /// Load and Output stages: the output at t, given the value `out` so far.
     fn output(&mut self, out: f64, _s: &Sample) -> f64 {
         out
     }
@@ -132,6 +146,12 @@ pub trait Effect: Clone + Debug + Send + Sync {
     /// `cols` are the columns of its own parameters.
     fn start_tangent(&self, x0: f64, y0: f64, _dx0: &[f64], _cols: &Columns) -> Self {
         self.start(x0, y0)
+    }
+    /// `state` with the tangent `dx` of x(t) carried along (the default leaves it: an effect
+    /// of another stage). Only the columns of a, b and the State and Drive effects' own
+    /// parameters may be non-zero in `dx`.
+    fn state_tangent(&mut self, x: f64, _dx: &mut [f64], s: &Sample, _cols: &Columns) -> f64 {
+        self.state(x, s)
     }
     /// `drive` with the tangent `dv` of the value carried along (the default leaves it: an
     /// effect of another stage).
@@ -244,6 +264,11 @@ macro_rules! registry {
             pub fn start(&self, x0: f64, y0: f64) -> AnyEffect {
                 match self { $(AnyEffect::$t(e) => AnyEffect::$t(e.start(x0, y0))),* }
             }
+            /// [`Effect::state`].
+            #[inline(always)]
+            pub fn state(&mut self, x: f64, s: &Sample) -> f64 {
+                match self { $(AnyEffect::$t(e) => e.state(x, s)),* }
+            }
             /// [`Effect::drive`].
             #[inline(always)]
             pub fn drive(&mut self, v: f64, s: &Sample) -> f64 {
@@ -288,6 +313,13 @@ macro_rules! registry {
                 match self {
                     $(AnyEffect::$t(e) => AnyEffect::$t(e.start_tangent(x0, y0, dx0, cols))),*
                 }
+            }
+            /// [`Effect::state_tangent`].
+            #[inline(always)]
+            pub fn state_tangent(
+                &mut self, x: f64, dx: &mut [f64], s: &Sample, cols: &Columns,
+            ) -> f64 {
+                match self { $(AnyEffect::$t(e) => e.state_tangent(x, dx, s, cols)),* }
             }
             /// [`Effect::drive_tangent`].
             #[inline(always)]
@@ -342,4 +374,6 @@ registry!(
     dynamic_friction::DynamicFriction,
     feedback_hysteresis::FeedbackHysteresis,
     creep::Creep,
+    state_saturation::StateSaturation,
+    sensor_saturation::SensorSaturation,
 );

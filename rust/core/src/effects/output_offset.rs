@@ -1,4 +1,7 @@
 //! Output offset and drift: y += o_0 + o_1 tau.
+//!
+//! Stage: Output. A sensor's offset and its drift: on the measured output, after a
+//! sandwich's output block.
 
 use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::Result;

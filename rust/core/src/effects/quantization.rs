@@ -1,4 +1,6 @@
 //! Quantiser: y := q round(y / q) (q = 0: none), after everything else.
+//!
+//! Stage: Output, last: the sensor's resolution, on the measured output.
 
 use super::{arity, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
@@ -21,7 +23,7 @@ pub fn from_parameters(p: &[f64]) -> Result<Quantization> {
 
 impl Effect for Quantization {
     // last: the sensor's resolution
-    place!(Output, 9);
+    place!(Output, 10);
     fn check(&self) -> Result<()> {
         if !(self.quantum.is_finite() && self.quantum >= 0.0) {
             return Err(Error::Model(format!(

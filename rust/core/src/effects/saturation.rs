@@ -1,4 +1,7 @@
 //! Saturation: the drive input clipped to [lo, hi] before the linear block.
+//!
+//! Stage: Drive (the actuator's input limit; `state_saturation` limits x(t) itself and
+//! `sensor_saturation` the measured output).
 
 use super::{add_at, arity, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};

@@ -9,6 +9,8 @@
 //! Stribeck effect (static friction F_c + F_s, falling to F_c as the drive speeds up). Unlike
 //! [`super::friction`], whose sign(v) lags a sample, the drive here stops exactly where the
 //! force is too small to move it. At F_c = F_s = F_v = 0 it is the nominal model.
+//!
+//! Stage: Drive (a force balance on the input block's drive).
 
 use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};

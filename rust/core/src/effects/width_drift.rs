@@ -1,4 +1,6 @@
 //! Width drift: c_L(t) = c_L + dc_L tau, c_R(t) = c_R + dc_R tau, tau = (t0 + t) / time_scale.
+//!
+//! Stage: Widths (wear of the backlash itself).
 
 use super::{add_at, arity, finite, Columns, Effect, Sample, Stage};
 use crate::error::Result;

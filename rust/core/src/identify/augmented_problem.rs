@@ -1,13 +1,15 @@
-//! The diagnosis's refit compiled once: the nominal cascade's structure, effects of the
+//! The diagnosis's refit compiled once: the nominal chain's structure (a cascade, or a
+//! sandwich: the input backlash is the sandwich with na = 1, nb = 0), effects of the
 //! catalogue ([`crate::effects`]) with the names of their parameters that the refit frees,
-//! and the record (u, y, warm-up, its time t0 and time scale, the start: rest or the input
-//! held at u(0), and the backlash memory y(0)), checked on construction. theta is the
-//! cascade's parameter vector (`Structure`'s layout and names) followed by the free effect
+//! and the record (u, y, warm-up, its time t0 and time scale, the start: rest, the input
+//! held at u(0), or an explicit physical state; and the backlash memory y(0)), checked on
+//! construction. theta is the chain's parameter vector (`Structure`'s layout and names: the
+//! sandwich's with r_1 = 1 fixed, as `fit_sandwich`'s refinement) followed by the free effect
 //! parameters in the order given; the other effect parameters (an integer dead time, a
 //! quantiser's step, any not freed) keep their given values. The output-error factor and
 //! gradient carry the exact sensitivities of `augmented_sensitivity`.
 
-use crate::augmented::simulate_augmented;
+use crate::augmented::{check_time, simulate_augmented_chain, AugmentedChain, AugmentedState};
 use crate::effects::{from_parameters, AnyEffect};
 use crate::error::{Error, Result};
 use crate::identify::augmented_sensitivity::{
@@ -22,12 +24,26 @@ use crate::model::backlash::check_memory;
 use crate::model::cascade::{CascadeModel, CascadeState};
 use crate::model::linear::{LinearBlock, LinearState};
 
+/// An explicit physical state before the record, each past most recent first: the input
+/// block's past inputs u_past (na) and outputs x_past (nb), and for the sandwich its output
+/// block's past inputs y_past (nr; y_past[0] is the backlash memory y(0)) and outputs w_past
+/// (ns). The sensitivities take it as a constant.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Past {
+    pub u_past: Vec<f64>,
+    pub x_past: Vec<f64>,
+    pub y_past: Vec<f64>,
+    pub w_past: Vec<f64>,
+}
+
 /// Where the record starts.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RecordStart {
     /// The linear block at its equilibrium with u(0) (the input held before the record)
-    /// instead of at rest.
+    /// instead of at rest; a sandwich's output block at its equilibrium with y(0) held.
     pub held: bool,
+    /// The explicit state (None: rest or held); not with `held`.
+    pub past: Option<Past>,
     /// The backlash memory y(0).
     pub y_prev: f64,
     /// The time of u(0) in the continuous record, in samples (drifts only).
@@ -53,14 +69,15 @@ pub struct AugmentedProblem {
 
 /// The model, effects and their columns of one theta.
 struct At {
-    model: CascadeModel,
+    model: AugmentedChain,
     effects: Vec<(AnyEffect, Vec<Option<usize>>)>,
 }
 
 impl AugmentedProblem {
-    /// `structure` a cascade without feedthrough; `effects` (name, parameters) pairs of the
-    /// catalogue, each name at most once; `free` names of their parameters, each once and
-    /// differentiable; u, y non-empty, finite, one length; 0 <= warmup < len(u).
+    /// `structure` a cascade or sandwich without feedthroughs or initial state; `effects`
+    /// (name, parameters) pairs of the catalogue, each name at most once; `free` names of
+    /// their parameters, each once and differentiable; u, y non-empty, finite, one length;
+    /// 0 <= warmup < len(u); an explicit start's pasts of the structure's orders.
     pub fn new(
         structure: Structure,
         effects: &[(String, Vec<f64>)],
@@ -70,10 +87,10 @@ impl AugmentedProblem {
         warmup: usize,
         start: RecordStart,
     ) -> Result<Self> {
-        if structure.is_sandwich() || structure.feedthrough {
+        if structure.feedthrough || structure.output_feedthrough || structure.initial_state {
             return Err(Error::Data(
-                "the augmented cascade takes a cascade structure without feedthrough (the \
-                 diagnosis delays the record instead)"
+                "the augmented chain takes a cascade or sandwich structure without feedthrough \
+                 (the diagnosis delays the record instead) nor initial state (give the start)"
                     .into(),
             ));
         }
@@ -85,19 +102,11 @@ impl AugmentedProblem {
                 u.len()
             )));
         }
-        if !(start.time_scale.is_finite() && start.time_scale > 0.0) {
-            return Err(Error::Data(format!(
-                "time_scale = {}: give a positive number of samples per time unit",
-                start.time_scale
-            )));
-        }
-        if !start.t0.is_finite() {
-            return Err(Error::Data(format!(
-                "t0 = {}: give the record's start time in samples",
-                start.t0
-            )));
-        }
+        check_time(start.t0, start.time_scale)?;
         check_memory(start.y_prev)?;
+        if let Some(past) = &start.past {
+            check_past(&structure, past, start.y_prev, start.held)?;
+        }
         let mut built: Vec<AnyEffect> = Vec::with_capacity(effects.len());
         for (name, p) in effects {
             let e = from_parameters(name, p)?;
@@ -212,28 +221,44 @@ impl AugmentedProblem {
             .map(|((e, p), c)| Ok((from_parameters(e.name(), &p)?, c)))
             .collect::<Result<_>>()?;
         Ok(At {
-            model: CascadeModel::new(blocks.linear, blocks.backlash),
+            model: AugmentedChain {
+                cascade: CascadeModel::new(blocks.linear, blocks.backlash),
+                output: blocks.output,
+            },
             effects,
         })
     }
 
-    /// The state before the record and d x_past / d theta (nb rows of p): rest, or the
-    /// input held at u(0) with x at its equilibrium sum a / (1 + sum b) u(0).
-    fn state(&self, linear: &LinearBlock) -> Result<(CascadeState, Vec<f64>)> {
+    /// The state before the record, d x_past / d theta (nb rows of p) and d w_past / d theta
+    /// (ns rows, or empty for zeros): the explicit start (constants); rest (a sandwich's
+    /// y_past = [y(0), 0, ..]); or the input held at u(0) with x at its equilibrium
+    /// sum a / (1 + sum b) u(0), and a sandwich's output block at its equilibrium with y(0)
+    /// held, w = sum r / (1 + sum s) y(0).
+    fn state(&self, chain: &AugmentedChain) -> Result<(AugmentedState, Vec<f64>, Vec<f64>)> {
+        let linear = &chain.cascade.linear;
         let (na, nb, p) = (linear.na(), linear.nb(), self.names.len());
+        let y0 = self.start.y_prev;
         let mut dx_past = vec![0.0; nb * p];
+        let mut dw_past = Vec::new();
+        if let Some(past) = &self.start.past {
+            let state = AugmentedState {
+                cascade: CascadeState {
+                    linear: LinearState {
+                        u_past: past.u_past.clone(),
+                        x_past: past.x_past.clone(),
+                    },
+                    y_prev: y0,
+                },
+                output: chain.output.as_ref().map(|_| LinearState {
+                    u_past: past.y_past.clone(),
+                    x_past: past.w_past.clone(),
+                }),
+            };
+            return Ok((state, dx_past, dw_past));
+        }
         let linear_state = if self.start.held {
             let u0 = self.u[0];
-            let den = 1.0 + linear.b().iter().sum::<f64>();
-            if den == 0.0 {
-                return Err(Error::Model(format!(
-                    "the linear block {:?}, {:?} has a pole at z = 1, so no equilibrium holds it \
-                     at a constant input: start from rest (initial_state='rest')",
-                    linear.a(),
-                    linear.b()
-                )));
-            }
-            let x_eq = linear.a().iter().sum::<f64>() / den * u0;
+            let (x_eq, den) = equilibrium(linear, u0)?;
             for row in dx_past.chunks_exact_mut(p) {
                 for v in &mut row[..na] {
                     *v = u0 / den;
@@ -249,38 +274,69 @@ impl AugmentedProblem {
         } else {
             linear.rest_state()
         };
+        let output = match &chain.output {
+            None => None,
+            Some(block) if self.start.held => {
+                // r_1 = 1 fixed: d w_eq / d r_i = y0 / den (i >= 2), d / d s_j = -w_eq / den
+                let (nr, ns) = (block.na(), block.nb());
+                let (w_eq, den) = equilibrium(block, y0)?;
+                let (col_r, col_s) = (
+                    self.structure.layout().r(),
+                    self.structure.layout().r() + nr - 1,
+                );
+                dw_past = vec![0.0; ns * p];
+                for row in dw_past.chunks_exact_mut(p) {
+                    row[col_r..col_s].fill(y0 / den);
+                    row[col_s..col_s + ns].fill(-w_eq / den);
+                }
+                Some(LinearState {
+                    u_past: vec![y0; nr],
+                    x_past: vec![w_eq; ns],
+                })
+            }
+            Some(block) => {
+                let mut rest = block.rest_state();
+                rest.u_past[0] = y0;
+                Some(rest)
+            }
+        };
         Ok((
-            CascadeState {
-                linear: linear_state,
-                y_prev: self.start.y_prev,
+            AugmentedState {
+                cascade: CascadeState {
+                    linear: linear_state,
+                    y_prev: y0,
+                },
+                output,
             },
             dx_past,
+            dw_past,
         ))
     }
 
     /// `pass` on theta's model and effects from the record's start state and its derivatives
-    /// (rest, or held at u[0]): what every sensitivity pass begins with.
+    /// (rest, held at u[0], or explicit): what every sensitivity pass begins with.
     fn with_start<T>(
         &self,
         theta: &[f64],
         pass: impl FnOnce(&At, &Start) -> Result<T>,
     ) -> Result<T> {
         let at = self.at(theta)?;
-        let (state, dx_past) = self.state(&at.model.linear)?;
+        let (state, dx_past, dw_past) = self.state(&at.model)?;
         let start = Start {
             state: &state,
             dx_past: &dx_past,
+            dw_past: &dw_past,
         };
         pass(&at, &start)
     }
 
-    /// The free-run output at theta (`simulate_augmented`).
+    /// The free-run output at theta (`simulate_augmented_chain`).
     pub fn simulate(&self, theta: &[f64]) -> Result<Vec<f64>> {
         let at = self.at(theta)?;
-        let (state, _) = self.state(&at.model.linear)?;
+        let (state, _, _) = self.state(&at.model)?;
         let effects: Vec<AnyEffect> = at.effects.into_iter().map(|(e, _)| e).collect();
         let s = &self.start;
-        simulate_augmented(&at.model, &effects, &self.u, s.t0, s.time_scale, &state)
+        simulate_augmented_chain(&at.model, &effects, &self.u, s.t0, s.time_scale, &state)
     }
 
     /// sum (y - y_sim)^2 over t >= warmup.
@@ -352,7 +408,7 @@ impl AugmentedProblem {
         })
     }
 
-    /// The refit's guard: the linear block stable and every effect with a free parameter
+    /// The refit's guard: the linear blocks stable and every effect with a free parameter
     /// inside its domain (`Effect::feasible`); an error only for a theta of the wrong length.
     pub fn feasible(&self, theta: &[f64]) -> Result<bool> {
         if theta.len() != self.names.len() {
@@ -360,7 +416,8 @@ impl AugmentedProblem {
         }
         Ok(match self.at(theta) {
             Ok(at) => {
-                at.model.linear.is_stable()
+                at.model.cascade.linear.is_stable()
+                    && at.model.output.as_ref().is_none_or(LinearBlock::is_stable)
                     && at
                         .effects
                         .iter()
@@ -388,11 +445,77 @@ impl AugmentedProblem {
     }
 }
 
+/// x_eq = sum a / (1 + sum b) v of `block` held at the input v, and 1 + sum b.
+fn equilibrium(block: &LinearBlock, v: f64) -> Result<(f64, f64)> {
+    let den = 1.0 + block.b().iter().sum::<f64>();
+    if den == 0.0 {
+        return Err(Error::Model(format!(
+            "the linear block {:?}, {:?} has a pole at z = 1, so no equilibrium holds it at a \
+             constant input: start from rest (initial_state='rest') or give the state",
+            block.a(),
+            block.b()
+        )));
+    }
+    Ok((block.a().iter().sum::<f64>() / den * v, den))
+}
+
+/// An explicit start's pasts of the structure's orders (the core's block: u_past na, x_past
+/// nb, a sandwich's y_past nr with y_past[0] = y(0) and w_past ns; a cascade's empty), finite,
+/// and not with a held start.
+fn check_past(structure: &Structure, past: &Past, y_prev: f64, held: bool) -> Result<()> {
+    if held {
+        return Err(Error::Data(
+            "held=True and an explicit start (u_past, x_past, y_past, w_past) both given: give \
+             one of them"
+                .into(),
+        ));
+    }
+    let sandwich = structure.is_sandwich();
+    let want = [
+        ("u_past", &past.u_past, structure.n_a(), "na"),
+        ("x_past", &past.x_past, structure.nb, "nb"),
+        ("y_past", &past.y_past, structure.n_r(), "nr"),
+        (
+            "w_past",
+            &past.w_past,
+            if sandwich { structure.ns } else { 0 },
+            "ns",
+        ),
+    ];
+    for (name, v, n, order) in want {
+        if v.len() != n {
+            let what = if n == 0 && !sandwich {
+                "none for a cascade".to_string()
+            } else {
+                format!("{order} = {n} of them, most recent first")
+            };
+            return Err(Error::Data(format!(
+                "{name} has {} values: give {what}",
+                v.len()
+            )));
+        }
+        if let Some(x) = v.iter().find(|x| !x.is_finite()) {
+            return Err(Error::Data(format!(
+                "{name} holds {x}: give finite past values"
+            )));
+        }
+    }
+    if sandwich && past.y_past[0] != y_prev {
+        return Err(Error::Data(format!(
+            "y_past[0] = {} but y_prev = {y_prev}: the output block's newest past input is the \
+             backlash memory y(0); give the same value",
+            past.y_past[0]
+        )));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::identify::sensitivity::cascade_sensitivity;
-    use crate::test_params::{input, lcg_unit, noisy, smooth_input};
+    use crate::identify::sensitivity::{cascade_sensitivity, sandwich_sensitivity};
+    use crate::model::sandwich::{SandwichModel, SandwichState};
+    use crate::test_params::{input, lcg_unit, noisy, perturbed, smooth_input, EXAMPLE2_THETA};
 
     /// Example 1's orders (na = nb = 2, cubic branches) at an estimate off the true values.
     const THETA: [f64; 11] = [
@@ -430,6 +553,7 @@ mod tests {
     fn start(held: bool) -> RecordStart {
         RecordStart {
             held,
+            past: None,
             y_prev: if held { 0.3 } else { 0.0 },
             t0: if held { 700.0 } else { 0.0 },
             time_scale: 250.0,
@@ -991,5 +1115,322 @@ mod tests {
         assert!(matches!(wild.cost(&th), Err(Error::Model(_))));
         assert!(matches!(wild.oe_factor(&th), Err(Error::Model(_))));
         assert!(matches!(wild.gradient(&th), Err(Error::Model(_))));
+    }
+
+    /// The chains of the tests: (name, structure, theta off the true values): Example 1's
+    /// cascade, Example 2's sandwich and the input backlash (Hammerstein: na = 1, nb = 0)
+    /// with Example 2's backlash and output block.
+    fn chains() -> Vec<(&'static str, Structure, Vec<f64>)> {
+        let ex2 = perturbed(EXAMPLE2_THETA).to_vec();
+        let mut hammerstein = vec![1.0];
+        hammerstein.extend_from_slice(&ex2[4..]);
+        vec![
+            ("cascade", structure(), THETA.to_vec()),
+            (
+                "sandwich",
+                Structure::new(2, 2, 3, 2, 2, false, false).unwrap(),
+                ex2,
+            ),
+            (
+                "hammerstein",
+                Structure::new(1, 0, 3, 2, 2, false, false).unwrap(),
+                hammerstein,
+            ),
+        ]
+    }
+
+    /// The nominal chain of a structure's theta.
+    fn nominal(s: &Structure, th: &[f64]) -> AugmentedChain {
+        let b = s.unpack(th).unwrap();
+        AugmentedChain {
+            cascade: CascadeModel::new(b.linear, b.backlash),
+            output: b.output,
+        }
+    }
+
+    /// How a test record starts.
+    #[derive(Clone, Copy, Debug)]
+    enum From {
+        Rest,
+        Held,
+        /// The state the nominal chain left after 250 samples of the input (explicit).
+        Busy,
+    }
+
+    /// The problem of `effects` with `free` parameters on `u` (y: noise) for a chain; the
+    /// held start takes y(0) inside the dead band at x_eq and u(0) = 0 with friction (see
+    /// `problem`).
+    fn chain_problem(
+        s: Structure,
+        th: &[f64],
+        effects: &[(&str, &[f64])],
+        free: &[&str],
+        u: &[f64],
+        from: From,
+    ) -> AugmentedProblem {
+        let mut u = u.to_vec();
+        let chain = nominal(&s, th);
+        let mut start = RecordStart {
+            held: false,
+            past: None,
+            y_prev: 0.0,
+            t0: 300.0,
+            time_scale: 250.0,
+        };
+        match from {
+            From::Rest => {}
+            From::Held => {
+                start.held = true;
+                if effects.iter().any(|(n, _)| *n == "friction") {
+                    u[0] = 0.0;
+                }
+                let (x_eq, _) = equilibrium(&chain.cascade.linear, u[0]).unwrap();
+                let bl = &chain.cascade.backlash;
+                start.y_prev = 0.5 * (bl.left().value(x_eq) + bl.right().value(x_eq));
+            }
+            From::Busy => {
+                let pre: Vec<f64> = smooth_input(250).iter().map(|v| 1.3 * v).collect();
+                let (past, y_prev) = match &chain.output {
+                    None => {
+                        let m = &chain.cascade;
+                        let st = m.simulate_internals(&pre, &m.rest_state()).unwrap();
+                        let st = st.final_state;
+                        let past = Past {
+                            u_past: st.linear.u_past,
+                            x_past: st.linear.x_past,
+                            ..Past::default()
+                        };
+                        (past, st.y_prev)
+                    }
+                    Some(out) => {
+                        let m = SandwichModel::new(
+                            chain.cascade.linear.clone(),
+                            chain.cascade.backlash.clone(),
+                            out.clone(),
+                        );
+                        let st = m.simulate_internals(&pre, &m.rest_state()).unwrap();
+                        let st = st.final_state;
+                        let y_prev = st.output.u_past[0];
+                        let past = Past {
+                            u_past: st.input.u_past,
+                            x_past: st.input.x_past,
+                            y_past: st.output.u_past,
+                            w_past: st.output.x_past,
+                        };
+                        (past, y_prev)
+                    }
+                };
+                start.past = Some(past);
+                start.y_prev = y_prev;
+            }
+        }
+        let effects: Vec<(String, Vec<f64>)> = effects
+            .iter()
+            .map(|(n, p)| (n.to_string(), p.to_vec()))
+            .collect();
+        let free: Vec<String> = free.iter().map(|n| n.to_string()).collect();
+        let y = noisy(&vec![0.0; u.len()], 4);
+        AugmentedProblem::new(s, &effects, &free, u, y, 5, start).unwrap()
+    }
+
+    /// theta of a chain's problem: the chain's, then the free parameters' given values.
+    fn chain_theta(p: &AugmentedProblem, th: &[f64]) -> Vec<f64> {
+        let mut th = th.to_vec();
+        for &(i, k) in &p.free {
+            th.push(p.effects[i].parameters()[k]);
+        }
+        th
+    }
+
+    /// Every effect (existing and new) alone, and a mix of all stages, on the cascade, the
+    /// sandwich and the input backlash, on every input, from rest, held and from a busy
+    /// explicit start: the exact Jacobian is the central differences'.
+    #[test]
+    fn chain_sensitivities_are_central_differences_for_every_effect_and_start() {
+        type Case<'a> = (&'a str, Vec<f64>, &'a [&'a str]);
+        let mut worst: f64 = 0.0;
+        for (chain_name, s, th) in chains() {
+            for (input_name, u) in inputs(500) {
+                // the sensor's clip at 70 % of the nominal output's range
+                let y0 = chain_problem(s, &th, &[], &[], &u, From::Rest)
+                    .simulate(&th)
+                    .unwrap();
+                let (lo, hi) = y0
+                    .iter()
+                    .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
+                let cases: Vec<Case> = vec![
+                    ("saturation", vec![-0.9, 1.0], &["lo", "hi"]),
+                    ("state_saturation", vec![-0.7, 0.8], &["lo", "hi"]),
+                    ("friction", vec![0.05, 0.1], &["F_c", "F_v"]),
+                    (
+                        "stick_slip",
+                        vec![0.03, 0.1, 0.02, 0.1],
+                        &["F_c", "F_v", "F_s", "v_s"],
+                    ),
+                    ("width_drift", vec![0.3, -0.2], &["dc_L", "dc_R"]),
+                    ("compliance", vec![0.4, 0.6, 0.15], &["k", "omega", "zeta"]),
+                    (
+                        "hysteresis_memory",
+                        vec![0.2, 0.3, 0.5, -0.2],
+                        &["r_1", "w_1", "r_2", "w_2"],
+                    ),
+                    ("output_offset", vec![0.1, 0.3], &["o_0", "o_1"]),
+                    ("sensor_saturation", vec![0.7 * lo, 0.7 * hi], &["lo", "hi"]),
+                    ("dead_time", vec![2.0], &[]),
+                    ("quantization", vec![0.0], &[]),
+                ];
+                for (name, params, free) in &cases {
+                    for from in [From::Rest, From::Held, From::Busy] {
+                        let p = chain_problem(s, &th, &[(name, params)], free, &u, from);
+                        let what =
+                            format!("{chain_name}: {name} {params:?} on {input_name}, {from:?}");
+                        let th = chain_theta(&p, &th);
+                        worst = worst.max(check_jacobian(&p, &th, 1e-6, &what));
+                    }
+                }
+                let mix: &[(&str, &[f64])] = &[
+                    ("state_saturation", &[-0.75, 0.85]),
+                    ("dead_time", &[1.0]),
+                    ("friction", &[0.04, 0.15]),
+                    ("width_drift", &[0.2, 0.1]),
+                    ("compliance", &[0.3, 0.9, 0.2]),
+                    ("hysteresis_memory", &[0.25, 0.2]),
+                    ("output_offset", &[-0.1, 0.2]),
+                    ("sensor_saturation", &[0.8 * lo, 0.8 * hi]),
+                ];
+                let free = [
+                    "lo", "F_c", "F_v", "dc_L", "dc_R", "k", "omega", "zeta", "r_1", "w_1", "o_0",
+                    "o_1",
+                ];
+                for from in [From::Rest, From::Held, From::Busy] {
+                    let p = chain_problem(s, &th, mix, &free, &u, from);
+                    let what = format!("{chain_name}: all stages on {input_name}, {from:?}");
+                    let th = chain_theta(&p, &th);
+                    worst = worst.max(check_jacobian(&p, &th, 1e-6, &what));
+                }
+            }
+        }
+        eprintln!("worst relative error {worst:e}");
+    }
+
+    /// Without effects the sandwich's (and the input backlash's) Jacobian is the sandwich
+    /// refinement's (`identify::sensitivity`), and its output `SandwichModel`'s.
+    #[test]
+    fn without_effects_the_jacobian_is_the_sandwichs() {
+        let u = smooth_input(800);
+        for (name, s, th) in chains().into_iter().skip(1) {
+            let p = chain_problem(s, &th, &[], &[], &u, From::Rest);
+            let got = p.sensitivity(&th).unwrap();
+            let b = s.unpack(&th).unwrap();
+            let out = b.output.unwrap();
+            let want = sandwich_sensitivity(&b.linear, &b.backlash, &out, &u).unwrap();
+            assert_eq!(got.cols, want.cols, "{name}");
+            assert_eq!(got.output, want.output, "{name}");
+            let m = SandwichModel::new(b.linear, b.backlash, out);
+            assert_eq!(got.output, m.simulate(&u, &m.rest_state()).unwrap());
+            let scale = want.jacobian.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            let mut worst: f64 = 0.0;
+            for (k, (a, b)) in got.jacobian.iter().zip(&want.jacobian).enumerate() {
+                worst = worst.max((a - b).abs() / scale);
+                assert!(
+                    (a - b).abs() <= 1e-10 * scale,
+                    "{name} row {} col {}: {a} {b}",
+                    k / got.cols,
+                    k % got.cols
+                );
+            }
+            eprintln!("{name}: max |J - J_sandwich| / max |J| = {worst:e}");
+            // the cost of the factor and of the gradient pass agree
+            let (_, cost) = p.oe_factor(&th).unwrap();
+            let g = p.gradient(&th).unwrap();
+            assert!((g.cost - cost).abs() <= 1e-12 * cost);
+        }
+    }
+
+    /// An explicit start's pasts are checked on construction: lengths of the structure's
+    /// orders, finite, y_past[0] the memory, not with held; feedthroughs are refused.
+    #[test]
+    fn explicit_starts_and_sandwich_structures_are_checked() {
+        let u = smooth_input(50);
+        let sandwich = Structure::new(2, 2, 3, 2, 2, false, false).unwrap();
+        let make = |s: Structure, past: Past, y_prev: f64, held: bool| {
+            let start = RecordStart {
+                held,
+                past: Some(past),
+                y_prev,
+                t0: 0.0,
+                time_scale: 1000.0,
+            };
+            AugmentedProblem::new(s, &[], &[], u.clone(), u.clone(), 0, start)
+        };
+        let good = Past {
+            u_past: vec![0.1, 0.2],
+            x_past: vec![0.3, 0.4],
+            y_past: vec![0.5, 0.6],
+            w_past: vec![0.7, 0.8],
+        };
+        assert!(make(sandwich, good.clone(), 0.5, false).is_ok());
+        let data = |r: Result<AugmentedProblem>, word: &str| {
+            assert!(
+                matches!(&r, Err(Error::Data(m)) if m.contains(word)),
+                "{word}: {r:?}"
+            )
+        };
+        data(make(sandwich, good.clone(), 0.4, false), "y_past[0]");
+        data(make(sandwich, good.clone(), 0.5, true), "held");
+        let names = ["u_past", "x_past", "y_past", "w_past"];
+        for (field, name) in names.iter().enumerate() {
+            fn pick(p: &mut Past, field: usize) -> &mut Vec<f64> {
+                match field {
+                    0 => &mut p.u_past,
+                    1 => &mut p.x_past,
+                    2 => &mut p.y_past,
+                    _ => &mut p.w_past,
+                }
+            }
+            let mut bad = good.clone();
+            pick(&mut bad, field).push(0.0);
+            data(make(sandwich, bad, 0.5, false), name);
+            let mut bad = good.clone();
+            pick(&mut bad, field)[1] = f64::INFINITY;
+            data(make(sandwich, bad, 0.5, false), name);
+        }
+        // a cascade has no output block's past
+        let cascade_past = Past {
+            y_past: vec![0.5],
+            w_past: vec![],
+            ..good.clone()
+        };
+        data(make(structure(), cascade_past, 0.5, false), "y_past");
+        // feedthroughs and an initial state in theta are refused
+        for s in [
+            Structure::new(2, 2, 3, 2, 2, true, false).unwrap(),
+            Structure::new(2, 2, 3, 2, 2, false, true).unwrap(),
+            sandwich.with_initial_state(true),
+        ] {
+            let r = AugmentedProblem::new(s, &[], &[], u.clone(), u.clone(), 0, start(false));
+            assert!(matches!(r, Err(Error::Data(_))), "{s:?}");
+        }
+        // the explicit start is used as given: the plain sandwich from that state
+        let p = make(sandwich, good.clone(), 0.5, false).unwrap();
+        let th = perturbed(EXAMPLE2_THETA);
+        let (lin, bl, out) = crate::test_params::sandwich_from(&th);
+        let m = SandwichModel::new(lin, bl, out);
+        let state = SandwichState {
+            input: LinearState {
+                u_past: good.u_past.clone(),
+                x_past: good.x_past.clone(),
+            },
+            output: LinearState {
+                u_past: good.y_past.clone(),
+                x_past: good.w_past.clone(),
+            },
+        };
+        assert_eq!(p.simulate(&th).unwrap(), m.simulate(&u, &state).unwrap());
+        // an unstable output block is infeasible
+        let mut wild = th;
+        wild[13] = 1.5;
+        assert!(!p.feasible(&wild).unwrap());
+        assert!(p.feasible(&th).unwrap());
     }
 }

@@ -1,13 +1,14 @@
-//! Exact forward sensitivities of the augmented cascade ([`crate::augmented`]): the one-pass
+//! Exact forward sensitivities of the augmented chain ([`crate::augmented`]): the one-pass
 //! simulation run again with d/dtheta carried beside every value, theta = the nominal
-//! cascade's parameters (`problem::Layout`'s columns) followed by the refitted effects'
-//! continuous parameters. Per sample t:
+//! chain's parameters (`problem::Layout`'s columns, then the sandwich's r_2..r_nr,
+//! s_1..s_ns) followed by the refitted effects' continuous parameters. Per sample t:
 //!
 //! - linear block (eq 16) with its input u_eff depending on theta (saturation's levels,
 //!   friction's feedback): dx(t) = sum_i a_i du_eff(t-i) - sum_j b_j dx(t-j) +
 //!   [dx/da_i = u_eff(t-i), dx/db_j = -x(t-j)], the past before the record carried as
-//!   given (zero at rest; the held start's equilibrium x = sum a / (1 + sum b) u(0) has its
-//!   own);
+//!   given (zero at rest or from an explicit start, a constant; the held start's
+//!   equilibrium x = sum a / (1 + sum b) u(0) has its own);
+//! - state stage: each effect's `state_tangent` (dx(t) itself, before the recursion keeps it);
 //! - drive stage: each effect's `drive_tangent` (d u_eff);
 //! - widths stage: each effect's `widths_tangent` (d c_L(t), d c_R(t); e_{c_L}, e_{c_R}
 //!   without one);
@@ -15,22 +16,26 @@
 //!   widths' tangents in place of e_{c_L}, e_{c_R}: on L dy = L'(xi1) (dx + dc_L) +
 //!   [dL/dm_Li = xi1^i], on R dy = R'(xi2) (dx - dc_R) + [dR/dm_Ri = xi2^i], holding dy(t) =
 //!   dy(t-1);
+//! - load stage: each effect's `output_tangent` on df;
+//! - the sandwich's output block (eq 29): dw(t) = sum_i r_i dy_L(t-i) - sum_j s_j dw(t-j) +
+//!   [dw/dr_i = y_L(t-i) for i >= 2 (r_1 = 1 fixed), dw/ds_j = -w(t-j)], the pasts before
+//!   the record as given (dy_L zero; dw zero but for the held start's equilibrium);
 //! - output stage: each effect's `output_tangent`.
 //!
 //! `sensitivity`'s cascade recursion filters lags of u and x by 1/B once for all columns; that
 //! needs an input free of theta, which a drive effect breaks, so the linear block's tangent
 //! here is the plain recursion on dx (p (na + nb) multiply-adds a sample).
 
-use crate::augmented::{branch, diverged, free_gain, free_response};
-use crate::effects::{AnyEffect, Sample, Stage, Tangent};
+use crate::augmented::{
+    branch, diverged, free_gain, free_response, AugmentedChain, AugmentedState, Stages,
+};
+use crate::effects::{AnyEffect, Sample, Tangent};
 use crate::error::{Error, Result};
 use crate::guard;
 use crate::identify::gradient::OeGradient;
 use crate::identify::problem::Layout;
 use crate::identify::sensitivity::{branch_degree, finish, overflowed, Move, Sensitivity};
 use crate::linalg::streaming::{fold_stream_parts, TriangularFactor};
-use crate::model::backlash::check_memory;
-use crate::model::cascade::{CascadeModel, CascadeState};
 
 /// d branch / d xi by Horner's rule (as `Branch::slope`).
 #[inline(always)]
@@ -74,25 +79,37 @@ impl Ring {
         &self.data[at * self.p..(at + 1) * self.p]
     }
 
-    /// The newest row becomes lag 1 (its columns `cols` written; the others keep zero).
+    /// The slot of the newest row, which becomes lag 1 (the oldest's values until written).
     #[inline(always)]
-    fn push(&mut self, row: &[f64], cols: &XCols) {
+    fn advance(&mut self) -> &mut [f64] {
         self.head = if self.head == 0 {
             self.rows - 1
         } else {
             self.head - 1
         };
         let at = self.head * self.p;
-        let slot = &mut self.data[at..at + self.p];
+        &mut self.data[at..at + self.p]
+    }
+
+    /// The newest row becomes lag 1 (its columns `cols` written; the others keep zero).
+    #[inline(always)]
+    fn push(&mut self, row: &[f64], cols: &XCols) {
+        let slot = self.advance();
         slot[..cols.lead].copy_from_slice(&row[..cols.lead]);
         for &c in &cols.extra {
             slot[c] = row[c];
         }
     }
+
+    /// The newest row becomes lag 1, all its columns written.
+    #[inline(always)]
+    fn push_all(&mut self, row: &[f64]) {
+        self.advance().copy_from_slice(row);
+    }
 }
 
 /// The columns in which x (and u_eff) can depend on theta: a, b (the first `lead`) and the
-/// drive effects' free parameters (`extra`, after the cascade's); the others of dx stay 0.
+/// state and drive effects' free parameters (`extra`, after the cascade's); the others of dx stay 0.
 struct XCols {
     lead: usize,
     extra: Vec<usize>,
@@ -124,21 +141,23 @@ impl XCols {
     }
 }
 
-/// The start of a tangent pass: the state before the record and d x_past / d theta (nb rows
-/// of p, most recent first; the past inputs u_past are constants).
+/// The start of a tangent pass: the state before the record, d x_past / d theta (nb rows
+/// of p, most recent first; the past inputs u_past are constants) and for the sandwich
+/// d w_past / d theta (ns rows of p, or empty for zeros; its past inputs are constants).
 pub(crate) struct Start<'a> {
-    pub(crate) state: &'a CascadeState,
+    pub(crate) state: &'a AugmentedState,
     pub(crate) dx_past: &'a [f64],
+    pub(crate) dw_past: &'a [f64],
 }
 
-/// The augmented cascade's output y(t) and its row dy(t) / d theta (`p` wide), handed to
+/// The augmented chain's output y(t) and its row dy(t) / d theta (`p` wide), handed to
 /// `visit(t, y(t), dy(t), same)` for t = 0, 1, ...; `same` says dy(t) equals dy(t-1) bit for
-/// bit (a held backlash whose output effects left the row alone). `effects` pairs each effect
-/// with the columns of its parameters (None: held). The values are those of
-/// `simulate_augmented` to the bit.
+/// bit (a cascade's held backlash whose output effects left the row alone). `effects` pairs
+/// each effect with the columns of its parameters (None: held). The values are those of
+/// `simulate_augmented_chain` to the bit.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn walk_augmented(
-    model: &CascadeModel,
+    chain: &AugmentedChain,
     effects: &[(AnyEffect, Vec<Option<usize>>)],
     u: &[f64],
     t0: f64,
@@ -147,21 +166,33 @@ pub(crate) fn walk_augmented(
     p: usize,
     mut visit: impl FnMut(usize, f64, &[f64], bool) -> Result<()>,
 ) -> Result<()> {
-    let lin = &model.linear;
-    let bl = &model.backlash;
-    let state = start.state;
-    lin.check_state(&state.linear, "state.linear")?;
-    check_memory(state.y_prev)?;
+    let lin = &chain.cascade.linear;
+    let bl = &chain.cascade.backlash;
+    chain.check_state(start.state)?;
+    let state = &start.state.cascade;
+    let output = chain.output.as_ref().zip(start.state.output.as_ref());
     let n = branch_degree(bl)?;
     let (a, b) = (lin.a(), lin.b());
     let (na, nb) = (a.len(), b.len());
     let lay = Layout { na, nb, n };
-    if p < lay.r() || start.dx_past.len() != nb * p || lin.feedthrough().is_some() {
+    let (r, s_out): (&[f64], &[f64]) = match output {
+        Some((block, _)) => (block.a(), block.b()),
+        None => (&[], &[]),
+    };
+    let (nr, ns) = (r.len(), s_out.len());
+    // the columns of r_2..r_nr and s_1..s_ns
+    let (col_r, col_s) = (lay.r(), lay.r() + nr.saturating_sub(1));
+    let nominal = col_s + ns;
+    if p < nominal
+        || start.dx_past.len() != nb * p
+        || !(start.dw_past.is_empty() || start.dw_past.len() == ns * p)
+        || lin.feedthrough().is_some()
+    {
         return Err(Error::Data(format!(
-            "augmented sensitivities: {p} columns for a cascade of {} parameters, {} values of \
-             d x_past for {nb} x {p} (internal shape mismatch)",
-            lay.r(),
-            start.dx_past.len()
+            "augmented sensitivities: {p} columns for a chain of {nominal} parameters, {} values \
+             of d x_past for {nb} x {p}, {} of d w_past for {ns} x {p} (internal shape mismatch)",
+            start.dx_past.len(),
+            start.dw_past.len()
         )));
     }
     let (m_l, m_r) = (bl.left().coefficients(), bl.right().coefficients());
@@ -173,7 +204,7 @@ pub(crate) fn walk_augmented(
         vec![0.0; p]
     };
     // fresh copies with their memories at rest on x(0), y(0), in the order of the pass
-    let mut running: Vec<(AnyEffect, &[Option<usize>])> = effects
+    let running: Vec<(AnyEffect, &[Option<usize>])> = effects
         .iter()
         .map(|(e, cols)| {
             e.check()?;
@@ -189,22 +220,19 @@ pub(crate) fn walk_augmented(
             ))
         })
         .collect::<Result<_>>()?;
-    running.sort_by_key(|(e, _)| e.order());
-    let mut drive = Vec::new();
-    let mut widths = Vec::new();
-    let mut output = Vec::new();
-    for e in running {
-        match e.0.stage() {
-            Stage::Drive => drive.push(e),
-            Stage::Widths => widths.push(e),
-            Stage::Output => output.push(e),
-        }
-    }
+    let Stages {
+        state: mut on_x,
+        mut drive,
+        widths,
+        mut load,
+        output: mut sensor,
+    } = Stages::sort(running, |e| &e.0);
     let driven = !drive.is_empty();
-    // the columns x can depend on: a, b and the drive effects' free parameters (every other
-    // column of dx, du_eff stays 0; the recursions run over these only)
-    let mut extra: Vec<usize> = drive
+    // the columns x can depend on: a, b and the state and drive effects' free parameters
+    // (every other column of dx, du_eff stays 0; the recursions run over these only)
+    let mut extra: Vec<usize> = on_x
         .iter()
+        .chain(&drive)
         .flat_map(|(_, cols)| cols.iter().flatten().copied())
         .collect();
     extra.sort_unstable();
@@ -249,9 +277,17 @@ pub(crate) fn walk_augmented(
     let mut prev_out = vec![0.0; p];
     let mut y_prev = state.y_prev;
     let mut x_prev = x0;
+    // the output block's input y_L and output w with their tangents over nr and ns lags
+    let len_w = if output.is_some() { len } else { 0 };
+    let (mut y_load, mut w) = (
+        guard::filled(len_w, 0.0, "y_load")?,
+        guard::filled(len_w, 0.0, "w")?,
+    );
+    let mut dyl = Ring::new(nr.max(1), p, &[]);
+    let mut dwr = Ring::new(ns.max(1), p, start.dw_past);
+    let mut dw = vec![0.0; if output.is_some() { p } else { 0 }];
     for t in 0..len {
-        let xt = lin.output_at(&u_eff, &x, t, &state.linear);
-        x[t] = xt;
+        let mut xt = lin.output_at(&u_eff, &x, t, &state.linear);
         // dx(t), in the columns of xcols (the others stay 0)
         xcols.zero(&mut dxt);
         if driven {
@@ -286,6 +322,12 @@ pub(crate) fn walk_augmented(
             x_free: 0.0,
             gain,
         };
+        // x(t) as the recursion stores it
+        for (e, cols) in on_x.iter_mut() {
+            xt = e.state_tangent(xt, &mut dxt, &s, cols);
+        }
+        x[t] = xt;
+        s.x = xt;
         if free {
             // x_free = sum_{i >= 2} a_i u_eff(t+1-i) - sum_j b_j x(t+1-j), and its tangent
             s.x_free = free_response(lin, &u_eff, &x, t, &state.linear);
@@ -388,7 +430,7 @@ pub(crate) fn walk_augmented(
         y_prev = f;
         s.f = f;
         let mut out = f;
-        if output.is_empty() {
+        if load.is_empty() && output.is_none() && sensor.is_empty() {
             // the row is dy itself
             if !(out.is_finite() && xt.is_finite()) {
                 return Err(diverged(t, xt, out));
@@ -402,13 +444,51 @@ pub(crate) fn walk_augmented(
                 df: &dy,
                 dx_free: &[],
             };
-            for (e, cols) in output.iter_mut() {
+            for (e, cols) in load.iter_mut() {
+                out = e.output_tangent(out, &mut dout, &s, &d, cols);
+            }
+            if let Some((block, past)) = output {
+                // eq (29) of y_L up to t-1, then y_L(t) and its tangent join the past
+                let wt = block.output_at(&y_load, &w, t, past);
+                dw.fill(0.0);
+                for (i, ri) in r.iter().enumerate() {
+                    for (o, v) in dw.iter_mut().zip(dyl.lag(i + 1)) {
+                        *o += ri * v;
+                    }
+                    if i >= 1 {
+                        dw[col_r + i - 1] += if i < t {
+                            y_load[t - i - 1]
+                        } else {
+                            past.u_past[i - t]
+                        };
+                    }
+                }
+                for (j, sj) in s_out.iter().enumerate() {
+                    for (o, v) in dw.iter_mut().zip(dwr.lag(j + 1)) {
+                        *o -= sj * v;
+                    }
+                    dw[col_s + j] -= if j < t {
+                        w[t - j - 1]
+                    } else {
+                        past.x_past[j - t]
+                    };
+                }
+                y_load[t] = out;
+                w[t] = wt;
+                dyl.push_all(&dout);
+                if ns > 0 {
+                    dwr.push_all(&dw);
+                }
+                out = wt;
+                dout.copy_from_slice(&dw);
+            }
+            for (e, cols) in sensor.iter_mut() {
                 out = e.output_tangent(out, &mut dout, &s, &d, cols);
             }
             if !(out.is_finite() && xt.is_finite()) {
                 return Err(diverged(t, xt, out));
             }
-            let same = mv == Move::Hold && t > 0 && dout == prev_out;
+            let same = output.is_none() && mv == Move::Hold && t > 0 && dout == prev_out;
             visit(t, out, &dout, same)?;
             std::mem::swap(&mut dout, &mut prev_out);
         }
@@ -421,7 +501,7 @@ pub(crate) fn walk_augmented(
 /// `augmented_oe_factor`).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn augmented_sensitivity(
-    model: &CascadeModel,
+    chain: &AugmentedChain,
     effects: &[(AnyEffect, Vec<Option<usize>>)],
     u: &[f64],
     t0: f64,
@@ -435,7 +515,7 @@ pub(crate) fn augmented_sensitivity(
         cols: p,
     };
     walk_augmented(
-        model,
+        chain,
         effects,
         u,
         t0,
@@ -460,7 +540,7 @@ pub(crate) fn augmented_sensitivity(
 /// (`RowSink::repeat`). The folding runs on a second thread when `threads` >= 2.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn augmented_oe_factor(
-    model: &CascadeModel,
+    chain: &AugmentedChain,
     effects: &[(AnyEffect, Vec<Option<usize>>)],
     u: &[f64],
     y: &[f64],
@@ -471,11 +551,11 @@ pub(crate) fn augmented_oe_factor(
     p: usize,
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
-    let lin = &model.linear;
+    let lin = &chain.cascade.linear;
     let lay = Layout {
         na: lin.na(),
         nb: lin.nb(),
-        n: branch_degree(&model.backlash)?,
+        n: branch_degree(&chain.cascade.backlash)?,
     };
     // L's own columns c_l..m_r1, R's m_r1..r
     let (c_l, m_r1, r_end) = (lay.c_l(), lay.m_r1(), lay.r());
@@ -485,7 +565,7 @@ pub(crate) fn augmented_oe_factor(
     let widths = [left.len(), right.len(), p];
     let streamed = fold_stream_parts(&widths, threads, |sink| {
         walk_augmented(
-            model,
+            chain,
             effects,
             u,
             t0,
@@ -526,7 +606,7 @@ pub(crate) fn augmented_oe_factor(
 /// g = J^T r over t >= `warmup` and the cost, in the forward pass (no factor).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn augmented_oe_gradient(
-    model: &CascadeModel,
+    chain: &AugmentedChain,
     effects: &[(AnyEffect, Vec<Option<usize>>)],
     u: &[f64],
     y: &[f64],
@@ -541,7 +621,7 @@ pub(crate) fn augmented_oe_gradient(
         cost: 0.0,
     };
     walk_augmented(
-        model,
+        chain,
         effects,
         u,
         t0,

@@ -15,7 +15,7 @@ mod rows;
 pub mod sensitivity;
 pub mod wiener_hammerstein;
 
-pub use augmented_problem::{AugmentedProblem, RecordStart};
+pub use augmented_problem::{AugmentedProblem, Past, RecordStart};
 pub use bands::{cascade_output_variance, sandwich_output_variance, OutputVariance};
 pub use gradient::{cascade_oe_gradient, sandwich_oe_gradient, Motion, OeGradient};
 pub use initial::InitialState;
