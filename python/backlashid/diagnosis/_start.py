@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from .._numerics import minimize_bounded
 from ..errors import BacklashIdError
-from ..identify import estimate_state
+from ..identify import estimate_state, refine_values
 from ..models import CascadeModel, CascadeState
 from ._records import Nominal
 from .effects._base import Start, held_past, start_of
@@ -37,7 +37,6 @@ __all__ = ["INITIAL_STATES", "describe", "estimated_start", "held_state", "nomin
 INITIAL_STATES = ("estimate", "rest")
 MEMORY_GRID = 33  # backlash memories tried before the 1-D refinement (estimated_start)
 MEMORY_PREFIX = 256  # first prefix of the record tried for the memory search (doubled until settled)
-GN_STEPS = 6  # damped Gauss-Newton steps of an augmented model's start
 Array = NDArray[np.float64]
 
 
@@ -90,8 +89,8 @@ def _with(start: Start, keys: list[str], v: Array) -> Start:
 
 def refined_start(simulate: Callable[[Array, Start], Array], u: Array, y: Array, samples: int, start: Start) -> Start:
     """An augmented model's start: the internal values of ``start`` refitted to the record's
-    first ``samples`` samples (damped Gauss-Newton, forward-difference Jacobian of the core's
-    simulation); ``start`` itself where that does not lower the error.
+    first ``samples`` samples (:func:`~backlashid.identify.refine_values`, damped Gauss-Newton on
+    the core's simulation); ``start`` itself where that does not lower the error.
 
     Parameters
     ----------
@@ -122,37 +121,7 @@ def refined_start(simulate: Callable[[Array, Start], Array], u: Array, y: Array,
             return None
         return r if np.all(np.isfinite(r)) else None
 
-    r = residual(v0)
-    if r is None or v0.size == 0:
-        return start
-    v, cost = v0.copy(), float(r @ r)
-    lam = 1e-3
-    for _ in range(GN_STEPS):
-        h = 1e-6 * (1.0 + np.abs(v))
-        cols = []
-        for k in range(v.size):
-            vk = v.copy()
-            vk[k] += h[k]
-            rk = residual(vk)
-            if rk is None:
-                return _with(start, keys, v)
-            cols.append((r - rk) / h[k])  # d(simulation)/dv
-        jac = np.column_stack(cols)
-        jtj, jtr = jac.T @ jac, jac.T @ r
-        improved = False
-        for _ in range(8):
-            step = np.linalg.solve(jtj + lam * (np.diag(np.diag(jtj)) + 1e-12 * np.eye(v.size)), jtr)
-            trial = v + step
-            rt = residual(trial)
-            if rt is not None and float(rt @ rt) < cost:
-                v, r, cost = trial, rt, float(rt @ rt)
-                lam = max(lam / 10.0, 1e-9)
-                improved = True
-                break
-            lam *= 10.0
-        if not improved or float(np.max(np.abs(step))) <= 1e-10 * (1.0 + float(np.max(np.abs(v)))):
-            break
-    return _with(start, keys, v)
+    return _with(start, keys, refine_values(residual, v0))
 
 
 def describe(how: str, samples: int) -> str:

@@ -15,7 +15,7 @@ from ._metrics import Metrics, evaluate, fit_percent, nrmse, one_step_prediction
 from ._refine import OutputErrorFit, levenberg_marquardt
 from ._scaling import Scaling, evaluate_scaled, simulate_scaled
 from ._selection import StructureSelection, select_structure
-from ._state import estimate_state, model_state, simulate_from_samples
+from ._state import estimate_state, model_state, refine_values, simulate_from_samples
 from ._structure import Estimate, Structure, normalise
 from ._wiener_hammerstein import LinearBaseline, WienerHammersteinFit, fit_wiener_hammerstein, wiener_hammerstein_model
 
@@ -44,6 +44,7 @@ __all__ = [
     "nrmse",
     "normalise",
     "one_step_prediction",
+    "refine_values",
     "rmse",
     "select_structure",
     "simulate_from_samples",

@@ -33,7 +33,7 @@ from ..models import CascadeModel, CascadeState, LinearBlock, Model, SandwichMod
 from ._refine import levenberg_marquardt
 from ._structure import Structure, normalise
 
-__all__ = ["estimate_state", "model_state", "simulate_from_samples"]
+__all__ = ["estimate_state", "model_state", "refine_values", "simulate_from_samples"]
 
 # a conversion is exact when the free responses agree to this, relative to their size
 _EXACT = 1e-9
@@ -50,6 +50,10 @@ _MAP_SEARCHED = 6
 _PRIOR_SAMPLES = 2
 # the prior's covariance: eigenvalues floored at this fraction of the largest
 _FLOOR = 1e-6
+# the start's final damped Gauss-Newton steps on the model's own state (refine_values), and the
+# share of the estimate's error over the samples below which the refined state is kept
+_GN_STEPS = 6
+_REFINED = 0.25
 # the default noise level with no residual degrees of freedom: this fraction of the spread
 # of the model's output (a signal-to-noise ratio of 20 dB)
 _NOISE = 0.1
@@ -564,7 +568,119 @@ n > d (zero, and the prior without effect, on a record the model fits exactly), 
 the standard deviation of the model's output on the input (a 20 dB signal-to-noise ratio:
 with no residual degrees of freedom the samples cannot tell their noise). The prior enters
 the same search as extra residual rows (its square root L, Sigma^-1 = L^T L). With more
-than 2 d samples the data determine the state and the data-only estimate is returned."""
+than 2 d samples the data determine the state and the data-only estimate is returned.
+
+Last, the state's model-dependent values in the model's own pasts (x_past and the memory; a
+sandwich's y_past and w_past; u_past is the input's and stays) are refined by damped
+Gauss-Newton steps on the samples (:func:`refine_values`), and the refined state is kept where
+its error over the samples is at most a quarter of the estimate's: the search's starts lie
+around the states the model visits from rest, which a drive whose output is a position (an
+integrator, far from its rest level) does not reach."""
+
+
+def refine_values(residual: Any, v0: NDArray[np.float64], steps: int = _GN_STEPS) -> NDArray[np.float64]:
+    """Damped Gauss-Newton steps on a few state values: ``residual(v)`` (measured minus
+    simulated over the samples, None where the simulation fails) from ``v0``, forward-difference
+    Jacobian; returns the values of the lowest error found (``v0`` if none is lower).
+
+    The core's search runs in the minimal (observer-canonical) values from starts around the
+    states the model visits from rest; a drive whose output is a position (an integrator) sits
+    far from those, and its state in the model's own pasts (x_past, the memory) is then found
+    by these steps from the core's estimate.
+
+    Parameters
+    ----------
+    residual : callable
+        ``residual(v) -> ndarray or None``.
+    v0 : ndarray
+        The values to start from.
+    steps : int, default 6
+        Gauss-Newton steps at most.
+
+    Returns
+    -------
+    ndarray
+        The refined values.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.identify import refine_values
+    >>> t = np.arange(5.0)
+    >>> np.round(refine_values(lambda v: 3.0 + 2.0 * t - (v[0] + v[1] * t), np.zeros(2)), 6).tolist()
+    [3.0, 2.0]
+    """
+    v = np.array(v0, dtype=np.float64)
+    r = residual(v)
+    if r is None or v.size == 0:
+        return v
+    cost = float(r @ r)
+    lam = 1e-3
+    for _ in range(steps):
+        h = 1e-6 * (1.0 + np.abs(v))
+        cols = []
+        for k in range(v.size):
+            vk = v.copy()
+            vk[k] += h[k]
+            rk = residual(vk)
+            if rk is None:
+                return v
+            cols.append((r - rk) / h[k])  # d(simulation) / dv
+        jac = np.column_stack(cols)
+        jtj, jtr = jac.T @ jac, jac.T @ r
+        step = np.zeros_like(v)
+        improved = False
+        for _ in range(8):
+            step = np.linalg.solve(jtj + lam * (np.diag(np.diag(jtj)) + 1e-12 * np.eye(v.size)), jtr)
+            trial = v + step
+            rt = residual(trial)
+            if rt is not None and float(rt @ rt) < cost:
+                v, r, cost = trial, rt, float(rt @ rt)
+                lam = max(lam / 10.0, 1e-9)
+                improved = True
+                break
+            lam *= 10.0
+        if not improved or float(np.max(np.abs(step))) <= 1e-10 * (1.0 + float(np.max(np.abs(v)))):
+            break
+    return v
+
+
+def _internal_values(state: CascadeState | SandwichState) -> NDArray[np.float64]:
+    """The state's values that depend on the model (not the input's past u_past)."""
+    if isinstance(state, SandwichState):
+        return np.array([*state.x_past, *state.y_past, *state.w_past], dtype=np.float64)
+    return np.array([*state.x_past, state.y_prev], dtype=np.float64)
+
+
+def _with_values(state: CascadeState | SandwichState, v: NDArray[np.float64]) -> CascadeState | SandwichState:
+    nx = len(state.x_past)
+    if isinstance(state, SandwichState):
+        ny = len(state.y_past)
+        return SandwichState(state.u_past, tuple(v[:nx].tolist()), tuple(v[nx : nx + ny].tolist()), tuple(v[nx + ny :].tolist()))
+    return CascadeState(state.u_past, tuple(v[:nx].tolist()), float(v[nx]))
+
+
+def _refined_state(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samples: int, state: CascadeState | SandwichState) -> CascadeState | SandwichState | None:
+    """The state refined by :func:`refine_values` on the first samples, if its error there is at
+    most ``_REFINED`` of the estimate's (else None: the estimate stands)."""
+    u_n, y_n = u[:samples], y[:samples]
+
+    def residual(v: NDArray[np.float64]) -> NDArray[np.float64] | None:
+        try:
+            r = y_n - model.simulate(u_n, initial_state=_with_values(state, v))
+        except BacklashIdError:
+            return None
+        return r if np.all(np.isfinite(r)) else None
+
+    v0 = _internal_values(state)
+    r0 = residual(v0)
+    if r0 is None:
+        return None
+    v = refine_values(residual, v0)
+    r = residual(v)
+    if r is None or float(r @ r) > _REFINED * float(r0 @ r0):
+        return None
+    return _with_values(state, v)
 
 
 @fill(estimate=_ESTIMATE_DOC)
@@ -615,9 +731,12 @@ def estimate_state(
     >>> bool(np.max(np.abs(model.simulate(u, initial_state=state) - y)) < 1e-8)
     True
     """
-    _u, _y, structure, theta = _estimate_checked(model, u, y, samples, "samples", noise_std, none_is_whole=True)
+    u_arr, y_arr, structure, theta = _estimate_checked(model, u, y, samples, "samples", noise_std, none_is_whole=True)
     x0, y_prev, w0 = structure.initial(theta)
-    return _scaled(model, _normalised_state(normalise(model), np.asarray(x0), y_prev, np.asarray(w0)))
+    state = _scaled(model, _normalised_state(normalise(model), np.asarray(x0), y_prev, np.asarray(w0)))
+    n = len(u_arr) if samples is None else int(samples)
+    refined = _refined_state(model, u_arr, y_arr, n, state)
+    return state if refined is None else refined
 
 
 @fill(estimate=_ESTIMATE_DOC)
@@ -670,6 +789,14 @@ def simulate_from_samples(
     True
     """
     u_arr, y_arr, structure, theta = _estimate_checked(model, u, y, init_samples, "init_samples", noise_std)
+    try:
+        x0, y_prev, w0 = structure.initial(theta)
+        state = _scaled(model, _normalised_state(normalise(model), np.asarray(x0), y_prev, np.asarray(w0)))
+        refined = _refined_state(model, u_arr, y_arr, int(init_samples), state)
+    except ModelError:  # a free response the model's own pasts cannot hold: the core's values
+        refined = None
+    if refined is not None:
+        return np.asarray(model.simulate(u_arr, initial_state=refined), dtype=np.float64)
     whole = _record(model, structure, u_arr, y_arr)
     # normalisation leaves the output unchanged: the core's output is the model's
     return np.asarray(whole.simulate(theta))[structure.shift :]
