@@ -194,7 +194,7 @@ def test_the_quantiser_search_quantises_like_the_core(nominal, u) -> None:
 def test_the_memory_search_on_a_prefix_equals_the_whole_record(nominal, u) -> None:
     """The validation start's memory is searched on the prefix after which the start is
     forgotten: the same memory as a search on the whole record."""
-    from backlashid.diagnosis import _diagnose as dg
+    from backlashid.diagnosis import _start as dg
 
     def sim(uu, y0, held):
         return nominal.simulate(uu, initial_state=dg.held_state(nominal, uu[0], y0) if held else None)
