@@ -6,7 +6,7 @@ Prints the table in Markdown:
 
     python docs/case_studies/bouc_wen.py
 
-Run time about 20 s on the project's 2-core machine (the fits take most of it). Deterministic.
+Run time 6 to 16 s on the project's 2-core machine (the five fits take most of it). Deterministic.
 
 Data: shared/data/bouc_wen (read in place; $BACKLASHID_DATA overrides). The records are
 SIMULATED by the benchmark's own Newmark integrator, not measured. Input: force u [N]; output:
