@@ -43,7 +43,7 @@ class FeedbackHysteresis(Effect, rank=12, augmentation=AUGMENTATION):
     def box(self, prob: Problem, theta0: Array) -> tuple[Array, Array]:
         """The refit's box on the nominal loop's scales (k, s_x, v_max of :func:`_scales`): 0 <=
         alpha <= 2 k (a stiffness up to twice the loop's), beta, |gamma| <= 0.9 / v_max (with
-        the core's |gamma| <= beta the explicit step's factor 1 - beta |v| - gamma v sign(z)
+        each at most 0.9 / v_max the explicit step's factor 1 - beta |v| - gamma v sign(z)
         stays in [-0.8, 1]: z bounded), 0 <= k_3 <= 2 k / s_x^2 (a hardening spring: a
         softening one runs away once x is large)."""
         k, sx, vmax = _scales(prob, theta0)

@@ -109,10 +109,14 @@ impl Effect for FeedbackHysteresis {
             _ => (f64::NEG_INFINITY, f64::INFINITY),
         }
     }
-    /// Where the refit may take it: |gamma| <= beta, Bouc-Wen's condition for a bounded z
-    /// (|z| <= alpha / (beta - |gamma|) under any motion; at beta = gamma = 0 a linear spring).
+    /// Where the refit may take it: |gamma| <= 2 beta. Bouc-Wen's condition for a z bounded
+    /// under any motion is |gamma| <= beta (|z| <= alpha / (beta - |gamma|)); the Bouc-Wen
+    /// benchmark's own hysteresis has gamma = -1.375 beta (beta 800, gamma -1100: z grows on
+    /// loading, bounded over its stroke), which |gamma| <= beta cut off (multisine error
+    /// 4.7e-5 m at the bound). A set whose z runs away on a record ends the pass in a
+    /// ModelError, which the refit and the diagnosis treat as unusable.
     fn feasible(&self) -> bool {
-        self.check().is_ok() && self.gamma.abs() <= self.beta
+        self.check().is_ok() && self.gamma.abs() <= 2.0 * self.beta
     }
     fn start_tangent(&self, x0: f64, y0: f64, dx0: &[f64], _cols: &Columns) -> Self {
         let mut e = self.start(x0, y0);
