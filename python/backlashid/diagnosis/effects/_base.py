@@ -1,9 +1,11 @@
 """The one base of the effect catalogue: :class:`Effect`, the augmented model it refits, and
 the shared refit machinery.
 
-Each effect of the catalogue is an augmentation of the nominal cascade (linear block, eq 16
--> general backlash, eq 1) that gives exactly the nominal model at zero size (the Rust core's
-``simulate_augmented``; each effect's definition in ``rust/core/src/effects/``). An effect's
+Each effect of the catalogue is an augmentation of the nominal chain (linear block, eq 16
+-> general backlash, eq 1, and for the sandwich its output block, eq 29; the input backlash is
+the sandwich with input block 1) that gives exactly the nominal model at zero size (the Rust
+core's ``simulate_augmented``; each effect's definition and its stage in
+``rust/core/src/effects/``). An effect's
 module (one per effect in this package) subclasses :class:`Effect` with its parameters, their
 start values and bounds, how it is refitted and screened, and its place in the ranking order;
 the registry (``_registry``) finds the modules itself.
@@ -24,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from ... import _core
 from ..._json import json_float
 from ..._validation import as_signal, check_same_length
-from ...errors import BacklashIdError, ModelError
+from ...errors import BacklashIdError, DataError, ModelError
 from ...identify import Structure, levenberg_marquardt
 from ...models import CascadeModel, LinearBlock
 
@@ -35,6 +37,9 @@ MAX_ITER = 40  # most iterations of a refit to convergence
 
 Array = NDArray[np.float64]
 CoreEffects = tuple[tuple[str, tuple[float, ...]], ...]  # (name, parameters) for _core.simulate_augmented
+# An explicit start (any of u_past, x_past, y_past, w_past: lists, most recent first; the
+# others at rest), the keywords of _core.simulate_augmented and _core.AugmentedProblem.
+Start = dict[str, list[float]]
 Fitted = tuple[Array, dict[str, float], float]  # nominal parameters, the effect's, cost
 
 
@@ -98,39 +103,61 @@ def held_past(block: LinearBlock, u0: float, hold: int | None = None) -> tuple[l
 
 
 def simulate(
-    structure: Structure, theta: Array, effects: CoreEffects, u: Array, t0: float, y_prev: float = 0.0, held: bool = False
+    structure: Structure,
+    theta: Array,
+    effects: CoreEffects,
+    u: Array,
+    t0: float,
+    y_prev: float = 0.0,
+    held: bool = False,
+    start: Start | None = None,
 ) -> Array:
-    """The augmented cascade's output (``_core.simulate_augmented``). ``held``: the linear block
-    starts at its equilibrium with u[0] (the input held before the record for ever) instead of
-    at rest; ``y_prev`` is the backlash memory y(0)."""
-    return Simulator(structure, theta, effects, t0)(u, y_prev, held)
+    """The augmented chain's output (``_core.simulate_augmented``; a sandwich structure runs
+    its output block too). ``held``: the linear block starts at its equilibrium with u[0] (the
+    input held before the record for ever), a sandwich's output block at its equilibrium with
+    y_prev, instead of at rest; ``start``: an explicit state instead; ``y_prev`` is the
+    backlash memory y(0)."""
+    return Simulator(structure, theta, effects, t0)(u, y_prev, held, start)
 
 
 class Simulator:
-    """One augmented cascade's simulation, unpacked once: ``(u, y_prev, held) -> output``, for
-    the many runs of one model that differ in the start only (the validation start's search).
-    ``hold``: the held start holds the input for that many samples from rest (None: for ever,
-    the equilibrium), :func:`held_past`."""
+    """One augmented chain's simulation, unpacked once: ``(u, y_prev, held, start) -> output``,
+    for the many runs of one model that differ in the start only (the validation start's
+    search). ``hold``: the held start holds the input (and a sandwich's output block its input
+    y_prev) for that many samples from rest (None: for ever, the equilibrium),
+    :func:`held_past`."""
 
     def __init__(self, structure: Structure, theta: Array, effects: CoreEffects, t0: float, hold: int | None = None) -> None:
-        self.chain = structure.unpack(theta).chain()
+        est = structure.unpack(theta)
+        self.chain = est.chain()
+        self.output: dict[str, list[float]] = {"r": est.r, "s": est.s} if structure.is_sandwich else {}
         self.effects = list(effects)
         self.t0 = float(t0)
         self.hold = hold
-        self._held: dict[float, dict[str, Any]] = {}
+        self._held: dict[tuple[float, float], dict[str, Any]] = {}
 
-    def held_state(self, u0: float) -> dict[str, Any]:
-        """The linear block's past after the input was held at u0 (:func:`held_past`)."""
-        if u0 not in self._held:
+    def held_state(self, u0: float, y_prev: float = 0.0) -> dict[str, Any]:
+        """The linear block's past after the input was held at u0, and a sandwich's output
+        block's after its input was held at y_prev (:func:`held_past`)."""
+        key = (u0, y_prev if self.output else 0.0)
+        if key not in self._held:
             u_past, x_past = held_past(LinearBlock(self.chain[0], self.chain[1]), u0, self.hold)
-            self._held[u0] = {"u_past": u_past, "x_past": x_past}
-        return self._held[u0]
+            state: dict[str, Any] = {"u_past": u_past, "x_past": x_past}
+            if self.output:
+                y_past, w_past = held_past(LinearBlock(self.output["r"], self.output["s"]), y_prev, self.hold)
+                state.update(y_past=[y_prev, *y_past[1:]], w_past=w_past)
+            self._held[key] = state
+        return self._held[key]
 
-    def __call__(self, u: Array, y_prev: float = 0.0, held: bool = False) -> Array:
-        state = self.held_state(float(u[0])) if held else {}
+    def __call__(self, u: Array, y_prev: float = 0.0, held: bool = False, start: Start | None = None) -> Array:
+        if held and start is not None:
+            raise DataError("held=True and an explicit start both given: give one of them")
+        state = self.held_state(float(u[0]), float(y_prev)) if held else dict(start or {})
         return _core.simulate_augmented(
-            *self.chain, u, effects=self.effects, t0=self.t0, time_scale=TIME_SCALE, y_prev=float(y_prev), **state
-        )
+            *self.chain, u, r=self.output.get("r"), s=self.output.get("s"), effects=self.effects, t0=self.t0,
+            time_scale=TIME_SCALE, y_prev=float(y_prev), u_past=state.get("u_past"), x_past=state.get("x_past"),
+            y_past=state.get("y_past"), w_past=state.get("w_past"),
+        )  # fmt: skip
 
 
 def ar_predict(residual: Array, phi: Array) -> Array:
@@ -184,7 +211,7 @@ class AugmentedModel:
     ar: Array = field(default_factory=lambda: np.zeros(0), repr=False)
     n_extra: int = 0
 
-    def simulate(self, u: ArrayLike, t0: float = 0.0, *, y_prev: float = 0.0, held: bool = False) -> Array:
+    def simulate(self, u: ArrayLike, t0: float = 0.0, *, y_prev: float = 0.0, held: bool = False, start: Start | None = None) -> Array:
         """Free-run output for the input u.
 
         Parameters
@@ -196,7 +223,12 @@ class AugmentedModel:
         y_prev : float, default 0.0
             The backlash memory before the first sample.
         held : bool, default False
-            Start the linear block at its equilibrium with u[0] instead of at rest.
+            Start the linear block at its equilibrium with u[0] (a sandwich's output block at
+            its equilibrium with ``y_prev``) instead of at rest.
+        start : dict, optional
+            An explicit start instead: any of ``u_past``, ``x_past`` (the input block's past,
+            most recent first) and for a sandwich ``y_past`` (``y_past[0] = y_prev``),
+            ``w_past`` (the output block's); the others at rest.
 
         Returns
         -------
@@ -207,9 +239,11 @@ class AugmentedModel:
         ------
         ModelError
             If the augmented model diverges or the linear block has a pole at 1 with ``held``.
+        DataError
+            If a past of ``start`` has the wrong length or a non-finite value.
         """
         u_arr = as_signal(u, "u").ravel()
-        return self.simulator(t0)(u_arr, y_prev, held)
+        return self.simulator(t0)(u_arr, y_prev, held, start)
 
     def simulator(self, t0: float = 0.0, hold: int | None = None) -> Simulator:
         """This model's simulation unpacked once, ``(u, y_prev, held) -> output`` (u checked by
@@ -226,7 +260,7 @@ class AugmentedModel:
         Returns
         -------
         Simulator
-            Callable ``(u, y_prev=0.0, held=False) -> ndarray``, as :meth:`simulate`.
+            Callable ``(u, y_prev=0.0, held=False, start=None) -> ndarray``, as :meth:`simulate`.
         """
         return Simulator(self.structure, self.theta, self.core, t0, hold)
 
@@ -348,20 +382,23 @@ class Screening:
 
 @dataclass
 class Problem:
-    """The estimation record an effect is refitted on (output-error least squares)."""
+    """The estimation record an effect is refitted on (output-error least squares): from rest,
+    or from an explicit ``start`` (``Start``'s pasts and the backlash memory ``y_prev``)."""
 
     structure: Structure
     u: Array
     y: Array
     warmup: int
     t0: float
+    start: Start | None = None
+    y_prev: float = 0.0
 
     def __post_init__(self) -> None:
         self.big = 1e3 * (float(np.std(self.y)) + 1.0)  # the residual of a diverging model
 
     def simulate(self, theta: Array, effects: CoreEffects = ()) -> Array:
-        """The augmented cascade on this record."""
-        return simulate(self.structure, theta, effects, self.u, self.t0)
+        """The augmented chain on this record."""
+        return simulate(self.structure, theta, effects, self.u, self.t0, self.y_prev, start=self.start)
 
     def output_residual(self, y_hat: Array) -> Array:
         """Output error of the output y_hat after the warm-up (a large constant where it diverges)."""
@@ -384,11 +421,12 @@ class Problem:
     def compiled(self, effects: CoreEffects, free: Sequence[str]) -> _core.AugmentedProblem:
         """The core's compiled refit of the nominal parameters and the effects' parameters
         ``free`` (the others held at their values in ``effects``): theta is the structure's
-        vector followed by the free parameters; exact sensitivities."""
-        s = self.structure
+        vector (a sandwich's too) followed by the free parameters; exact sensitivities."""
+        s, start = self.structure, self.start or {}
         return _core.AugmentedProblem(
             self.u, self.y, s.na, s.nb, s.degree, [(n, list(p)) for n, p in effects], list(free),
-            warmup=self.warmup, t0=self.t0, time_scale=TIME_SCALE,
+            nr=s.nr, ns=s.ns, warmup=self.warmup, t0=self.t0, time_scale=TIME_SCALE, y_prev=self.y_prev,
+            u_past=start.get("u_past"), x_past=start.get("x_past"), y_past=start.get("y_past"), w_past=start.get("w_past"),
         )  # fmt: skip
 
 
@@ -666,8 +704,9 @@ class StructureEffect(Effect):
     def directions(self, screen: ScreenContext) -> list[Array]:
         """Derivatives in the first new terms, by finite differences."""
         est = screen.structure.unpack(screen.theta)
+        output = {"r": est.r, "s": est.s} if screen.structure.is_sandwich else {}
         out = []
         for a, b, m_l, m_r in self.first_terms(est, self.step):
-            y = _core.simulate_augmented(a, b, est.c_left, est.c_right, m_l, m_r, screen.u, t0=screen.t0)
+            y = _core.simulate_augmented(a, b, est.c_left, est.c_right, m_l, m_r, screen.u, t0=screen.t0, **output)
             out.append((y - screen.y_sim) / self.step)
         return out
