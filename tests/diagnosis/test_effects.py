@@ -39,6 +39,7 @@ def test_catalogue_is_the_contracts() -> None:
         "dead_time", "saturation", "friction", "width_drift", "output_offset", "branch_degree",
         "linear_order", "compliance", "quantization", "hysteresis_memory", "colored_noise",
         "dynamic_friction", "feedback_hysteresis", "creep",
+        "state_saturation", "sensor_saturation",
     )  # fmt: skip
     assert set(fx.AUGMENTATIONS) == set(bx.EFFECTS)
 

@@ -142,6 +142,19 @@ def _saturation(case: Case, prob: _base.Problem) -> list[float]:
     return [lo, hi] if lo < hi else [lo - 0.1, hi + 0.1]  # a record of one value: bounds around it
 
 
+def _clip(name: str) -> Callable[[Case, _base.Problem], list[float]]:
+    """(lo, hi) of a clipping effect inside its bounds on the record (around a record of one
+    value; a level of exactly 0, an output resting in the dead band, moved off it)."""
+
+    def sample(case: Case, prob: _base.Problem) -> list[float]:
+        lower, upper = fx.REGISTRY[name].bounds(prob)
+        lo, hi = _within(case.rng, lower, upper)
+        lo, hi = (lo, hi) if lo < hi else (lo - 0.1, hi + 0.1)
+        return [lo or -1e-3, hi or 1e-3]
+
+    return sample
+
+
 def _friction(case: Case, prob: _base.Problem) -> list[float]:
     lower, upper = fx.REGISTRY["friction"].bounds(prob)
     f_c, f_v = _within(case.rng, lower, upper)
@@ -219,6 +232,8 @@ PUT: dict[str, Callable[[Case], None]] = {
     "dynamic_friction": _simulated("dynamic_friction", _dynamic_friction),
     "feedback_hysteresis": _simulated("feedback_hysteresis", _feedback_hysteresis),
     "creep": _simulated("creep", _creep),
+    "state_saturation": _simulated("state_saturation", _clip("state_saturation")),
+    "sensor_saturation": _simulated("sensor_saturation", _clip("sensor_saturation")),
 }
 
 

@@ -57,12 +57,14 @@ def linear_with_friction(
     u_past: Sequence[float] = (),
     x_past: Sequence[float] = (),
     restoring: Callable[[float, float, float], float] | None = None,
+    stop: tuple[float, float] = (-math.inf, math.inf),
 ) -> Array:
     """Eq (16) driven by u_eff(t) = u(t) - F_c sign(v(t)) - F_v v(t), v(t) = x(t) - x(t-1)
     (sign(0) = 0): x(t) needs u_eff up to t - 1 only, so u_eff(t) follows x(t). From rest, or
     from the past u_past = [u(-1), u(-2), ..] and x_past = [x(-1), x(-2), ..] (x(-1) is also
     x(t-1) of v at t = 0; 0 without it). ``restoring(drive, x(t), x(t-1))``: the drive less a
-    restoring force, after the friction (:func:`bouc_wen`)."""
+    restoring force, after the friction (:func:`bouc_wen`). ``stop`` = (lo, hi) holds x(t) in
+    [lo, hi] as it is computed, before the recursion remembers it (a travel stop of the state)."""
     a, b = [float(v) for v in a], [float(v) for v in b]
     na, nb = len(a), len(b)
     ue = [float(v) for v in reversed(u_past)] if len(u_past) else [0.0] * na  # u_eff(t-na) .. u_eff(t-1), oldest first
@@ -74,6 +76,7 @@ def linear_with_friction(
             x += a[i - 1] * ue[-i]
         for j in range(1, nb + 1):
             x -= b[j - 1] * xx[-j]
+        x = stop[0] if x < stop[0] else (stop[1] if x > stop[1] else x)
         v = x - xx[-1]
         sign = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
         drive = ut - f_c * sign - f_v * v if f_c != 0.0 or f_v != 0.0 else ut
@@ -94,13 +97,15 @@ def linear_with_stick_slip(
     u_past: Sequence[float] = (),
     x_past: Sequence[float] = (),
     restoring: Callable[[float, float, float], float] | None = None,
+    stop: tuple[float, float] = (-math.inf, math.inf),
 ) -> Array:
     """Eq (16) with stick-slip friction in its force balance (Karnopp's rule, a Stribeck dip):
     x(t+1) = a_1 u_eff(t) + x_free; w = u(t) - F_v v, v = x(t) - x(t-1); u_stay = (x(t) -
     x_free) / a_1 holds x(t+1) = x(t), F_hold = w - u_stay; stuck (u_eff = u_stay) while
     abs(F_hold) <= F_c + F_s, else u_eff = w - (F_c + F_s exp(-(v / v_s)^2)) sign(F_hold). At
-    F_c = F_v = F_s = 0 (or a_1 = 0: no sticking) u_eff = w. From rest or from the past, as
-    :func:`linear_with_friction`; ``restoring`` subtracted after the friction, as there."""
+    F_c = F_v = F_s = 0 (or a_1 = 0: no sticking) u_eff = w. From rest or from the past, with
+    the state's ``stop``, as :func:`linear_with_friction`; ``restoring`` subtracted after the
+    friction, as there."""
     a, b = [float(v) for v in a], [float(v) for v in b]
     na, nb = len(a), len(b)
     ue = [float(v) for v in reversed(u_past)] if len(u_past) else [0.0] * na  # oldest first
@@ -113,6 +118,7 @@ def linear_with_stick_slip(
             x += a[i - 1] * ue[-i]
         for j in range(1, nb + 1):
             x -= b[j - 1] * xx[-j]
+        x = stop[0] if x < stop[0] else (stop[1] if x > stop[1] else x)
         v = x - xx[-1]
         x_prev = xx[-1]
         xx.append(x)
@@ -287,14 +293,16 @@ def augmented_cascade(
 ) -> Array:
     """The nominal cascade (eq 16 -> eq 1) with the catalogue's effects, each given as
     (name, parameters) in the Python catalogue's order: u(t - d), clipped to [lo, hi], through
-    friction (or stick-slip friction) and the Bouc-Wen restoring force into eq (16) from its past; the backlash (eq 1) on x(t) with the widths
+    friction (or stick-slip friction) and the Bouc-Wen restoring force into eq (16) from its
+    past, x(t) held in the state's stop; the backlash (eq 1) on x(t) with the widths
     c + dc tau(t), tau(t) = (t0 + t) / time_scale, from y(0) = y_prev; then compliance, the
-    dynamic (Dahl) friction, the extra plays (at rest on x_past[0]), creep (at rest on y_prev), the output
-    offset and drift, and the quantiser."""
+    dynamic (Dahl) friction, the extra plays (at rest on x_past[0]), creep (at rest on y_prev),
+    the output offset and drift, the sensor's clip and the quantiser."""
     p = {name: [float(v) for v in params] for name, params in effects}
     known = {
         "dead_time", "saturation", "friction", "stick_slip", "feedback_hysteresis", "width_drift", "compliance",
-        "dynamic_friction", "hysteresis_memory", "creep", "output_offset", "quantization",
+        "dynamic_friction", "hysteresis_memory", "creep", "output_offset", "quantization", "state_saturation",
+        "sensor_saturation",
     }  # fmt: skip
     if set(p) - known:
         raise ValueError(
@@ -305,12 +313,13 @@ def augmented_cascade(
     v = saturation(v, *p["saturation"]) if "saturation" in p else v
     fh = p.get("feedback_hysteresis", (0.0, 0.0, 0.0, 0.0))
     restoring = bouc_wen(*fh) if fh[0] != 0.0 or fh[3] != 0.0 else None
+    lo, hi = p.get("state_saturation", (-math.inf, math.inf))
     if "stick_slip" in p:
         f_c, f_v, f_s, v_s = p["stick_slip"]
-        x = linear_with_stick_slip(a, b, v, f_c, f_v, f_s, v_s, u_past, x_past, restoring)
+        x = linear_with_stick_slip(a, b, v, f_c, f_v, f_s, v_s, u_past, x_past, restoring, stop=(lo, hi))
     else:
         f_c, f_v = p.get("friction", (0.0, 0.0))
-        x = linear_with_friction(a, b, v, f_c, f_v, u_past, x_past, restoring)
+        x = linear_with_friction(a, b, v, f_c, f_v, u_past, x_past, restoring, stop=(lo, hi))
     x0 = float(x_past[0]) if len(x_past) else 0.0
     dc_l, dc_r = p.get("width_drift", (0.0, 0.0))
     left = branch(m_left, x + width_drift(c_left, dc_l, tau))
@@ -329,6 +338,8 @@ def augmented_cascade(
         y = creep(y, [(g, log_t) for g, log_t in zip(cr[0::2], cr[1::2]) if g != 0.0], y_prev)
     if "output_offset" in p:
         y = output_offset(y, *p["output_offset"], tau)
+    if "sensor_saturation" in p:
+        y = saturation(y, *p["sensor_saturation"])
     if "quantization" in p:
         y = quantiser(y, p["quantization"][0])
     with np.errstate(invalid="ignore"):

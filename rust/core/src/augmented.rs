@@ -758,7 +758,7 @@ mod tests {
                 let want = (v + 0.1 + 0.5 * (50.0 + t as f64) / 100.0).clamp(-0.3, 0.4);
                 assert!((g - want).abs() < 1e-12, "{name} {t}");
             }
-            assert!(got.iter().any(|v| *v == 0.4) && got.iter().any(|v| *v == -0.3));
+            assert!(got.contains(&0.4) && got.contains(&-0.3));
         }
     }
 
@@ -783,7 +783,7 @@ mod tests {
         }
         let got = sim(&m, &[("state_saturation", &[lo, hi])], &u, 0.0, TIME_SCALE);
         assert!(max_diff(&got, &want) < 1e-12);
-        assert!(got.iter().any(|v| *v == hi) && got.iter().any(|v| *v == lo));
+        assert!(got.contains(&hi) && got.contains(&lo));
         let drive = sim(&m, &[("saturation", &[-0.2, 0.3])], &u, 0.0, TIME_SCALE);
         assert!(max_diff(&drive, &got) > 0.1);
         // a sensor's clip leaves the state alone: the unclipped output, clipped

@@ -417,7 +417,11 @@ impl AugmentedProblem {
         Ok(match self.at(theta) {
             Ok(at) => {
                 at.model.cascade.linear.is_stable()
-                    && at.model.output.as_ref().is_none_or(LinearBlock::is_stable)
+                    && at
+                        .model
+                        .output
+                        .as_ref()
+                        .map_or(true, LinearBlock::is_stable)
                     && at
                         .effects
                         .iter()
