@@ -12,7 +12,7 @@
 //!   gradient;
 //! - `linalg`: least squares by QR and the streaming triangular factor;
 //! - `effects`: the diagnosis catalogue's effects, one module each over the `Effect` trait;
-//! - `augmented`: the cascade with those effects, simulated in one fused pass;
+//! - `augmented`: the cascade or sandwich with those effects, simulated in one fused pass;
 //! - `guard`: fallible allocation of record-sized buffers and the interruption check.
 //!
 //! The items below are the API the Python binding and the benches use.
