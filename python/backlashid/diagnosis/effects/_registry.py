@@ -16,6 +16,7 @@ import importlib
 import pkgutil
 from collections.abc import Mapping
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -24,7 +25,7 @@ from ..._numerics import lstsq
 from ..._validation import check_int, check_real, check_seed, check_signals, shown
 from ...errors import DataError, ModelError
 from ...identify import Structure
-from ...models import CascadeModel
+from ...models import CascadeModel, SandwichModel
 from ._base import Array, Augmentation, AugmentedModel, Effect, Problem, ScreenContext, Screening, simulate
 
 __all__ = ["AUGMENTATIONS", "EFFECTS", "REGISTRY", "fit_effect", "screen"]
@@ -60,22 +61,24 @@ AUGMENTATIONS: dict[str, Augmentation] = {name: e.augmentation for name, e in RE
 """Every effect's parameters, their zero values and description, by name."""
 
 
-def _structure_of(model: CascadeModel) -> Structure:
-    return Structure(model.linear.na, model.linear.nb, model.backlash.degree)
+def _chain(model: Any, u_est: ArrayLike, y_est: ArrayLike, warmup: int) -> tuple[Structure, Array, Array, Array]:
+    """The nominal chain's structure and vector, and the record (its input advanced by the
+    chain's feedthroughs, :func:`~backlashid.diagnosis._records.nominal_chain`)."""
+    from .._records import nominal_chain
 
-
-def _check(model: CascadeModel, u_est: ArrayLike, y_est: ArrayLike, warmup: int) -> tuple[Array, Array]:
-    if not isinstance(model, CascadeModel):
+    if not isinstance(model, (CascadeModel, SandwichModel)):
         raise ModelError(
-            f"effects augment a CascadeModel (linear block -> backlash), got {type(model).__name__}: fit the nominal model with fit_cascade"
+            f"effects augment a CascadeModel or a SandwichModel (the input backlash included), got {type(model).__name__}: "
+            "fit the nominal model with fit_cascade, fit_sandwich or fit_hammerstein_backlash"
         )
     warmup = check_int(warmup, "warmup (samples)", 0)
     u, y = check_signals(("u_est", u_est), ("y_est", y_est), min_length=int(warmup) + 50, what=f"a warm-up of {warmup} plus a refit")
-    return u, y
+    chain = nominal_chain(model)
+    return chain.structure, chain.theta, chain.advanced(u), y
 
 
 def fit_effect(
-    effect: str, model: CascadeModel, u_est: ArrayLike, y_est: ArrayLike, *, warmup: int = 0, t0: float = 0.0, seed: int = 0
+    effect: str, model: CascadeModel | SandwichModel, u_est: ArrayLike, y_est: ArrayLike, *, warmup: int = 0, t0: float = 0.0, seed: int = 0
 ) -> AugmentedModel:
     """Refit the nominal cascade together with one effect on the estimation record.
 
@@ -86,8 +89,8 @@ def fit_effect(
     ----------
     effect : str
         One of ``EFFECTS``.
-    model : CascadeModel
-        The nominal cascade (the refit starts from it).
+    model : CascadeModel or SandwichModel
+        The nominal model (the refit starts from it; a sandwich or input-backlash model too).
     u_est : array_like
         Estimation input, 1-D, finite.
     y_est : array_like
@@ -109,7 +112,7 @@ def fit_effect(
     DataError
         If the effect is unknown or the record is unusable (lengths, NaN, too short).
     ModelError
-        If ``model`` is not a CascadeModel.
+        If ``model`` is not a CascadeModel or SandwichModel.
 
     Examples
     --------
@@ -123,17 +126,15 @@ def fit_effect(
     """
     if not isinstance(effect, str) or effect not in REGISTRY:
         raise DataError(f"unknown effect {shown(effect)}: choose one of {', '.join(EFFECTS)}")
-    u, y = _check(model, u_est, y_est, warmup)
+    structure, theta0, u, y = _chain(model, u_est, y_est, warmup)
     t0 = check_real(t0, "t0")
     check_seed(seed)
-    structure = _structure_of(model)
-    theta0 = structure.pack(model)
     prob = Problem(structure, u, y, int(warmup), float(t0))
     return REGISTRY[effect].fit(prob, theta0)
 
 
 def screen(
-    model: CascadeModel, u_est: ArrayLike, y_est: ArrayLike, *, warmup: int = 0, t0: float = 0.0, candidates: tuple[str, ...] = EFFECTS
+    model: CascadeModel | SandwichModel, u_est: ArrayLike, y_est: ArrayLike, *, warmup: int = 0, t0: float = 0.0, candidates: tuple[str, ...] = EFFECTS
 ) -> list[Screening]:
     """Score tests of every candidate on the estimation record, most significant first.
 
@@ -142,8 +143,8 @@ def screen(
 
     Parameters
     ----------
-    model : CascadeModel
-        The nominal cascade whose residual is tested.
+    model : CascadeModel or SandwichModel
+        The nominal model whose residual is tested.
     u_est : array_like
         Input of the estimation record.
     y_est : array_like
@@ -165,7 +166,7 @@ def screen(
     DataError
         If the record is unusable.
     ModelError
-        If ``model`` is not a CascadeModel (fit the nominal model with fit_cascade).
+        If ``model`` is not a CascadeModel or SandwichModel.
 
     Examples
     --------
@@ -176,9 +177,7 @@ def screen(
     >>> tests[0].effect, bool(tests[0].p_value < 1e-6)
     ('output_offset', True)
     """
-    u, y = _check(model, u_est, y_est, warmup)
-    structure = _structure_of(model)
-    theta = structure.pack(model)
+    structure, theta, u, y = _chain(model, u_est, y_est, warmup)
     y_sim = simulate(structure, theta, (), u, t0)
     r = (y - y_sim)[warmup:]
     ctx = ScreenContext(structure, theta, u, y, t0, y_sim)
