@@ -159,7 +159,9 @@ def oracle_case(effect: str, level: float, index: int, seeds: str = "tune", cand
     share = grid.q**2 / 12.0 / mse0 if grid is not None and mse0 > 0 else 0.0
     cands = {}
     for cand in rep.ranking:
-        mse = float(cand.validation_rmse) ** 2
+        # a noise model's error is its one-step prediction (its free run is the nominal's)
+        rmse = float(cand.prediction_rmse) if math.isfinite(float(cand.prediction_rmse)) else float(cand.validation_rmse)
+        mse = rmse**2
         cands[cand.effect] = {
             "p": float(cand.p_value), "z": _z(float(cand.p_value)), "R": 1.0 - mse / mse0 if mse0 > 0 else 0.0,
             "gap_closed_true": (mse0 - mse) / (mse0 - s2) if mse0 > s2 else float("nan"), "bic": float(cand.criterion),

@@ -64,7 +64,7 @@ def test_default_set_has_every_effect_at_every_level():
     assert count[("none", 0.0)] == 10
     assert len({s.seed for s in specs}) == len(specs)
     assert "output_gain_drift" in W.OUT_OF_CATALOGUE and not set(W.OUT_OF_CATALOGUE) & set(W.CATALOGUE)
-    assert len(W.CATALOGUE) == 14
+    assert len(W.CATALOGUE) == 16
     assert W.CATALOGUE == bid.EFFECTS  # the diagnoser's names, each with its own generator here
     assert set(W.CATALOGUE + W.OUT_OF_CATALOGUE) == set(W._GENERATORS)
 

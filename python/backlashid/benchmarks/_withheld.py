@@ -566,6 +566,39 @@ def _lag_order_block(a: list[float], b: list[float], p: dict[str, Any]) -> tuple
     return _lag_block(a, b, p["p"])
 
 
+def _shape_state_saturation(ctx: _Context) -> tuple[dict[str, Any], float, float]:
+    """A travel stop of x on one or both sides: at size s the stop sits s of the way from the
+    range's end towards its median (as the actuator's saturation)."""
+    x = ctx.x_nom[ctx.rec]
+    med = float(np.median(x))
+    k_hi, k_lo = ctx.rng.uniform(0.5, 1.0, 2)
+    return {"x_max": float(x.max()), "x_min": float(x.min()), "span_hi": k_hi * (x.max() - med), "span_lo": k_lo * (med - x.min())}, 0.2, 0.95
+
+
+def _params_state_saturation(sh: dict[str, Any], s: float) -> dict[str, Any]:
+    return {"lo": sh["x_min"] + s * sh["span_lo"], "hi": sh["x_max"] - s * sh["span_hi"]}
+
+
+def _shape_sensor_saturation(ctx: _Context) -> tuple[dict[str, Any], float, float]:
+    """A sensor range narrower than the output's: clipped s of the way from the ends."""
+    y = ctx.y_nom[ctx.rec]
+    med = float(np.median(y))
+    k_hi, k_lo = ctx.rng.uniform(0.5, 1.0, 2)
+    return {"y_max": float(y.max()), "y_min": float(y.min()), "span_hi": k_hi * (y.max() - med), "span_lo": k_lo * (med - y.min())}, 0.2, 0.95
+
+
+def _params_sensor_saturation(sh: dict[str, Any], s: float) -> dict[str, Any]:
+    return {"lo": sh["y_min"] + s * sh["span_lo"], "hi": sh["y_max"] - s * sh["span_hi"]}
+
+
+def _state_saturation_linear(a: list[float], b: list[float], u: Array, p: dict[str, Any]) -> Array:
+    return _linear_with_friction(a, b, u, 0.0, 0.0, stop=(p["lo"], p["hi"]))
+
+
+def _sensor_saturation_output(y: Array, x: Array, p: dict[str, Any], t: Array, horizon: float) -> Array:
+    return np.clip(y, p["lo"], p["hi"])
+
+
 def _friction_linear(a: list[float], b: list[float], u: Array, p: dict[str, Any]) -> Array:
     return _linear_with_friction(a, b, u, p["F_c"], p["F_v"])
 
@@ -740,6 +773,8 @@ _GENERATORS: dict[str, _Generator] = {
     "dynamic_friction": _Generator(_shape_dynamic_friction, _params_dynamic_friction, output=_dynamic_friction_output),
     "feedback_hysteresis": _Generator(_shape_feedback_hysteresis, _params_feedback_hysteresis, linear=_feedback_hysteresis_linear),
     "creep": _Generator(_shape_creep, _params_creep, output=_creep_output),
+    "state_saturation": _Generator(_shape_state_saturation, _params_state_saturation, linear=_state_saturation_linear),
+    "sensor_saturation": _Generator(_shape_sensor_saturation, _params_sensor_saturation, output=_sensor_saturation_output),
     "output_gain_drift": _Generator(_shape_gain_drift, _params_gain_drift, output=_output_gain_output),
     "input_gain_drift": _Generator(_shape_gain_drift, _params_gain_drift, drive=_input_gain_drive),
 }

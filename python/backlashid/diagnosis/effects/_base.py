@@ -176,18 +176,26 @@ class Simulator:
         self.hold = hold
         self._held: dict[float, dict[str, Any]] = {}
 
-    def held_state(self, u0: float) -> dict[str, Any]:
-        """The linear block's past after the input was held at u0 (:func:`held_past`)."""
+    def held_state(self, u0: float, y_prev: float = 0.0) -> dict[str, Any]:
+        """The linear block's past after the input was held at u0 (:func:`held_past`); a
+        sandwich's output block at its equilibrium with the backlash memory y_prev."""
         if u0 not in self._held:
             u_past, x_past = held_past(LinearBlock(self.chain[0], self.chain[1]), u0, self.hold)
             self._held[u0] = {"u_past": u_past, "x_past": x_past}
-        return self._held[u0]
+        state = dict(self._held[u0])
+        if self.output_block:
+            r, s = self.output_block["r"], self.output_block["s"]
+            w = sum(r) / (1.0 + sum(s)) * y_prev  # eq (29) at rest with its input held at y_prev
+            state.update(y_past=[y_prev] * len(r), w_past=[w] * len(s))
+        return state
 
     def __call__(self, u: Array, y_prev: float = 0.0, held: bool = False, *, start: Start | None = None) -> Array:
+        if start and held:
+            raise DataError("a held start and a given start exclude each other: give held=True or start=..., not both")
         if start:
             state = _fitted_start(self.structure, start)
         else:
-            state = dict(self.held_state(float(u[0])) if held else {}, y_prev=float(y_prev))
+            state = dict(self.held_state(float(u[0]), float(y_prev)) if held else {}, y_prev=float(y_prev))
         return _core.simulate_augmented(
             *self.chain, u, effects=self.effects, t0=self.t0, time_scale=TIME_SCALE, **self.output_block, **state
         )
