@@ -34,6 +34,8 @@ def print_candidates(report: bid.DiagnosisReport, nominal: str, scale: float, ga
     print("|---|---|---|---|---|")
     print(f"| (nominal {nominal}) | | | | {scale * report.nominal_validation_rmse:.3f} |")
     for c in report.ranking:
-        note = " (one-step prediction)" if c.effect == "colored_noise" else ""
-        print(f"| {c.effect}{note} | {100 * c.gap_closed:.0f} % | {c.p_value:.1e} | {c.n_extra} | {scale * c.validation_rmse:.3f} |")
+        if c.effect == "colored_noise":  # a noise model: its one-step prediction, its free run is the nominal's
+            print(f"| {c.effect} (one-step prediction) | n/a | {c.p_value:.1e} | {c.n_extra} | {scale * c.prediction_rmse:.3f} |")
+            continue
+        print(f"| {c.effect} | {100 * c.gap_closed:.0f} % | {c.p_value:.1e} | {c.n_extra} | {scale * c.validation_rmse:.3f} |")
     return report.best or next(c for c in report.ranking if c.effect != "colored_noise")

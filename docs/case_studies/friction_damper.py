@@ -17,15 +17,16 @@ decimated by 8 (1024 Hz to 128 Hz).
 - Fit: the six 36 lb harmonic tests at 0.25 and 1 Hz (0.5, 1 and 1.5 in), one model of the six
   records (``fit_cascade([u1, ..], [y1, ..])``, each record from its own estimated state).
 - Selection and diagnosis: the four 36 lb harmonic tests at 0.5 and 2 Hz, never used in a fit.
-  The structure with the lowest mean validation NRMSE is the nominal model. ``diagnose`` takes a
-  cascade and one record per role, so it diagnoses the best cascade with the six fit records
-  joined as estimation and the four validation records joined as validation.
+  The structure with the lowest mean validation NRMSE is the nominal model; ``diagnose`` takes it
+  (any chain) with the six fit records as estimation and the four validation records as
+  validation, each record started from its own estimated state (lists of records, not joined).
 - Scores: NRMSE = RMSE / range of the measured force, of the free-run simulation, on the
   companion paper's evaluation windows of the four earthquake records, beside the LuGre
   baseline of the data folder's README. The state at the window's start comes from the
-  samples before it only (cascades and augmented models: linear block at equilibrium, the
-  backlash memory fitted to the samples before the window; the sandwich: ``simulate_from_samples``
-  on them). The earthquake windows choose nothing.
+  samples before it only, as the diagnosis starts a record: the nominal models by
+  ``simulate_from_samples`` on them, the diagnosed model (``report.model``) from its nominal
+  part's estimated state with its own internal state refitted to the same samples. The
+  earthquake windows choose nothing.
 """
 
 from __future__ import annotations
@@ -39,9 +40,10 @@ import numpy as np
 from _fits import fit_structure, print_candidates  # docs/case_studies/_fits.py, beside this script
 
 import backlashid as bid
-from backlashid.app import Record, concatenate, decimate, load_record
-from backlashid.diagnosis import estimated_start, held_state
-from backlashid.identify import Scaling
+from backlashid.app import Record, decimate, load_record
+from backlashid.diagnosis._start import refined_start
+from backlashid.diagnosis.effects._base import start_of
+from backlashid.identify import Scaling, estimate_state
 
 DECIMATE = 8  # 1024 Hz -> 128 Hz: the motion is slow, the identification needs samples that change
 DT = DECIMATE / 1024.0
@@ -75,26 +77,21 @@ def tests_36lb(folder: Path) -> dict[str, Record]:
     return {n.removeprefix("d2_char_").removesuffix(".npz"): decimate(load_record(folder / n, "x_in", "F_kip"), DECIMATE) for n in names}
 
 
+def nominal_state(model: Any, u: np.ndarray, y: np.ndarray, init: int) -> dict[str, Any]:
+    """The nominal chain's state estimated from the first ``init`` samples (as core keywords)."""
+    return start_of(estimate_state(model, u, y, samples=init))
+
+
 def simulate(model: Any, u: np.ndarray, y: np.ndarray, init: int) -> np.ndarray:
     """Free run over the whole record, the state at sample 0 set from the first ``init`` samples
-    only: cascades and augmented models from the linear block at equilibrium and the backlash
-    memory fitted to those samples (as diagnose does), sandwiches by ``simulate_from_samples``."""
-    if isinstance(model, bid.SandwichModel):
+    only: a cascade or sandwich by ``simulate_from_samples``, the diagnosed (augmented) model as
+    the diagnosis starts it."""
+    if isinstance(model, (bid.CascadeModel, bid.SandwichModel)):
         return bid.simulate_from_samples(model, u, y, init)
-    span = (float(y[:init].min()), float(y[:init].max()))
-    if isinstance(model, bid.CascadeModel):
-
-        def run(v: np.ndarray, y0: float, held: bool) -> np.ndarray:
-            return model.simulate(v, initial_state=held_state(model, v[0], y0))
-
-    else:
-        sim = model.simulator(0.0)
-
-        def run(v: np.ndarray, y0: float, held: bool) -> np.ndarray:
-            return sim(v, y0, True)
-
-    _, y0 = estimated_start(run, u[:init], y[:init], span)
-    return run(u, y0, True)
+    sim = model.simulator(0.0)
+    start = nominal_state(model.nominal, u, y, init)
+    start = refined_start(lambda v, st: sim(v, start=st), u, y, init, start)
+    return np.asarray(sim(u, start=start))
 
 
 def main() -> None:
@@ -153,19 +150,21 @@ def main() -> None:
     cascade = fits[best_cascade][0].model
     print(f"\nnominal model (lowest mean validation NRMSE): {best_label}; best cascade (diagnosed): {best_cascade}\n")
 
-    # 2. the diagnosis of the best cascade on the validation records
-    est = concatenate([tests[n] for n in fit_names])
-    val = concatenate([tests[n] for n in val_names])
+    # 2. the diagnosis of the nominal model on the validation records (each its own record)
+    est = [(to_u(tests[n].u), to_y(tests[n].y)) for n in fit_names]
+    val = [(to_u(tests[n].u), to_y(tests[n].y)) for n in val_names]
     t = time.perf_counter()
-    report = bid.diagnose(cascade, estimation=(to_u(est.u), to_y(est.y)), validation=(to_u(val.u), to_y(val.y)))
+    report = bid.diagnose(nominal, estimation=est, validation=val, init_samples=INIT)
     print(report.summary())
     print(f"\ndiagnosis took {time.perf_counter() - t:.2f} s (model units: output / {scaling.output_scale:.4g} kip)\n")
     scale = abs(scaling.output_scale)
-    top = print_candidates(report, best_cascade, scale, "the validation records", "validation RMSE [kip]")
-    print(f"\nbest augmented model: {best_cascade} + {top.effect} ({'named' if report.best else 'not named: ' + report.best_effect})\n")
+    top = print_candidates(report, best_label, scale, "the validation records", "validation RMSE [kip]")
+    named = " + ".join(report.effects)
+    diagnosed_label = f"{best_label} + {named}" if named else f"{best_label} + {top.effect} (not named)"
+    print(f"\ndiagnosed model: {diagnosed_label} ({report.verdict()})\n")
 
     # 3. the earthquake records, scored only now
-    models = {best_cascade: cascade, f"{best_cascade} + {top.effect}": top.model, best_label: nominal}
+    models = {best_cascade: cascade, diagnosed_label: report.model if named else top.model, best_label: nominal}
     scores = {label: quake_scores(m) for label, m in models.items()}
     labels = list(models)
     prev_quakes = quake_scores(previous, sc_one)
@@ -180,7 +179,7 @@ def main() -> None:
     aug = labels[1]
     for n in WINDOWS:
         print(
-            f"{n}: {aug} lowers the cascade's NRMSE by {100 * (1 - scores[aug][n] / scores[best_cascade][n]):.0f} %; "
+            f"{n}: {aug} / LuGre = {scores[aug][n] / LUGRE_NRMSE[n]:.2f}; "
             f"{best_label} / LuGre = {scores[best_label][n] / LUGRE_NRMSE[n]:.2f}"
         )
     print(f"regime sample shares of the diagnosis add up to {100 * sum(r.sample_share for r in report.regimes.regimes):.0f} %")
@@ -200,7 +199,7 @@ def main() -> None:
         u, y = to_u(rec.u), to_y(rec.y)
         tt = np.arange(len(y))[a:b] * DT
         ax.plot(tt, rec.y[a:b], "k", lw=1.4, label="measured")
-        styles = {best_cascade: ("C0", "-"), f"{best_cascade} + {top.effect}": ("C2", "--"), best_label: ("C3", "-")}
+        styles = {best_cascade: ("C0", "-"), diagnosed_label: ("C2", "--"), best_label: ("C3", "-")}
         for label, m in models.items():
             sim = scaling.output_from_model(simulate(m, u, y, a))
             color, ls = styles[label]

@@ -121,6 +121,11 @@ def test_two_effects_are_both_named_and_the_model_round_trips():
     assert back.effects == report.model.effects
     assert np.array_equal(back.simulate(u[N:]), report.model.simulate(u[N:]))
     assert json.loads(json.dumps(report.to_dict()))["effects"] == list(report.effects)
+    # evaluate and simulate_from_samples take the diagnosed model and start it as the diagnosis did
+    metrics = evaluate(report.model, u[N:], y[N:], init_samples=report.warmup)
+    assert metrics.simulation_rmse == pytest.approx(report.steps[-1].validation_rmse, rel=0.1)
+    sim = bid.simulate_from_samples(report.model, u[N:], y[N:], report.warmup)
+    assert np.sqrt(np.mean((sim - y[N:])[report.warmup :] ** 2)) == pytest.approx(metrics.simulation_rmse)
 
 
 def test_noise_free_record_reads_as_noise_free():

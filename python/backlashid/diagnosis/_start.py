@@ -20,17 +20,16 @@ from zero, as the paper assumes.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .._numerics import minimize_bounded
-from ..errors import BacklashIdError
-from ..identify import estimate_state, refine_values
+from ..identify import estimate_state
 from ..models import CascadeModel, CascadeState
 from ._records import Nominal
-from .effects._base import Start, held_past, start_of
+from .effects._base import Start, held_past, refined_start, start_of
 
 __all__ = ["INITIAL_STATES", "describe", "estimated_start", "held_state", "nominal_start", "refined_start"]
 
@@ -62,66 +61,6 @@ def nominal_start(nominal: Nominal, u: Array, y: Array, how: str, samples: int) 
     if how == "rest":
         return {}
     return start_of(estimate_state(nominal.model, u, y, samples=max(1, min(samples, u.size))))
-
-
-def _internal(start: Start) -> tuple[list[str], Array]:
-    """The start's internal values (everything but the input's past) as one vector."""
-    keys = [k for k in ("x_past", "y_past", "w_past") if k in start]
-    values = [np.asarray(start[k], dtype=np.float64) for k in keys]
-    if "y_past" not in start:
-        keys.append("y_prev")
-        values.append(np.array([float(start.get("y_prev", 0.0))]))
-    return keys, np.concatenate(values) if values else np.zeros(0)
-
-
-def _with(start: Start, keys: list[str], v: Array) -> Start:
-    out = dict(start)
-    k = 0
-    for key in keys:
-        n = 1 if key == "y_prev" else len(start[key])
-        part = v[k : k + n]
-        out[key] = float(part[0]) if key == "y_prev" else part.tolist()
-        k += n
-    if "y_past" in out and out["y_past"]:
-        out["y_prev"] = float(out["y_past"][0])  # the sandwich's y(0) is the backlash memory
-    return out
-
-
-def refined_start(simulate: Callable[[Array, Start], Array], u: Array, y: Array, samples: int, start: Start) -> Start:
-    """An augmented model's start: the internal values of ``start`` refitted to the record's
-    first ``samples`` samples (:func:`~backlashid.identify.refine_values`, damped Gauss-Newton on
-    the core's simulation); ``start`` itself where that does not lower the error.
-
-    Parameters
-    ----------
-    simulate : callable
-        ``simulate(u, start) -> output`` of the augmented model.
-    u, y : ndarray
-        The record.
-    samples : int
-        Samples the start is fitted to.
-    start : dict
-        The nominal's start (:func:`nominal_start`); empty: rest, kept.
-
-    Returns
-    -------
-    dict
-        The refitted start.
-    """
-    if not start:
-        return start
-    n = max(1, min(samples, u.size))
-    u_n, y_n = u[:n], y[:n]
-    keys, v0 = _internal(start)
-
-    def residual(v: Array) -> Array | None:
-        try:
-            r = y_n - simulate(u_n, _with(start, keys, v))
-        except BacklashIdError:
-            return None
-        return r if np.all(np.isfinite(r)) else None
-
-    return _with(start, keys, refine_values(residual, v0))
 
 
 def describe(how: str, samples: int) -> str:

@@ -270,6 +270,14 @@ class Metrics:
         return plot_simulation(ys, y_sim, warmup=self.warmup, ax=ax, title=title)
 
 
+def _augmented(model: Any) -> bool:
+    """A diagnosed model (``DiagnosisReport.model``, an augmented chain): it simulates from the
+    samples and predicts by its own methods."""
+    return not isinstance(model, (CascadeModel, SandwichModel)) and all(
+        callable(getattr(model, name, None)) for name in ("simulate", "simulate_from_samples", "predict_from")
+    )
+
+
 def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_samples: int = 0) -> Metrics:
     """Both kinds of error of ``model`` on the record (u, y), from sample ``warmup`` on.
 
@@ -281,8 +289,9 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
 
     Parameters
     ----------
-    model : CascadeModel or SandwichModel
-        The model to judge, best on data not used to fit it.
+    model : CascadeModel, SandwichModel or AugmentedModel
+        The model to judge, best on data not used to fit it (a diagnosed model,
+        ``DiagnosisReport.model``, too).
     u : array_like
         Input u(t).
     y : array_like
@@ -314,7 +323,9 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
     >>> bid.evaluate(truth, data.u[700:], data.noisy[700:], init_samples=50).simulation_rmse < 1e-8
     True
     """
-    check_model(model)
+    augmented = _augmented(model)
+    if not augmented:
+        check_model(model)
     u_arr, y_arr = one_record(u, y, flatten=True)
     check_finite(u_arr, "u")
     check_finite(y_arr, "y")
@@ -326,9 +337,10 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
     else:
         if init >= y_arr.size:
             raise DataError(f"init_samples = {init}: leave samples to evaluate, give fewer than the record's {y_arr.size}")
-        simulated = simulate_from_samples(model, u_arr, y_arr, init)
+        simulated = model.simulate_from_samples(u_arr, y_arr, init) if augmented else simulate_from_samples(model, u_arr, y_arr, init)
         warmup = max(check_warmup(warmup, y_arr.size), init)
-    predicted = one_step_prediction(model, u_arr, y_arr)
+    # a diagnosed model's predictor: its simulation plus its noise model (the simulation without one)
+    predicted = model.predict_from(simulated, y_arr) if augmented else one_step_prediction(model, u_arr, y_arr)
     metrics = Metrics(
         simulation_rmse=rmse(y_arr, simulated, warmup=warmup),
         simulation_nrmse=nrmse(y_arr, simulated, warmup=warmup),

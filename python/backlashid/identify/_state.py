@@ -788,6 +788,8 @@ def simulate_from_samples(
     >>> bool(np.max(np.abs(sim - d.noisy[150:])) < 1e-8)
     True
     """
+    if not isinstance(model, (CascadeModel, SandwichModel)) and callable(getattr(model, "simulate_from_samples", None)):
+        return np.asarray(model.simulate_from_samples(u, y, init_samples), dtype=np.float64)  # a diagnosed model
     u_arr, y_arr, structure, theta = _estimate_checked(model, u, y, init_samples, "init_samples", noise_std)
     try:
         x0, y_prev, w0 = structure.initial(theta)

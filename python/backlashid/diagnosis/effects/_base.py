@@ -26,7 +26,7 @@ from ..._json import json_float
 from ..._numerics import r_factor
 from ..._validation import as_signal, check_same_length
 from ...errors import BacklashIdError, DataError, ModelError
-from ...identify import Structure, levenberg_marquardt
+from ...identify import Structure, estimate_state, levenberg_marquardt, refine_values
 from ...models import LinearBlock
 
 __all__ = ["Augmentation", "AugmentedModel", "Effect", "Screening", "TIME_SCALE"]
@@ -117,6 +117,66 @@ def start_of(state: Any) -> Start:
     else:
         out["y_prev"] = float(state.y_prev)
     return out
+
+
+def _internal(start: Start) -> tuple[list[str], Array]:
+    """The start's internal values (everything but the input's past) as one vector."""
+    keys = [k for k in ("x_past", "y_past", "w_past") if k in start]
+    values = [np.asarray(start[k], dtype=np.float64) for k in keys]
+    if "y_past" not in start:
+        keys.append("y_prev")
+        values.append(np.array([float(start.get("y_prev", 0.0))]))
+    return keys, np.concatenate(values) if values else np.zeros(0)
+
+
+def _with(start: Start, keys: list[str], v: Array) -> Start:
+    out = dict(start)
+    k = 0
+    for key in keys:
+        n = 1 if key == "y_prev" else len(start[key])
+        part = v[k : k + n]
+        out[key] = float(part[0]) if key == "y_prev" else part.tolist()
+        k += n
+    if "y_past" in out and out["y_past"]:
+        out["y_prev"] = float(out["y_past"][0])  # the sandwich's y(0) is the backlash memory
+    return out
+
+
+def refined_start(simulate: Any, u: Array, y: Array, samples: int, start: Start) -> Start:
+    """An augmented model's start: the internal values of ``start`` refitted to the record's
+    first ``samples`` samples (:func:`~backlashid.identify.refine_values`, damped Gauss-Newton on
+    the core's simulation); ``start`` itself where that does not lower the error.
+
+    Parameters
+    ----------
+    simulate : callable
+        ``simulate(u, start) -> output`` of the augmented model.
+    u, y : ndarray
+        The record.
+    samples : int
+        Samples the start is fitted to.
+    start : dict
+        The nominal's start (:func:`nominal_start`); empty: rest, kept.
+
+    Returns
+    -------
+    dict
+        The refitted start.
+    """
+    if not start:
+        return start
+    n = max(1, min(samples, u.size))
+    u_n, y_n = u[:n], y[:n]
+    keys, v0 = _internal(start)
+
+    def residual(v: Array) -> Array | None:
+        try:
+            r = y_n - simulate(u_n, _with(start, keys, v))
+        except BacklashIdError:
+            return None
+        return r if np.all(np.isfinite(r)) else None
+
+    return _with(start, keys, refine_values(residual, v0))
 
 
 def _exact(v: float) -> float | str:
@@ -320,6 +380,48 @@ class AugmentedModel:
             Callable ``(u, y_prev=0.0, held=False, start=None) -> ndarray``, as :meth:`simulate`.
         """
         return Simulator(self.structure, self.theta, self.core, t0, hold)
+
+    def simulate_from_samples(self, u: ArrayLike, y: ArrayLike, init_samples: int) -> Array:
+        """The free-run simulation of the whole record from the state estimated on its first
+        ``init_samples`` measured samples, as the diagnosis starts a record: the nominal part's
+        state (:func:`~backlashid.identify.estimate_state`), its internal values refitted to the
+        same samples with the effects (which start at rest on it). ``evaluate`` and
+        ``simulate_from_samples`` of :mod:`backlashid.identify` take this model too.
+
+        Parameters
+        ----------
+        u : array_like
+            Input, 1-D (advanced by the nominal's feedthroughs, as the diagnosis drives it).
+        y : array_like
+            Measured output, as long as ``u``; only its first ``init_samples`` are used.
+        init_samples : int
+            Samples that set the state, 1..N.
+
+        Returns
+        -------
+        ndarray
+            The model's output for every sample of u.
+
+        Raises
+        ------
+        DataError
+            If the record is unusable or ``init_samples`` is not in 1..N.
+        ModelError
+            If the refitted nominal part is no valid model or the simulation diverges.
+        """
+        u_arr = as_signal(u, "u").ravel()
+        y_arr = as_signal(y, "y").ravel()
+        check_same_length(("u", u_arr), ("y", y_arr))
+        if isinstance(init_samples, bool) or not isinstance(init_samples, (int, np.integer)) or not 1 <= init_samples <= u_arr.size:
+            raise DataError(f"init_samples = {init_samples!r}: give a whole number of samples from 1 to the record's {u_arr.size}")
+        nominal = self.nominal
+        if nominal is None:
+            raise ModelError("the refitted nominal part is no valid backlash model: its state cannot be estimated")
+        n = int(init_samples)
+        sim = self.simulator(0.0)
+        start = start_of(estimate_state(nominal, u_arr, y_arr, samples=n))
+        start = refined_start(lambda v, st: sim(v, start=st), u_arr, y_arr, n, start)
+        return np.asarray(sim(u_arr, start=start), dtype=np.float64)
 
     def predict(self, u: ArrayLike, y: ArrayLike, t0: float = 0.0) -> Array:
         """One-step prediction: the simulation plus the noise model's prediction of the output
