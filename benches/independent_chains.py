@@ -105,8 +105,9 @@ row and level, twice as many for the 'none' rows)
 - integrating (ENR 3): none, friction, dead_time, saturation, output_offset;
 - pair (cascade, two effects at once, each scaled alone to the level): dead_time+output_offset,
   friction+quantization, saturation+width_drift, compliance+colored_noise; the noise is set by
-  the noise-scaled member if there is one (dead_time, output_offset), else drawn, and the other
-  member solved to the level;
+  the noise-scaled member if there is one (dead_time, output_offset; for dead_time+output_offset
+  the dead time, the offset keeping its drawn size), else drawn, and the other member solved
+  to the level; each member's ENR alone is recorded (``params[effect]["enr_alone"]``);
 - physics (cascade): lugre, bouc_wen, duffing, creep, travel_stop, sensor_clip;
 - ooc (cascade): eccentric_gear, supply_ripple. (gain_drift and cogging stay in
   independent_effects.)
@@ -258,7 +259,7 @@ def velocity_drive_friction(u: Array, tau: float, coulomb: float, viscous: float
             force = drive_force + fric
             new_pos = pos + p01 * vel + g0 * force
             new_vel = p11 * vel + g1 * force
-            if vel != 0.0 and new_vel * vel < 0.0:
+            if coulomb and vel != 0.0 and new_vel * vel < 0.0:
                 new_vel = 0.0  # the velocity would reverse within the substep: it stops (Karnopp)
             pos, vel, moved = new_pos, new_vel, True
         moving += moved
@@ -766,7 +767,8 @@ def _draw(row: Row, level: float, kind: str, rng: np.random.Generator) -> dict[s
         m, y1, info = _sized(e, plant, par, y0, level * sigma)
         d = (y1 - y0)[WARMUP:]
         if e in NOISE_SCALED:
-            sigma = ie.rms(d) / level
+            if not noise_scaled:  # the first noise-scaled member sets the noise; a second keeps its drawn size
+                sigma = ie.rms(d) / level
             noise_scaled = True
         elif not 0.98 * level * sigma <= ie.rms(d) <= 1.02 * level * sigma:
             noise_scaled = True  # the size hit its range: the noise follows the effect
