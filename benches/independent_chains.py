@@ -1158,7 +1158,15 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     ap.add_argument("--check", action="store_true", help="generator and nominal fits only (no diagnosis)")
     ap.add_argument("--json", metavar="PATH", help="write per-case results and the summary as JSON")
+    ap.add_argument("--log", metavar="PATH", help="append each case's result as one JSON line as it finishes")
+    ap.add_argument("--from-log", metavar="PATH", help="print the summary (with --check: the check report) of a --log file; run nothing")
     args = ap.parse_args()
+    if args.from_log:
+        with open(args.from_log) as fh:
+            logged = [json.loads(line) for line in fh if line.strip()]
+        print(f"{len(logged)} cases from {args.from_log}")
+        check_report(logged) if args.check else summarise(logged)
+        return 0
     unknown = [r for r in args.rows if r not in ROWS]
     if unknown:
         ap.error(f"unknown rows {unknown}; choose from {' '.join(ROWS)}")
@@ -1168,11 +1176,16 @@ def main() -> int:
     t0 = time.perf_counter()
     cols = list(zip(*cases)) if cases else [[], [], []]
     call = (cols[0], cols[1], cols[2], [args.seeds] * len(cases), [args.check] * len(cases))
-    if args.jobs > 1:
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            results = list(pool.map(run_case, *call))
-    else:
-        results = list(map(run_case, *call))
+    log = open(args.log, "a") if args.log else None
+    results = []
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        for res in pool.map(run_case, *call) if args.jobs > 1 else map(run_case, *call):
+            results.append(res)
+            if log is not None:
+                log.write(json.dumps(res, default=float) + "\n")
+                log.flush()
+    if log is not None:
+        log.close()
     wall = time.perf_counter() - t0
     summary = check_report(results) if args.check else summarise(results)
     summary["wall_seconds"] = wall
