@@ -1163,7 +1163,12 @@ def main() -> int:
     args = ap.parse_args()
     if args.from_log:
         with open(args.from_log) as fh:
-            logged = [json.loads(line) for line in fh if line.strip()]
+            by_case = {}  # a case run twice (a restarted run): its last result
+            for line in fh:
+                if line.strip():
+                    res = json.loads(line)
+                    by_case[(res["row"], res["level"], res["index"], res["seeds"])] = res
+            logged = list(by_case.values())
         print(f"{len(logged)} cases from {args.from_log}")
         check_report(logged) if args.check else summarise(logged)
         return 0
