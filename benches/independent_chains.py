@@ -51,7 +51,11 @@ the ENR as in independent_effects)
   F_v = lam nu 2 z_l w_l); for integrating on the motor's velocity balance
   v' = (u - v) / tau_m - F_c sign(v) - F_v v, F_c = lam phi / tau_m, F_v = lam nu / tau_m
   (stuck at rest while abs(u) / tau_m <= F_c). phi in [0.05, 0.3], nu in [0.1, 0.5], size lam in
-  [0.01, 4].
+  [0.01, 4] (integrating: [1e-4, 4]: the position integrates every lost velocity, so the ENR
+  needs a far smaller friction).
+- saturation on an integrating plant: the clipped share in [0.003, 0.3] and its rule 0.3-30 %
+  of the samples (a velocity clipped on 3 % of the samples already drifts the position far
+  beyond ENR 3 at realistic noise).
 - lugre -> dynamic_friction: a damper-like plant, displacement in, force out: the play's output
   p is a piston position, the load cell measures k p (k = 1: the nominal) plus the LuGre friction
   force of the moving piston, F = sigma0 zb + sigma1 zb' + sigma2 v, zb' = v - sigma0 abs(v) zb / g(v),
@@ -105,9 +109,11 @@ row and level, twice as many for the 'none' rows)
 - integrating (ENR 3): none, friction, dead_time, saturation, output_offset;
 - pair (cascade, two effects at once, each scaled alone to the level): dead_time+output_offset,
   friction+quantization, saturation+width_drift, compliance+colored_noise; the noise is set by
-  the noise-scaled member if there is one (dead_time, output_offset; for dead_time+output_offset
-  the dead time, the offset keeping its drawn size), else drawn, and the other member solved
-  to the level; each member's ENR alone is recorded (``params[effect]["enr_alone"]``);
+  the noise-scaled member if there is one (dead_time, output_offset), else drawn, and the other
+  member solved to the level; each member's ENR alone is recorded (``params[effect]["enr_alone"]``); when
+  both are noise-scaled (dead_time+output_offset) sigma = sqrt(RMS(d_1) RMS(d_2)) / level, and
+  the draw is rejected unless RMS(d_1) / RMS(d_2) lies in [1/3, 3] (each member's ENR alone
+  then within a factor 1.73 of the level);
 - physics (cascade): lugre, bouc_wen, duffing, creep, travel_stop, sensor_clip;
 - ooc (cascade): eccentric_gear, supply_ripple. (gain_drift and cogging stay in
   independent_effects.)
@@ -618,6 +624,17 @@ SIZE_RANGE: dict[str, tuple[float, float] | None] = {
     "lugre": None, "bouc_wen": (1e-3, 3.0), "duffing": (1e-3, 0.5), "creep": (1e-3, 2.0),
     "travel_stop": (0.03, 0.8), "sensor_clip": (0.03, 0.3), "eccentric_gear": (1e-3, 0.9), "supply_ripple": (1e-3, 0.5),
 }  # fmt: skip
+# integrating plants: an input-side effect's error integrates into a drift of the position, so
+# the ENR needs far smaller sizes than on a plant that forgets
+INTEGRATING_RANGE = {"friction": (1e-4, 4.0), "saturation": (0.003, 0.3)}
+INTEGRATING_ACTIVE = (0.003, 0.30)  # the saturation rule there
+
+
+def size_range(effect: str, family: str) -> tuple[float, float]:
+    rng = INTEGRATING_RANGE.get(effect) if family == "integrating" else None
+    return rng or SIZE_RANGE[effect]  # type: ignore[return-value]
+
+
 LINEAR = ("colored_noise", "lugre")  # d is linear in the size: solved in one step
 
 
@@ -707,7 +724,7 @@ def _sized(effect: str, plant: Plant, par: dict[str, Any], y0: Array, target: fl
     elif SIZE_RANGE[effect] is None:
         size = 1.0
     else:
-        size = ie._solve_size(d_rms, target, *SIZE_RANGE[effect])
+        size = ie._solve_size(d_rms, target, *size_range(effect, plant.family))
     y1, info = run(size)
     return {**par, "size": size}, y1, info
 
@@ -719,7 +736,8 @@ def _rules(effect: str, mods: dict[str, Any], y1: Array, y0: Array, info: dict[s
         umax = mods["u_max"](mods["size"])
         active = float(np.mean(np.abs(plant.u[plant.start + WARMUP :]) > umax))
         out.update(u_max=umax, active=active)
-        if not 0.03 <= active <= 0.30:
+        lo, hi = INTEGRATING_ACTIVE if plant.family == "integrating" else (0.03, 0.30)
+        if not lo <= active <= hi:
             raise ie.Degenerate(f"saturation active on {active:.3f} of the samples")
     if effect in ("friction",) and info.get("moving", 1.0) < 0.3:
         raise ie.Degenerate(f"the drive moves on {info['moving']:.3f} of the samples")
@@ -767,7 +785,7 @@ def _draw(row: Row, level: float, kind: str, rng: np.random.Generator) -> dict[s
         m, y1, info = _sized(e, plant, par, y0, level * sigma)
         d = (y1 - y0)[WARMUP:]
         if e in NOISE_SCALED:
-            if not noise_scaled:  # the first noise-scaled member sets the noise; a second keeps its drawn size
+            if not noise_scaled:  # the first noise-scaled member sets the noise (two: see below)
                 sigma = ie.rms(d) / level
             noise_scaled = True
         elif not 0.98 * level * sigma <= ie.rms(d) <= 1.02 * level * sigma:
@@ -779,6 +797,11 @@ def _draw(row: Row, level: float, kind: str, rng: np.random.Generator) -> dict[s
         mods[e] = m
         d_alone[e] = y1 - y0
     if len(effects) == 2:  # the second member was solved to level * sigma of the first: re-check both
+        if all(e in NOISE_SCALED for e in effects):  # neither scales: the noise sits between them
+            rms_a, rms_b = (ie.rms(d_alone[e][WARMUP:]) for e in effects)
+            if not 1.0 / 3.0 <= rms_a / rms_b <= 3.0:
+                raise ie.Degenerate(f"the members' sizes differ by a factor {max(rms_a / rms_b, rms_b / rms_a):.1f} > 3")
+            sigma = math.sqrt(rms_a * rms_b) / level
         for e in effects:
             params[e]["enr_alone"] = ie.rms(d_alone[e][WARMUP:]) / sigma
     y1, info = plant.simulate(mods) if mods else (y0, {})

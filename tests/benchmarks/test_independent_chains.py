@@ -6,6 +6,7 @@ says, its cases hit the requested ENR, and its seeds and decision rules are as d
 from __future__ import annotations
 
 import importlib.util
+import math
 import sys
 from pathlib import Path
 
@@ -94,9 +95,14 @@ def test_sensor_clip_bounds_the_measured_output():
 
 def test_pair_scales_each_member_alone_to_the_level():
     c = C.make_case("pair:dead_time+output_offset", 3.0, 2)
-    assert c.params["dead_time"]["enr_alone"] == pytest.approx(3.0, rel=1e-9)  # it sets the noise
-    assert c.params["output_offset"]["enr_alone"] > 0.0
+    # neither member scales: the noise sits at their geometric mean, each within a factor 1.73 of the level
+    a, b = c.params["dead_time"]["enr_alone"], c.params["output_offset"]["enr_alone"]
+    assert math.sqrt(a * b) == pytest.approx(3.0, rel=1e-9)
+    assert 3.0 / 1.74 < a < 3.0 * 1.74 and 3.0 / 1.74 < b < 3.0 * 1.74
     assert "o" in c.params["output_offset"] and c.params["dead_time"]["d"] in (1, 2, 3)
+    c = C.make_case("pair:saturation+width_drift", 1.0, 0)  # both scale: each alone at the level
+    assert c.params["saturation"]["enr_alone"] == pytest.approx(1.0, rel=0.02)
+    assert c.params["width_drift"]["enr_alone"] == pytest.approx(1.0, rel=0.02)
 
 
 def test_seed_sets_are_new_reproducible_and_disjoint():
