@@ -244,7 +244,9 @@ def velocity_drive(u: Array, tau: float) -> Array:
 
 def velocity_drive_friction(u: Array, tau: float, coulomb: float, viscous: float) -> tuple[Array, float]:
     """The velocity drive with v' = (u - v) / tau - coulomb sign(v) - viscous v (Karnopp stick-slip),
-    SUBSTEPS substeps per sample, each exact for the linear part with the friction force held."""
+    SUBSTEPS substeps per sample, each exact for the linear part with the friction force held;
+    the position error of the friction force's sign within a reversing substep is O(coulomb h^2),
+    so the trajectory tends to the frictionless one as coulomb -> 0."""
     h = 1.0 / SUBSTEPS
     phi, gam = ie.zoh(np.array([[0.0, 1.0], [0.0, -(1.0 / tau + viscous)]]), np.array([0.0, 1.0]), h)
     p00, p01, p10, p11 = (float(v) for v in phi.ravel())
@@ -265,8 +267,11 @@ def velocity_drive_friction(u: Array, tau: float, coulomb: float, viscous: float
             force = drive_force + fric
             new_pos = pos + p01 * vel + g0 * force
             new_vel = p11 * vel + g1 * force
-            if coulomb and vel != 0.0 and new_vel * vel < 0.0:
-                new_vel = 0.0  # the velocity would reverse within the substep: it stops (Karnopp)
+            if coulomb and vel != 0.0 and new_vel * vel < 0.0 and abs(drive_force) <= coulomb:
+                # the velocity would reverse within the substep and the drive cannot overcome the
+                # static friction: it sticks (Karnopp). With a larger drive force it passes through
+                # zero (an integrator keeps every velocity lost at a stop, so none is invented here)
+                new_vel = 0.0
             pos, vel, moved = new_pos, new_vel, True
         moving += moved
     return out, moving / u.size

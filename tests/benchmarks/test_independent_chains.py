@@ -128,3 +128,14 @@ def test_case_list_and_decision_rules():
     assert C.correct({**pair, "effects": ["quantization", "friction"]})
     assert C.correct({"row": "ooc:supply_ripple", "reported": "unexplained"})
     assert not C.correct({"row": "sandwich:none", "reported": "fit_error"})
+
+
+def test_velocity_drive_friction_tends_to_the_frictionless_drive():
+    """A vanishing Coulomb friction must not invent a drift of the integrated position (a stop at
+    every reversal would lose a substep's motion each time, and the integrator keeps it)."""
+    u = np.diff(np.random.default_rng(6).uniform(-1, 1, 2001))
+    x0 = C.velocity_drive(u, 3.0)
+    x1, _ = C.velocity_drive_friction(u, 3.0, 1e-7, 0.0)
+    assert IE.rms(x1 - x0) < 1e-4 * IE.rms(x0)
+    x2, moving = C.velocity_drive_friction(u, 3.0, 0.2, 0.0)  # a real friction sticks
+    assert moving < 1.0 and IE.rms(x2 - x0) > 1e-2 * IE.rms(x0)
