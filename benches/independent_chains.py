@@ -81,7 +81,8 @@ the ENR as in independent_effects)
   the stops at the nominal motor position's quantiles a f_s and 1 - a (1 - f_s), f_s uniform
   [0.3, 0.7]; size a in [0.03, 0.8] (the motor leaves a stop as soon as the force turns, so it
   sits there on about a third of the share the nominal spends beyond it); rejected unless the
-  motor sits at a stop on 3-30 % of the samples.
+  motor sits at a stop on 0.5-30 % of the samples (at 3 %, 11 of the 20 tune cases found no
+  draw: a stop the motor touches on 1 % of the samples already carries ENR 3).
 - sensor_clip -> sensor_saturation: the measured output (after the noise) clipped to the
   sensor's range [y_lo, y_hi], the nominal output's quantiles a f_s and 1 - a (1 - f_s); d (for
   the ENR) is the noise-free clip error; size a in [0.03, 0.3]; rejected unless 3-30 % of the
@@ -640,6 +641,8 @@ def size_range(effect: str, family: str) -> tuple[float, float]:
     return rng or SIZE_RANGE[effect]  # type: ignore[return-value]
 
 
+STOP_SHARE = (0.005, 0.30)  # travel_stop: share of the samples the motor sits at a stop
+
 LINEAR = ("colored_noise", "lugre")  # d is linear in the size: solved in one step
 
 
@@ -748,7 +751,7 @@ def _rules(effect: str, mods: dict[str, Any], y1: Array, y0: Array, info: dict[s
         raise ie.Degenerate(f"the drive moves on {info['moving']:.3f} of the samples")
     if effect == "travel_stop":
         out["at_stop"] = info["at_stop"]
-        if not 0.03 <= info["at_stop"] <= 0.30:
+        if not STOP_SHARE[0] <= info["at_stop"] <= STOP_SHARE[1]:
             raise ie.Degenerate(f"at a stop on {info['at_stop']:.3f} of the samples")
     if effect == "sensor_clip":
         lo, hi = _clip_range(mods)
