@@ -167,8 +167,10 @@ def test_bad_inputs_raise_actionable_errors(nominal, u) -> None:
         fx.fit_effect("dead_time", nominal, u, u[:-1])
     with pytest.raises(bx.DataError, match="longer record"):
         fx.fit_effect("dead_time", nominal, u[:60], u[:60], warmup=30)
-    with pytest.raises(bx.ModelError, match="fit_cascade"):
-        fx.fit_effect("dead_time", bx.example2(), u, u)
+    with pytest.raises(bx.ModelError, match="fit_cascade, fit_sandwich or fit_hammerstein_backlash"):
+        fx.fit_effect("dead_time", bx.LinearBlock([1.0]), u, u)
+    # a sandwich is refitted like a cascade (its output block's parameters with the others)
+    assert fx.fit_effect("output_offset", bx.example2(), u, bx.example2().simulate(u) + 0.1).effects == ("output_offset",)
     with pytest.raises(bx.ModelError, match="lo < hi"):
         _core.simulate_augmented([1.0], [], 0.1, 0.1, [1.0], [1.0], u, effects=[("saturation", [1.0, -1.0])])
     with pytest.raises(bx.DataError):
