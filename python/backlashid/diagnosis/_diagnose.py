@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from .._validation import check_flag, check_noise_std, check_seed, shown
 from ..errors import BacklashIdError, DataError
 from ..models import CascadeState, SandwichState
-from ._noise import Signals, black_box_residuals, noise_floor
+from ._noise import Signals, black_box_residuals, one_step_floor
 from ._records import Nominal, nominal_chain, records_of
 from ._report import Candidate, CompositionStep, DiagnosisDetails, DiagnosisReport
 from ._start import INITIAL_STATES, describe, estimated_start, held_state, nominal_start, refined_start
@@ -439,11 +439,11 @@ def diagnose(
     if noise_std is not None:
         floor, floor_how = float(noise_std) ** 2, "given noise_std"
     else:
-        floor = min(noise_floor(r_bb, mse0), _candidate_floor(d, scored))
+        floor = min(one_step_floor(sig_e, sig_v, mse0), _candidate_floor(d, scored))
         floor_how = (
-            "estimated: the lower validation MSE of two one-step predictors of a residual (input lags, the internal "
-            "signal x and its velocity, powers of the output, the residual's last 10 values, fitted on the estimation "
-            "records): the nominal model's residual and the best candidate's"
+            "estimated: the lowest validation MSE of one-step predictors of a residual (the residual's last 10 values, "
+            "with and without input lags, the internal signal x and its velocity and powers of the output; fitted on "
+            "the estimation records): the nominal model's residual and the best candidate's"
         )
     gap = max(mse0 - floor, 0.0)
     level = ALPHA / (len(scored) + 1)
@@ -600,10 +600,9 @@ def _candidate_floor(d: _Diagnosis, scored: dict[str, _Scored]) -> float:
     best = min(det, key=lambda s: s.mse)
     try:
         sig_e, sig_v = d.signals(d.est_run(best.model), best.run.outputs)
-        _, one_step = black_box_residuals(sig_e, sig_v)
+        return one_step_floor(sig_e, sig_v, best.mse)
     except BacklashIdError:
         return math.inf
-    return noise_floor(one_step, best.mse)
 
 
 def _as_score(s: _Scored, mse_step: float, gap: float, y_out: Array, phi: Array, level: float, p_mod: float) -> Score:
