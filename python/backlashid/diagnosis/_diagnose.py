@@ -430,6 +430,12 @@ def diagnose(
     r_e_s = np.concatenate([(y - o)[w:] for (_, y), o in zip(est, d.ynom_est)])
     x_v_s = np.concatenate([x[w:] for x in d.x_val])
     p_modulation = modulation_p(r0, ynom_v_scored, phi)
+    # the validation residual's own (prewhitened) cross-correlation with the input and with x:
+    # a residual that depends on them is no noise, even where the black box fitted on an
+    # estimation record of narrow excitation cannot follow it onto a richer validation record
+    u_all, x_all = np.concatenate([u for u, _ in val]), np.concatenate(d.x_val)
+    tests = residual_tests(r0, u_all[d.keep_val], x_all[d.keep_val])
+    p_input = min(p_input, tests["ccf_u"].p_adjusted, tests["ccf_x"].p_adjusted)
     p_position = position_p(x_e_s, ynom_e_s, r_e_s, x_v_s, ynom_v_scored, r0)
 
     # step 0: every candidate against the nominal model
@@ -534,7 +540,6 @@ def diagnose(
     y_best = np.concatenate(final_run.outputs) if final_run is not None else y_nominal
     residual_full = d.y_val - y_nominal
     u_val_all = np.concatenate([u for u, _ in val])
-    x_val_all = np.concatenate(d.x_val)
     details = DiagnosisDetails(
         screening=tuple(screening),
         black_box_p_value=p_black_box,
@@ -562,7 +567,6 @@ def diagnose(
     )
     first_val = val[0]
     state0 = _state(nominal, d.starts_val[0])
-    tests = residual_tests(residual_full[d.keep_val], u_val_all[d.keep_val], x_val_all[d.keep_val])
     regimes = regime_shares(nominal.model, first_val[0], first_val[1] - d.ynom_val[0], warmup=w, initial_state=state0)
     spectrum = frequency_analysis(residual_full[d.keep_val], u_val_all[d.keep_val], noise_std=noise)
     drift = time_analysis(residual_full[d.keep_val])

@@ -186,8 +186,10 @@ class DiagnosisDetails:
     black_box_p_value : float
         p-value of the black-box residual model's (with the residual's past) improvement.
     input_p_value : float
-        p-value of the black-box model of input features alone (does the residual depend on
-        the input?).
+        Does the residual depend on the input? The lower of the p-values of the black-box model
+        of input features alone (fitted on estimation, scored on validation) and of the
+        validation residual's prewhitened cross-correlation tests with the input and with x
+        (Holm-adjusted).
     modulation_p_value : float
         p-value of the residual being a slowly modulated copy of the output.
     position_p_value : float

@@ -18,7 +18,7 @@ remaining gap (the step's MSE above the noise floor) it closes. The family-wise 
 - else (first step only) colored_noise if no significant deterministic candidate closes
   ``MATERIAL`` of the gap, its noise model predicts the residual significantly better one step
   ahead, and the residual is neither explained by the input (a cross-validated black box of input
-  features), nor modulated by the model's output, nor a function of the drive's position;
+  features, or its prewhitened cross-correlation with the input or x), nor modulated by the model's output, nor a function of the drive's position;
 - else "unexplained".
 """
 
