@@ -113,6 +113,7 @@ def main() -> None:
         print(f"| {name}, published | | | | {value:.3e} | |")
     print(f"\nverdict: {report.verdict()}")
     print(f"fitted effect parameters (model units): {report.best.params if report.best else {}}")
+    print(f"noise std estimated on the noise-free record: {report.noise_std:.4g} model units ({100 * report.noise_std / np.std(Y):.2f} % of the output's std)")
     print(f"\ntotal {time.perf_counter() - start_all:.0f} s")
 
 
