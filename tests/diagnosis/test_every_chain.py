@@ -151,3 +151,15 @@ def test_integrating_plant_starts_as_evaluate_does():
     reference = evaluate(model, u[N:], y[N:], init_samples=report.warmup).simulation_rmse
     assert report.nominal_validation_rmse == pytest.approx(reference, rel=0.1)
     assert report.best_effect == "none"
+
+
+def test_a_quantiser_after_a_dead_time_is_named_second():
+    from backlashid.diagnosis.effects._quantization import quantise
+
+    m = bid.example1()
+    u = _input(11)
+    y = quantise(m.simulate(_delayed(u, 2)) + 0.005 * np.random.default_rng(12).standard_normal(u.size), 0.08)
+    report = _diagnosed(m, u, y, candidates=["dead_time", "quantization", "output_offset"])
+    assert report.effects == ("dead_time", "quantization")
+    assert "then quantization" in report.verdict()
+    assert dict(report.model.core)["quantization"] == pytest.approx((0.08,))

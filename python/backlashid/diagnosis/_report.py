@@ -413,6 +413,8 @@ class DiagnosisReport:
             return f"unexplained: a significant gap that {first}{tail}"
         if best is None:
             return f"{self.best_effect}"
+        # a quantiser named from the lattice after the deterministic effects has no step of its own
+        quantiser = f"; then quantization: {lattice}" if "quantization" in self.effects[1:] and lattice else ""
         if len(self.steps) > 1:
             parts = [
                 f"{st.effect} closes {_pct(st.gap_closed).strip()} of the {'gap' if i == 0 else 'rest'} (p = {_p(st.p_value)})"
@@ -421,9 +423,10 @@ class DiagnosisReport:
             return (
                 f"{' + '.join(self.effects)}: " + ", then ".join(parts)
                 + f"; validation RMSE {self.nominal_validation_rmse:.4g} -> {self.steps[-1].validation_rmse:.4g}"
+                + quantiser
             )
         sig = "its signature is gone" if best.signature_removed else "the change it predicts still correlates with its residual"
-        return f"{best.effect}: closes {_pct(best.gap_closed).strip()} of the gap (p = {_p(best.p_value)}); {sig}"
+        return f"{best.effect}: closes {_pct(best.gap_closed).strip()} of the gap (p = {_p(best.p_value)}); {sig}{quantiser}"
 
     def _not_noise(self) -> str:
         """Why the residual is not noise, as the diagnoser recorded it in ``details``."""
