@@ -41,9 +41,7 @@ from _fits import fit_structure, print_candidates  # docs/case_studies/_fits.py,
 
 import backlashid as bid
 from backlashid.app import Record, decimate, load_record
-from backlashid.diagnosis._start import refined_start
-from backlashid.diagnosis.effects._base import start_of
-from backlashid.identify import Scaling, estimate_state
+from backlashid.identify import Scaling
 
 DECIMATE = 8  # 1024 Hz -> 128 Hz: the motion is slow, the identification needs samples that change
 DT = DECIMATE / 1024.0
@@ -77,21 +75,12 @@ def tests_36lb(folder: Path) -> dict[str, Record]:
     return {n.removeprefix("d2_char_").removesuffix(".npz"): decimate(load_record(folder / n, "x_in", "F_kip"), DECIMATE) for n in names}
 
 
-def nominal_state(model: Any, u: np.ndarray, y: np.ndarray, init: int) -> dict[str, Any]:
-    """The nominal chain's state estimated from the first ``init`` samples (as core keywords)."""
-    return start_of(estimate_state(model, u, y, samples=init))
-
-
 def simulate(model: Any, u: np.ndarray, y: np.ndarray, init: int) -> np.ndarray:
     """Free run over the whole record, the state at sample 0 set from the first ``init`` samples
-    only: a cascade or sandwich by ``simulate_from_samples``, the diagnosed (augmented) model as
-    the diagnosis starts it."""
-    if isinstance(model, (bid.CascadeModel, bid.SandwichModel)):
-        return bid.simulate_from_samples(model, u, y, init)
-    sim = model.simulator(0.0)
-    start = nominal_state(model.nominal, u, y, init)
-    start = refined_start(lambda v, st: sim(v, start=st), u, y, init, start)
-    return np.asarray(sim(u, start=start))
+    only: ``simulate_from_samples`` for a cascade, a sandwich and the diagnosed model (which starts
+    from its nominal part's estimated state, its own internal state refitted, as the diagnosis
+    starts a record)."""
+    return np.asarray(bid.simulate_from_samples(model, u, y, init))
 
 
 def main() -> None:
