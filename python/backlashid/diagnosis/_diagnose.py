@@ -38,11 +38,12 @@ from ._start import INITIAL_STATES, describe, estimated_start, held_state, nomin
 from ._statistics import modulation_p, paired_p, position_p, signature_removed
 from ._verdict import ALPHA, Evidence, Score, decide, gap_share
 from .analyses import NominalSignals, frequency_analysis, model_error, regime_shares, residual_tests, time_analysis
-from .effects import EFFECTS, REGISTRY, AugmentedModel
+from .effects import EFFECTS, REGISTRY, AugmentedModel, Screening
 from .effects._base import CoreEffects, Problem, ScreenContext, Simulator, Start, simulate
 from .effects._colored_noise import fit_ar
 from .effects._dead_time import MAX_DELAY
 from .effects._quantization import lattice
+from .effects._registry import score_tests
 
 __all__ = ["diagnose", "ALPHA", "default_warmup", "estimated_start", "held_state"]
 
@@ -211,50 +212,14 @@ def _whole(value: Any, name: str, least: int, most: int, what: str) -> int:
     return int(value)
 
 
-def _screen(d: _Diagnosis, base_model: AugmentedModel | None, candidates: Sequence[str]) -> list[Any]:
+def _screen(d: _Diagnosis, base_model: AugmentedModel | None, candidates: Sequence[str]) -> list[Screening]:
     """Score tests of the candidates on the first estimation record against the step's model."""
-    from scipy import stats
-
-    from .effects import Screening
-
     s = d.nominal.structure if base_model is None else base_model.structure
     theta = d.nominal.theta if base_model is None else base_model.theta
     base = () if base_model is None else base_model.core
     (u, y), t0, st = d.est[0], d.t0_est[0], d.starts_est[0]
     y_sim = simulate(s, theta, base, u, t0, start=st)
-    ctx = _BaseContext(s, theta, u, y, t0, y_sim, st, base)
-    r = (y - y_sim)[d.warmup :]
-    out = []
-    for name in candidates:
-        effect = REGISTRY[name]
-        try:
-            dirs = effect.directions(ctx)
-        except BacklashIdError:
-            dirs = []
-        a = np.column_stack([v[d.warmup :] for v in dirs]) if dirs else np.zeros((r.size, 0))
-        a = a[:, np.std(a, axis=0) > 1e-12 * (np.abs(a).max() + 1e-300)] if a.size else a
-        if effect.intercept and a.size:
-            a = np.column_stack([a, np.ones(r.size)])
-        if a.shape[1] == 0 or not np.all(np.isfinite(a)):
-            out.append(Screening(name, 0.0, 1.0, 0))
-            continue
-        from .._numerics import lstsq
-
-        coef = lstsq(a, r)
-        r2 = float(1.0 - np.sum((r - a @ coef) ** 2) / max(float(r @ r), 1e-300))
-        stat = r.size * max(r2, 0.0)
-        out.append(Screening(name, stat, float(stats.chi2.sf(stat, a.shape[1])), a.shape[1]))
-    return sorted(out, key=lambda sc: (sc.p_value, -sc.statistic))
-
-
-@dataclass
-class _BaseContext(ScreenContext):
-    """A screening context whose changes are taken on top of the step's effects."""
-
-    base: CoreEffects = ()
-
-    def change(self, effects: CoreEffects) -> Array:
-        return simulate(self.structure, self.theta, (*effects, *self.base), self.u, self.t0, start=self.start) - self.y_sim
+    return score_tests(ScreenContext(s, theta, u, y, t0, y_sim, st, base), d.warmup, candidates, skip_failing=True)
 
 
 def _score(d: _Diagnosis, model: AugmentedModel, r_step: Array, seed_outputs: list[Array] | None = None) -> _Scored:

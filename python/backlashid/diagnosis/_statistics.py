@@ -43,8 +43,10 @@ def holm(p_values: ArrayLike) -> NDArray[np.float64]:
 
 def paired_p(r0: Array, r1: Array) -> float:
     """One-sided p-value of E[r0^2 - r1^2] > 0 (Newey-West standard error): does the second
-    model's error improve on the first's?"""
-    d = r0 * r0 - r1 * r1
+    model's error improve on the first's? Computed in units of the largest error of the first,
+    so that the squares cannot overflow (the statistic does not depend on the unit)."""
+    scale = float(np.max(np.abs(r0), initial=0.0)) or 1.0
+    d = (r0 / scale) ** 2 - (r1 / scale) ** 2
     n = d.size
     dc = d - d.mean()
     var = float(dc @ dc) / n

@@ -73,6 +73,7 @@ from ..._json import json_float
 from ..._numerics import r_factor
 from ..._validation import as_signal, check_finite, check_real, check_warmup, shown
 from ...errors import DataError
+from .._statistics import paired_p
 
 __all__ = ["GROUPS", "ModelErrorModel", "NominalSignals", "model_error"]
 
@@ -107,7 +108,6 @@ TAIL = 0.25  # share of each estimation record (after the warm-up) held out to c
 CLIP = (-10.0, 1.0)
 NOTHING = 0.1  # a share below this: nothing predictable is missing
 ALPHA = 0.01  # level of the test that the validation error improved
-HAC_LAGS = 20  # Newey-West lags of that test
 CLOSE_ENOUGH = 0.5  # a share at least this: the model-error model explains the gap
 MATTERS = 0.05  # the groups named close the share of all groups but less than this
 MIN_ROWS_PER_COLUMN = 5  # estimation samples after the warm-up per feature
@@ -630,7 +630,7 @@ def model_error(
 
     relevance = {g: raw_share - share(columns_of([h for h in GROUPS if h != g]))[0] for g in GROUPS}
     alone = {g: share(columns_of([g]))[0] for g in GROUPS}
-    p_value = _improvement_p(e_val, e_val - phi_val @ coef)
+    p_value = paired_p(e_val, e_val - phi_val @ coef)
     groups: tuple[str, ...] = ()
     if np.isfinite(raw_share) and raw_share >= NOTHING and p_value < ALPHA:
         groups = _groups_that_matter(lambda kept: share(columns_of(kept))[0], raw_share, relevance, alone)
@@ -686,23 +686,6 @@ def _backward(share: Any, full: float, relevance: dict[str, float]) -> tuple[str
     else:
         losses = {kept[0]: current}
     return tuple(sorted(kept, key=lambda g: -losses[g]))
-
-
-def _improvement_p(r0: Array, r1: Array) -> float:
-    """One-sided p-value of E[r0^2 - r1^2] > 0, Newey-West standard error (``HAC_LAGS`` lags),
-    the diagnosis' paired test of an improvement."""
-    scale = float(np.max(np.abs(r0))) or 1.0  # in units of the largest error: no overflow in d^2
-    d = (r0 / scale) ** 2 - (r1 / scale) ** 2
-    n = d.size
-    dc = d - d.mean()
-    var = float(dc @ dc) / n
-    for k in range(1, min(HAC_LAGS, n - 1) + 1):
-        var += 2.0 * (1.0 - k / (HAC_LAGS + 1)) * float(dc[k:] @ dc[:-k]) / n
-    if var <= 0.0:
-        return 0.0 if d.mean() > 0 else 1.0
-    from scipy import stats  # imported when first needed: import backlashid stays fast
-
-    return float(stats.norm.sf(d.mean() / np.sqrt(var / n)))
 
 
 def _full(coef: Array, cols: Array, p: int) -> Array:

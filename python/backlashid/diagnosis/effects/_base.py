@@ -994,12 +994,13 @@ class ScreenContext:
     u: Array
     y: Array
     t0: float
-    y_sim: Array  # the nominal simulation
+    y_sim: Array  # the simulation of the step's model (the nominal, or it with ``base``)
     start: Start = field(default_factory=dict)  # the record's start (rest if empty)
+    base: CoreEffects = ()  # effects already in the step's model (the composition's earlier steps)
 
     def change(self, effects: CoreEffects) -> Array:
-        """The augmented simulation minus the nominal one."""
-        return simulate(self.structure, self.theta, effects, self.u, self.t0, start=self.start) - self.y_sim
+        """The augmented simulation (``effects`` on top of ``base``) minus the step's."""
+        return simulate(self.structure, self.theta, (*effects, *self.base), self.u, self.t0, start=self.start) - self.y_sim
 
 
 class StructureEffect(Effect):
@@ -1039,6 +1040,8 @@ class StructureEffect(Effect):
         out = []
         for a, b, m_l, m_r in self.first_terms(est, self.step):
             st = _fitted_start(Structure(len(a), len(b), len(m_l), screen.structure.nr, screen.structure.ns), screen.start)
-            y = _core.simulate_augmented(a, b, est.c_left, est.c_right, m_l, m_r, screen.u, t0=screen.t0, **block, **st)
+            y = _core.simulate_augmented(
+                a, b, est.c_left, est.c_right, m_l, m_r, screen.u, effects=list(screen.base), t0=screen.t0, **block, **st
+            )
             out.append((y - screen.y_sim) / self.step)
         return out

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from types import MappingProxyType
 from typing import Any
 
@@ -23,12 +23,12 @@ from numpy.typing import ArrayLike
 
 from ..._numerics import lstsq
 from ..._validation import check_int, check_real, check_seed, check_signals, shown
-from ...errors import DataError, ModelError
+from ...errors import BacklashIdError, DataError, ModelError
 from ...identify import Structure
 from ...models import CascadeModel, SandwichModel
 from ._base import Array, Augmentation, AugmentedModel, Effect, Problem, ScreenContext, Screening, simulate
 
-__all__ = ["AUGMENTATIONS", "EFFECTS", "REGISTRY", "fit_effect", "screen"]
+__all__ = ["AUGMENTATIONS", "EFFECTS", "REGISTRY", "fit_effect", "score_tests", "screen"]
 
 _INFRASTRUCTURE = {"_base", "_registry"}
 
@@ -179,19 +179,47 @@ def screen(
     """
     structure, theta, u, y = _chain(model, u_est, y_est, warmup)
     y_sim = simulate(structure, theta, (), u, t0)
-    r = (y - y_sim)[warmup:]
-    ctx = ScreenContext(structure, theta, u, y, t0, y_sim)
+    return score_tests(ScreenContext(structure, theta, u, y, t0, y_sim), warmup, candidates)
+
+
+def score_tests(ctx: ScreenContext, warmup: int, candidates: Sequence[str], *, skip_failing: bool = False) -> list[Screening]:
+    """The score tests of :func:`screen` on a record already simulated (``ctx``: its model, the
+    nominal or the nominal with the composition's earlier effects), most significant first.
+
+    Parameters
+    ----------
+    ctx : ScreenContext
+        The record, the step's model and its simulation.
+    warmup : int
+        Samples at the start left out of the regression.
+    candidates : sequence of str
+        The effects to screen.
+    skip_failing : bool, default False
+        A candidate whose directions cannot be simulated (BacklashIdError) or are not finite
+        gets p = 1 instead of raising.
+
+    Returns
+    -------
+    list of Screening
+        Most significant first.
+    """
     from scipy import stats  # imported when first needed: import backlashid stays fast
 
+    r = (ctx.y - ctx.y_sim)[warmup:]
     out = []
     for name in candidates:
         effect = REGISTRY[name]
-        dirs = effect.directions(ctx)
+        try:
+            dirs = effect.directions(ctx)
+        except BacklashIdError:
+            if not skip_failing:
+                raise
+            dirs = []
         a = np.column_stack([d[warmup:] for d in dirs]) if dirs else np.zeros((r.size, 0))
         a = a[:, np.std(a, axis=0) > 1e-12 * (np.abs(a).max() + 1e-300)] if a.size else a
         if effect.intercept:
             a = np.column_stack([a, np.ones(r.size)]) if a.size else a
-        if a.shape[1] == 0:
+        if a.shape[1] == 0 or (skip_failing and not np.all(np.isfinite(a))):
             out.append(Screening(name, 0.0, 1.0, 0))
             continue
         coef = lstsq(a, r)
