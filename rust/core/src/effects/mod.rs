@@ -190,6 +190,45 @@ pub trait Effect: Clone + Debug + Send + Sync {
     }
 }
 
+/// Bounds lo < hi of a clip (+-inf for none), or a ModelError naming `effect`.
+pub(crate) fn check_clip(effect: &str, lo: f64, hi: f64) -> Result<()> {
+    if lo.is_nan() || hi.is_nan() || lo >= hi {
+        return Err(Error::Model(format!(
+            "{effect} bounds lo = {lo}, hi = {hi}: give lo < hi (+-inf for no bound)"
+        )));
+    }
+    Ok(())
+}
+
+/// v clipped to [lo, hi]: the value of every saturation (input, state, sensor).
+#[inline(always)]
+pub(crate) fn clip(v: f64, lo: f64, hi: f64) -> f64 {
+    if v < lo {
+        lo
+    } else if v > hi {
+        hi
+    } else {
+        v
+    }
+}
+
+/// [`clip`] with its tangent: clipped, the bound's column (`cols[0]` lo, `cols[1]` hi) and
+/// nothing of v; at an edge the value is v's, so is the derivative.
+#[inline(always)]
+pub(crate) fn clip_tangent(v: f64, dv: &mut [f64], lo: f64, hi: f64, cols: &Columns) -> f64 {
+    if v < lo {
+        dv.fill(0.0);
+        add_at(dv, cols[0], 1.0);
+        lo
+    } else if v > hi {
+        dv.fill(0.0);
+        add_at(dv, cols[1], 1.0);
+        hi
+    } else {
+        v
+    }
+}
+
 /// A finite parameter, or a ModelError saying `what` to give.
 pub(crate) fn finite(name: &str, v: f64, what: &str) -> Result<()> {
     if v.is_finite() {

@@ -3,8 +3,8 @@
 //! Stage: Drive (the actuator's input limit; `state_saturation` limits x(t) itself and
 //! `sensor_saturation` the measured output).
 
-use super::{add_at, arity, Columns, Effect, Sample, Stage, Tangent};
-use crate::error::{Error, Result};
+use super::{Columns, Effect, Sample, Stage, Tangent, arity, check_clip, clip, clip_tangent};
+use crate::error::Result;
 
 /// Name in the catalogue.
 pub const NAME: &str = "saturation";
@@ -27,23 +27,11 @@ pub fn from_parameters(p: &[f64]) -> Result<Saturation> {
 impl Effect for Saturation {
     place!(Drive, 1);
     fn check(&self) -> Result<()> {
-        let (lo, hi) = (self.lo, self.hi);
-        if lo.is_nan() || hi.is_nan() || lo >= hi {
-            return Err(Error::Model(format!(
-                "saturation bounds lo = {lo}, hi = {hi}: give lo < hi (+-inf for no bound)"
-            )));
-        }
-        Ok(())
+        check_clip(NAME, self.lo, self.hi)
     }
     #[inline]
     fn drive(&mut self, v: f64, _s: &Sample) -> f64 {
-        if v < self.lo {
-            self.lo
-        } else if v > self.hi {
-            self.hi
-        } else {
-            v
-        }
+        clip(v, self.lo, self.hi)
     }
     fn parameters(&self) -> Vec<f64> {
         vec![self.lo, self.hi]
@@ -62,16 +50,6 @@ impl Effect for Saturation {
         _d: &Tangent,
         cols: &Columns,
     ) -> f64 {
-        if v < self.lo {
-            dv.fill(0.0);
-            add_at(dv, cols[0], 1.0);
-            self.lo
-        } else if v > self.hi {
-            dv.fill(0.0);
-            add_at(dv, cols[1], 1.0);
-            self.hi
-        } else {
-            v
-        }
+        clip_tangent(v, dv, self.lo, self.hi, cols)
     }
 }

@@ -4,8 +4,8 @@
 //! Stage: Output (the sensor's side: after a sandwich's output block and the output offset,
 //! before the quantiser).
 
-use super::{add_at, arity, Columns, Effect, Sample, Stage, Tangent};
-use crate::error::{Error, Result};
+use super::{Columns, Effect, Sample, Stage, Tangent, arity, check_clip, clip, clip_tangent};
+use crate::error::Result;
 
 /// Name in the catalogue.
 pub const NAME: &str = "sensor_saturation";
@@ -28,24 +28,11 @@ pub fn from_parameters(p: &[f64]) -> Result<SensorSaturation> {
 impl Effect for SensorSaturation {
     place!(Output, 9);
     fn check(&self) -> Result<()> {
-        let (lo, hi) = (self.lo, self.hi);
-        if lo.is_nan() || hi.is_nan() || lo >= hi {
-            return Err(Error::Model(format!(
-                "sensor_saturation bounds lo = {lo}, hi = {hi}: give lo < hi (+-inf for no \
-                 bound)"
-            )));
-        }
-        Ok(())
+        check_clip(NAME, self.lo, self.hi)
     }
     #[inline]
     fn output(&mut self, out: f64, _s: &Sample) -> f64 {
-        if out < self.lo {
-            self.lo
-        } else if out > self.hi {
-            self.hi
-        } else {
-            out
-        }
+        clip(out, self.lo, self.hi)
     }
     fn parameters(&self) -> Vec<f64> {
         vec![self.lo, self.hi]
@@ -64,16 +51,6 @@ impl Effect for SensorSaturation {
         _d: &Tangent,
         cols: &Columns,
     ) -> f64 {
-        if out < self.lo {
-            dout.fill(0.0);
-            add_at(dout, cols[0], 1.0);
-            self.lo
-        } else if out > self.hi {
-            dout.fill(0.0);
-            add_at(dout, cols[1], 1.0);
-            self.hi
-        } else {
-            out
-        }
+        clip_tangent(out, dout, self.lo, self.hi, cols)
     }
 }

@@ -7,8 +7,8 @@
 //! block leaves the stop as soon as its drive turns, without first unwinding what a linear
 //! block would have integrated past it.
 
-use super::{add_at, arity, Columns, Effect, Sample, Stage};
-use crate::error::{Error, Result};
+use super::{Columns, Effect, Sample, Stage, arity, check_clip, clip, clip_tangent};
+use crate::error::Result;
 
 /// Name in the catalogue.
 pub const NAME: &str = "state_saturation";
@@ -31,23 +31,11 @@ pub fn from_parameters(p: &[f64]) -> Result<StateSaturation> {
 impl Effect for StateSaturation {
     place!(State, 0);
     fn check(&self) -> Result<()> {
-        let (lo, hi) = (self.lo, self.hi);
-        if lo.is_nan() || hi.is_nan() || lo >= hi {
-            return Err(Error::Model(format!(
-                "state_saturation bounds lo = {lo}, hi = {hi}: give lo < hi (+-inf for no bound)"
-            )));
-        }
-        Ok(())
+        check_clip(NAME, self.lo, self.hi)
     }
     #[inline]
     fn state(&mut self, x: f64, _s: &Sample) -> f64 {
-        if x < self.lo {
-            self.lo
-        } else if x > self.hi {
-            self.hi
-        } else {
-            x
-        }
+        clip(x, self.lo, self.hi)
     }
     fn parameters(&self) -> Vec<f64> {
         vec![self.lo, self.hi]
@@ -60,16 +48,6 @@ impl Effect for StateSaturation {
     /// derivative.
     #[inline]
     fn state_tangent(&mut self, x: f64, dx: &mut [f64], _s: &Sample, cols: &Columns) -> f64 {
-        if x < self.lo {
-            dx.fill(0.0);
-            add_at(dx, cols[0], 1.0);
-            self.lo
-        } else if x > self.hi {
-            dx.fill(0.0);
-            add_at(dx, cols[1], 1.0);
-            self.hi
-        } else {
-            x
-        }
+        clip_tangent(x, dx, self.lo, self.hi, cols)
     }
 }
