@@ -12,7 +12,7 @@
 //! (beta + |gamma|) |v| <= 1, and a parameter set whose z runs away makes x non-finite, which
 //! the pass refuses (ModelError). At alpha = 0 and k_3 = 0 (z stays 0) it is the nominal model.
 
-use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
+use super::{Columns, Effect, Sample, Stage, Tangent, add_at, arity, finite, sign};
 use crate::error::Result;
 
 /// Name in the catalogue.
@@ -45,17 +45,6 @@ pub fn from_parameters(p: &[f64]) -> Result<FeedbackHysteresis> {
         z: 0.0,
         dz: Vec::new(),
     })
-}
-
-#[inline(always)]
-fn sign(v: f64) -> f64 {
-    if v > 0.0 {
-        1.0
-    } else if v < 0.0 {
-        -1.0
-    } else {
-        0.0
-    }
 }
 
 impl FeedbackHysteresis {

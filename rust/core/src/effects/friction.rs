@@ -3,7 +3,7 @@
 //!
 //! Stage: Drive (the friction force opposes the motor's drive, fed back from x).
 
-use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
+use super::{Columns, Effect, Sample, Stage, Tangent, add_at, arity, finite, sign};
 use crate::error::Result;
 
 /// Name in the catalogue.
@@ -25,17 +25,6 @@ pub fn from_parameters(p: &[f64]) -> Result<Friction> {
         coulomb: p[0],
         viscous: p[1],
     })
-}
-
-#[inline(always)]
-fn sign(v: f64) -> f64 {
-    if v > 0.0 {
-        1.0
-    } else if v < 0.0 {
-        -1.0
-    } else {
-        0.0
-    }
 }
 
 impl Effect for Friction {

@@ -190,6 +190,19 @@ pub trait Effect: Clone + Debug + Send + Sync {
     }
 }
 
+/// The sign of a velocity with sign(0) = 0 (a standstill, not a crossing): friction's
+/// direction and the Bouc-Wen state's |v| derivative.
+#[inline(always)]
+pub(crate) fn sign(v: f64) -> f64 {
+    if v > 0.0 {
+        1.0
+    } else if v < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
 /// Bounds lo < hi of a clip (+-inf for none), or a ModelError naming `effect`.
 pub(crate) fn check_clip(effect: &str, lo: f64, hi: f64) -> Result<()> {
     if lo.is_nan() || hi.is_nan() || lo >= hi {
