@@ -410,7 +410,7 @@ def diagnose(
     if noise_std is not None:
         floor, floor_how = float(noise_std) ** 2, "given noise_std"
     else:
-        floor = min(one_step_floor(sig_e, sig_v, mse0), _candidate_floor(d, scored))
+        floor = min(one_step_floor(sig_e, sig_v, mse0, with_signals=r_bb), _candidate_floor(d, scored))
         floor_how = (
             "estimated: the lowest validation MSE of one-step predictors of a residual (the residual's last 10 values, "
             "with and without input lags, the internal signal x and its velocity and powers of the output; fitted on "

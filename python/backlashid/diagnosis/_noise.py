@@ -123,7 +123,7 @@ def black_box_residuals(est: list[Signals], val: list[Signals]) -> tuple[Array, 
     return _fit_score(est, val, 0), _fit_score(est, val, RESIDUAL_LAGS)
 
 
-def one_step_floor(est: list[Signals], val: list[Signals], mse: float) -> float:
+def one_step_floor(est: list[Signals], val: list[Signals], mse: float, with_signals: Array | None = None) -> float:
     """The noise floor (MSE) that a model's residual shows: the lower validation MSE of its two
     one-step predictors, with the model's signals and the residual's past, and with the
     residual's past alone (an AR model: the signals' coefficients, fitted on an estimation
@@ -136,13 +136,17 @@ def one_step_floor(est: list[Signals], val: list[Signals], mse: float) -> float:
         The records as the model sees them (``y_nom``: the model's own simulation).
     mse : float
         The model's validation MSE.
+    with_signals : ndarray, optional
+        The first predictor's validation residual if already computed
+        (:func:`black_box_residuals`' second output).
 
     Returns
     -------
     float
         The floor.
     """
-    with_signals = _fit_score(est, val, RESIDUAL_LAGS)
+    if with_signals is None:
+        with_signals = _fit_score(est, val, RESIDUAL_LAGS)
     own_past = _fit_score(est, val, RESIDUAL_LAGS, signals=False)
     return min(noise_floor(with_signals, mse), noise_floor(own_past, mse))
 
