@@ -129,8 +129,9 @@ def _simulated(name: str, sample: Callable[[Case, _base.Problem], list[float]]) 
 
     def put(case: Case) -> None:
         params = [float(v) for v in sample(case, case.problem())]
-        assert all(v != 0.0 for v in params), f"{name}: zero-size parameters {params}"
         effect = fx.REGISTRY[name]
+        # every size non-zero (dynamic friction's source is a choice: 0 is driven by x)
+        assert all(v != 0.0 for k, v in zip(effect.parameters, params) if k != "source"), f"{name}: zero-size parameters {params}"
         case.core.extend(effect.core(dict(zip(effect.parameters, params))))
 
     return put
@@ -175,7 +176,7 @@ def _hysteresis(case: Case, prob: _base.Problem) -> list[float]:
 
 def _dynamic_friction(case: Case, prob: _base.Problem) -> list[float]:
     k_f, z_s, lam = _within(case.rng, *fx.REGISTRY["dynamic_friction"].bounds(prob))
-    return [k_f, z_s, lam or 0.01]
+    return [k_f, z_s, lam or 0.01, float(case.rng.integers(2))]  # driven by x or by u
 
 
 def _feedback_hysteresis(case: Case, prob: _base.Problem) -> list[float]:

@@ -248,13 +248,13 @@ def bouc_wen(alpha: float, beta: float, gamma: float, k_3: float) -> Callable[[f
     return drive_less
 
 
-def dahl_friction(y: Array, x: Array, k_f: float, z_s: float, lam: float, x0: float = 0.0) -> Array:
-    """y + k_f w, w the normalised bristle state of dw/dtau = x'/z_s - (|x'|/z_s + lambda) w
-    with x moving at constant speed v(t) = x(t) - x(t-1) over the sample: w(t) = e^-kappa
-    w(t-1) + (v / z_s)(1 - e^-kappa) / kappa, kappa = |v| / z_s + lambda; w at rest and
-    x(-1) = x0 before the record."""
-    out, w, prev = y.copy(), 0.0, float(x0)
-    for t, xt in enumerate(x.tolist()):
+def dahl_friction(y: Array, q: Array, k_f: float, z_s: float, lam: float, q0: float = 0.0) -> Array:
+    """y + k_f w, w the normalised bristle state of dw/dtau = q'/z_s - (|q'|/z_s + lambda) w
+    with the motion q moving at constant speed v(t) = q(t) - q(t-1) over the sample: w(t) =
+    e^-kappa w(t-1) + (v / z_s)(1 - e^-kappa) / kappa, kappa = |v| / z_s + lambda; w at rest
+    and q(-1) = q0 before the record."""
+    out, w, prev = y.copy(), 0.0, float(q0)
+    for t, xt in enumerate(q.tolist()):
         v = xt - prev
         kappa = abs(v) / z_s + lam
         gain = -math.expm1(-kappa) / kappa if kappa > 0.0 else 1.0
@@ -296,7 +296,7 @@ def augmented_cascade(
     friction (or stick-slip friction) and the Bouc-Wen restoring force into eq (16) from its
     past, x(t) held in the state's stop; the backlash (eq 1) on x(t) with the widths
     c + dc tau(t), tau(t) = (t0 + t) / time_scale, from y(0) = y_prev; then compliance, the
-    dynamic (Dahl) friction, the extra plays (at rest on x_past[0]), creep (at rest on y_prev),
+    dynamic (Dahl) friction (driven by x, or by u), the extra plays (at rest on x_past[0]), creep (at rest on y_prev),
     the output offset and drift, the sensor's clip and the quantiser."""
     p = {name: [float(v) for v in params] for name, params in effects}
     known = {
@@ -328,8 +328,11 @@ def augmented_cascade(
     if "compliance" in p and p["compliance"][0] != 0.0:
         y = compliance(y, *p["compliance"], f0=y_prev)
     if "dynamic_friction" in p and p["dynamic_friction"][0] != 0.0:
-        k_f, z_s, lam = p["dynamic_friction"]
-        y = dahl_friction(y, x, k_f, z_s, lam, x0=x0)
+        k_f, z_s, lam, *source = p["dynamic_friction"]
+        if source and source[0] == 1.0:  # driven by the measured input, u(-1) the latest past input
+            y = dahl_friction(y, np.asarray(u, dtype=np.float64), k_f, z_s, lam, q0=float(u_past[0]) if len(u_past) else 0.0)
+        else:
+            y = dahl_friction(y, x, k_f, z_s, lam, q0=x0)
     if "hysteresis_memory" in p:
         hm = p["hysteresis_memory"]
         y = plays(y, x, list(zip(hm[0::2], hm[1::2])), x0)

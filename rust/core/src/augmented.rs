@@ -265,6 +265,7 @@ fn run(
     let (m_l, m_r) = (bl.left().coefficients(), bl.right().coefficients());
     let (c_l, c_r) = (bl.c_left(), bl.c_right());
     let x0 = state.linear.x_past.first().copied().unwrap_or(0.0);
+    let u_before = state.linear.u_past.first().copied().unwrap_or(0.0);
     // fresh copies with their memories at rest on x(0), y(0), in the order of the pass
     let running: Vec<AnyEffect> = effects.iter().map(|e| e.start(x0, state.y_prev)).collect();
     let Stages {
@@ -290,6 +291,7 @@ fn run(
         let mut s = Sample {
             t,
             u,
+            u_prev: if t > 0 { u[t - 1] } else { u_before },
             x: lin.output_at(&u_eff, &x, t, &state.linear),
             x_prev,
             f: 0.0,

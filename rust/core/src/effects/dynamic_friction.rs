@@ -1,14 +1,19 @@
 //! Dynamic friction on the output (Dahl / LuGre family): a friction force whose internal
-//! (bristle) state follows the motion of x and relaxes when the motion stops, as in a friction
-//! damper whose input is a displacement and whose measured output is a force.
+//! (bristle) state follows a motion q and relaxes when the motion stops, as in a friction
+//! damper whose input is a displacement and whose measured output is a force. The motion is
+//! the linear block's output x (source 0: the friction sits behind the drive's dynamics) or the
+//! measured input u itself (source 1: an imposed displacement, the friction damper's case).
 //!
 //! Continuous form, with w = z / z_s the bristle state normalised to its sliding value:
 //!
-//!   dw/dt = x'(t) / z_s - (|x'(t)| / z_s + lambda) w,   y += k_f w,
+//!   dw/dt = q'(t) / z_s - (|q'(t)| / z_s + lambda) w,   f += k_f w,
+//!
+//! the friction force added to the load f(t), before the sandwich's output block (eq 29), which
+//! filters both (in a cascade, on the output y).
 //!
 //! the Dahl law dz/dx = 1 - sign(x') z / z_s (the friction force saturates at +-k_f after a
 //! slide of a few z_s) plus a relaxation at rate lambda per sample (the force decays at
-//! standstill). Between two samples x moves linearly, v(t) = x(t) - x(t-1) a sample, so the
+//! standstill). Between two samples q moves linearly, v(t) = q(t) - q(t-1) a sample, so the
 //! law is a linear ODE of constant coefficients over the sample and its exact step is
 //!
 //!   kappa = |v| / z_s + lambda,   w(t) = e^-kappa w(t-1) + (v / z_s) phi(kappa),
@@ -16,8 +21,10 @@
 //!
 //! so |w| <= 1 whenever it starts there (a convex combination of w(t-1) and sign(v) phi
 //! kappa |v| / z_s <= 1), without a step-size limit. Parameters: k_f (the friction force at
-//! full slip, output units; zero size 0), z_s (the presliding displacement, x units, > 0),
-//! lambda (>= 0). At k_f = 0 it is the nominal model; w starts at rest (0).
+//! full slip, output units; zero size 0), z_s (the presliding displacement, units of q, > 0),
+//! lambda (>= 0), source (0: q = x, 1: q = u; held in the refit, both searched). At k_f = 0
+//! it is the nominal model; w starts at rest (0), and for q = u the input before the record
+//! is the linear block's latest past input (rest: 0, held: u(0)).
 
 use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
@@ -25,7 +32,7 @@ use crate::error::{Error, Result};
 /// Name in the catalogue.
 pub const NAME: &str = "dynamic_friction";
 
-/// Dynamic friction (k_f, z_s, lambda) and its bristle state w.
+/// Dynamic friction (k_f, z_s, lambda, source) and its bristle state w.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DynamicFriction {
     /// The friction force at full slip k_f.
@@ -34,18 +41,29 @@ pub struct DynamicFriction {
     pub presliding: f64,
     /// The relaxation rate lambda per sample.
     pub relaxation: f64,
+    /// Whether the motion is the measured input u (source 1) rather than x (source 0).
+    pub input_driven: bool,
     w: f64,
     /// d w / d theta (tangent simulations only).
     dw: Vec<f64>,
 }
 
-/// From [k_f, z_s, lambda].
+/// From [k_f, z_s, lambda, source] (source 0: driven by x, 1: by u; [k_f, z_s, lambda]: by x).
 pub fn from_parameters(p: &[f64]) -> Result<DynamicFriction> {
-    arity(NAME, p, "k_f, z_s, lambda", 3)?;
+    if p.len() != 3 {
+        arity(NAME, p, "k_f, z_s, lambda, source", 4)?;
+    }
+    let source = p.get(3).copied().unwrap_or(0.0);
+    if !(source == 0.0 || source == 1.0) {
+        return Err(Error::Model(format!(
+            "source = {source}: give 0 (friction driven by the linear block's output x) or 1 (by the input u)"
+        )));
+    }
     Ok(DynamicFriction {
         force: p[0],
         presliding: p[1],
         relaxation: p[2],
+        input_driven: source == 1.0,
         w: 0.0,
         dw: Vec::new(),
     })
@@ -69,6 +87,16 @@ fn phi(kappa: f64) -> (f64, f64) {
 }
 
 impl DynamicFriction {
+    /// The motion over sample t, v = q(t) - q(t-1).
+    #[inline(always)]
+    fn velocity(&self, s: &Sample) -> f64 {
+        if !self.input_driven {
+            s.x - s.x_prev
+        } else {
+            s.u[s.t] - s.u_prev
+        }
+    }
+
     /// The exact step for the velocity `v`: (w(t), e^-kappa, phi(kappa), phi'(kappa)).
     #[inline(always)]
     fn step(&self, v: f64) -> (f64, f64, f64, f64) {
@@ -80,8 +108,9 @@ impl DynamicFriction {
 }
 
 impl Effect for DynamicFriction {
-    // after compliance (which filters f itself), before the extra plays
-    place!(Output, 5);
+    // on the load, before the sandwich's output block filters it with the backlash's output
+    // (a cascade: on the output); after compliance and the extra plays
+    place!(Load, 6);
     fn check(&self) -> Result<()> {
         finite("k_f", self.force, "give a finite friction force (0 for none)")?;
         if !(self.presliding.is_finite() && self.presliding > 0.0) {
@@ -111,19 +140,30 @@ impl Effect for DynamicFriction {
         if self.force == 0.0 {
             return out;
         }
-        self.w = self.step(s.x - s.x_prev).0;
+        self.w = self.step(self.velocity(s)).0;
         out + self.force * self.w
     }
     fn parameters(&self) -> Vec<f64> {
-        vec![self.force, self.presliding, self.relaxation]
+        vec![
+            self.force,
+            self.presliding,
+            self.relaxation,
+            f64::from(u8::from(self.input_driven)),
+        ]
     }
     fn parameter_names(&self) -> Vec<String> {
-        vec!["k_f".into(), "z_s".into(), "lambda".into()]
+        vec!["k_f".into(), "z_s".into(), "lambda".into(), "source".into()]
     }
-    /// k_f free (the force's sign is the sensor's), z_s >= 0 (`feasible`: > 0), lambda >= 0.
+    /// The source is a choice: searched outside the refit.
+    fn differentiable(&self, k: usize) -> bool {
+        k < 3
+    }
+    /// k_f free (the force's sign is the sensor's), z_s >= 0 (`feasible`: > 0), lambda >= 0,
+    /// source in {0, 1}.
     fn bounds(&self, k: usize) -> (f64, f64) {
         match k {
             0 => (f64::NEG_INFINITY, f64::INFINITY),
+            3 => (0.0, 1.0),
             _ => (0.0, f64::INFINITY),
         }
     }
@@ -136,6 +176,7 @@ impl Effect for DynamicFriction {
     /// (sign(0) = 0, the one-sided derivative of |v| at rest); d w = e^-kappa dw(t-1) +
     /// (v / z_s phi' - e^-kappa w(t-1)) d kappa + phi (dv / z_s - v / z_s^2 dz_s);
     /// d out += k_f dw + w dk_f. The state runs at k_f = 0 too (w is the derivative in k_f).
+    /// Driven by u, dv = 0 (the measured input has no parameter).
     #[inline]
     fn output_tangent(
         &mut self,
@@ -145,7 +186,7 @@ impl Effect for DynamicFriction {
         d: &Tangent,
         cols: &Columns,
     ) -> f64 {
-        let (v, zs) = (s.x - s.x_prev, self.presliding);
+        let (v, zs) = (self.velocity(s), self.presliding);
         let (w, e, p, dp) = self.step(v);
         let sign = if v > 0.0 {
             1.0
@@ -157,8 +198,12 @@ impl Effect for DynamicFriction {
         // w = e w1 + (v / z_s) phi: the coefficients of d kappa and of dv
         let c_kappa = v / zs * dp - e * self.w;
         let c_v = c_kappa * sign / zs + p / zs;
-        for ((o, a), b) in self.dw.iter_mut().zip(d.dx).zip(d.dx_prev) {
-            *o = e * *o + c_v * (a - b);
+        if self.input_driven {
+            self.dw.iter_mut().for_each(|o| *o *= e);
+        } else {
+            for ((o, a), b) in self.dw.iter_mut().zip(d.dx).zip(d.dx_prev) {
+                *o = e * *o + c_v * (a - b);
+            }
         }
         add_at(
             &mut self.dw,

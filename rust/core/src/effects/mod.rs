@@ -46,6 +46,8 @@ pub struct Sample<'a> {
     pub t: usize,
     /// The record's input u.
     pub u: &'a [f64],
+    /// u(t-1) (u(-1) of the state before the record: the linear block's latest past input).
+    pub u_prev: f64,
     /// x(t), the linear block's output (after the State stage; its input there).
     pub x: f64,
     /// x(t-1) (x(0) of the state before the record).

@@ -690,6 +690,14 @@ mod tests {
                 &["k_f", "z_s", "lambda"],
             ),
             (
+                &[("dynamic_friction", &[0.2, 0.05, 0.01, 1.0])],
+                &["k_f", "z_s", "lambda"],
+            ),
+            (
+                &[("dynamic_friction", &[0.0, 0.05, 0.01, 1.0])],
+                &["k_f", "z_s", "lambda"],
+            ),
+            (
                 &[("feedback_hysteresis", &[0.3, 0.5, 0.2, 0.05])],
                 &["alpha", "beta", "gamma", "k_3"],
             ),
@@ -804,7 +812,8 @@ mod tests {
             for held in [false, true] {
                 let nominal = problem(&[], &[], &u, start(held));
                 let want = nominal.simulate(&THETA).unwrap();
-                for e in zero {
+                let driven_by_u: (&str, &[f64]) = ("dynamic_friction", &[0.0, 0.03, 0.2, 1.0]);
+                for e in zero.iter().chain([&driven_by_u]) {
                     let p = problem(&[*e], &[], &u, start(held));
                     assert_eq!(p.simulate(&THETA).unwrap(), want, "{e:?} on {name}");
                     assert_eq!(p.sensitivity(&THETA).unwrap().output, want);
@@ -825,6 +834,8 @@ mod tests {
             ("dynamic_friction", &[0.1, 0.1, -0.1]),
             ("dynamic_friction", &[f64::NAN, 0.1, 0.0]),
             ("dynamic_friction", &[0.1, 0.1]),
+            ("dynamic_friction", &[0.1, 0.1, 0.0, 0.5]),
+            ("dynamic_friction", &[0.1, 0.1, 0.0, 1.0, 0.0]),
             ("feedback_hysteresis", &[0.1, 0.1, 0.1]),
             ("feedback_hysteresis", &[0.1, f64::INFINITY, 0.1, 0.0]),
             ("creep", &[0.1, 1.0]),

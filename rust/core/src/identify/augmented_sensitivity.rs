@@ -198,6 +198,7 @@ pub(crate) fn walk_augmented(
     let (m_l, m_r) = (bl.left().coefficients(), bl.right().coefficients());
     let (c_l, c_r) = (bl.c_left(), bl.c_right());
     let x0 = state.linear.x_past.first().copied().unwrap_or(0.0);
+    let u_before = state.linear.u_past.first().copied().unwrap_or(0.0);
     let dx0 = if nb > 0 {
         start.dx_past[..p].to_vec()
     } else {
@@ -315,6 +316,7 @@ pub(crate) fn walk_augmented(
         let mut s = Sample {
             t,
             u,
+            u_prev: if t > 0 { u[t - 1] } else { u_before },
             x: xt,
             x_prev,
             f: 0.0,
