@@ -118,7 +118,8 @@ def test_a_rank_deficient_start_is_skipped_while_another_start_remains(monkeypat
 
     monkeypatch.setattr(_fit, "_iteration", failing_first)
     result = bid.fit_cascade(u, y)
-    assert result.reason == "diverged" and result.iterations == 1
+    assert result.iterations_reason == "diverged" and result.iterations == 1
+    assert result.converged and result.reason == "refined"
     assert max(abs(e) for e in result.errors(TRUTH).values()) < 0.05
 
 

@@ -97,9 +97,16 @@ class FitResult:
     iterations : int
         Iterations of the paper's algorithm.
     converged : bool
-        The iterations or the refinement met their tolerance.
+        The fit's result is a converged estimate: the iterations or the refinement met their
+        tolerance and the estimate is a stable, valid model. Always agrees with ``reason``.
     reason : str
-        How the iterations ended: "tolerance", "2-cycle", "iteration limit" or "diverged".
+        How the fit ended, never contradicting ``converged``. Converged: "tolerance" or
+        "2-cycle" (the paper's iterations reached a fixed point or a 2-cycle) or "refined"
+        (they stopped early, see ``iterations_reason``, and the output-error refinement
+        converged). Not converged: "unstable", "not finite", "invalid model" or "time budget"
+        (why the final estimate failed; "best stable iterate" in ``NotConvergedError.
+        best_stable``), else how the iterations ended ("iteration limit", "diverged") when
+        neither they nor the refinement converged.
     simulation_rmse : float
         Free-run simulation RMSE on the estimation data after the warm-up.
     noise_std : float
@@ -126,6 +133,9 @@ class FitResult:
     refinement_converged : bool or None
         Whether the output-error refinement met its tolerance; None when no refinement ran
         (``refine=False``, ``paper=True``, or no start could be refined).
+    iterations_reason : str
+        How the paper's iterations ended: "tolerance", "2-cycle", "iteration limit",
+        "diverged" or "time budget" (the refinement may still have converged).
 
     Examples
     --------
@@ -155,6 +165,7 @@ class FitResult:
     coarse_samples: int = 0
     initial_state: dict[str, float] | list[dict[str, float]] | None = None
     refinement_converged: bool | None = None
+    iterations_reason: str = ""
 
     @property
     def names(self) -> list[str]:
@@ -321,7 +332,7 @@ class FitResult:
             "2-cycle": f"the paper's iterations stopped after {n} (a 2-cycle between two iterates)",
             "iteration limit": f"the paper's iterations stopped after {n} (the iteration limit, max_iter)",
             "diverged": f"the paper's iterations stopped after {n} (diverging)",
-        }.get(self.reason, f"the paper's iterations stopped after {n} ({self.reason})")
+        }.get(self.iterations_reason, f"the paper's iterations stopped after {n} ({self.iterations_reason})")
         if self.coarse_samples:
             iterations += f" on the first {self.coarse_samples} samples"
         steps = f"{self.refinement_steps} step{'' if self.refinement_steps == 1 else 's'}"
@@ -351,6 +362,7 @@ class FitResult:
             "iterations": int(self.iterations),
             "converged": bool(self.converged),
             "reason": self.reason,
+            "iterations_reason": self.iterations_reason,
             "simulation_rmse": float(self.simulation_rmse),
             "noise_std": float(self.noise_std),
             "moving_fraction": float(self.moving_fraction),
@@ -479,6 +491,7 @@ def _best_stable(structure: Structure, whole: Any, failed: FitResult, thetas: Se
         covariance=np.full((structure.size, structure.size), np.nan),
         simulation_rmse=float(np.sqrt(cost / max(n, 1))),
         converged=False,
+        reason="best stable iterate",
     )
 
 
@@ -914,11 +927,12 @@ def _fit(
         model, invalid = structure.model(theta), None
     except ModelError as exc:
         model, invalid = None, exc
-    failure = None
+    failure, failed = None, ""  # why the final estimate failed, and its reason
     est = structure.unpack(theta)
     for den, name in ((est.b, "input"), (est.s, "output")):
         radius = spectral_radius(np.asarray(den))
         if not radius < 1.0:
+            failed = "unstable"
             failure = (
                 f"the estimated {name} linear block is unstable (spectral radius {radius:.3f}); "
                 + ("use the default algorithm (it reflects unstable poles) or other initial values" if paper else
@@ -926,10 +940,12 @@ def _fit(
             )
             break
     if failure is None and not np.isfinite(rmse):
-        failure = "the identification diverged: the estimate simulates to no finite output"
+        failed, failure = "not finite", "the identification diverged: the estimate simulates to no finite output"
     if failure is None and invalid is not None:
+        failed = "invalid model"
         failure = f"the final estimate is not a valid model ({invalid}); try a lower branch degree, other orders or other starts"
     if failure is None and budget_hit():
+        failed = "time budget"
         failure = (
             f"the fit ran out of its time budget (time_budget = {time_budget:g} s) before it converged: its best "
             "estimate so far is in best and best_stable; give a larger time_budget, or a shorter record or coarse segment"
@@ -963,6 +979,8 @@ def _fit(
         )
     else:
         noise_var, covariance = _covariance(structure, run, refined)
+    converged = failure is None and (run.reason in CONVERGED or (refined is not None and refined.converged))
+    reason = failed or (run.reason if run.reason in CONVERGED or not converged else "refined")
     result = FitResult(
         model=_with_covariance(model, structure, covariance),
         structure=structure,
@@ -971,8 +989,8 @@ def _fit(
         history=np.array(run.history),
         history_rmse=np.array(run.rmse),
         iterations=len(run.history),
-        converged=failure is None and (run.reason in ("tolerance", "2-cycle") or (refined is not None and refined.converged)),
-        reason=run.reason,
+        converged=converged,
+        reason=reason,
         simulation_rmse=rmse,
         noise_std=float(np.sqrt(noise_var)),
         moving_fraction=moving,
@@ -983,6 +1001,7 @@ def _fit(
         coarse_samples=segment,
         initial_state=state,
         refinement_converged=refined.converged if refined is not None else None,
+        iterations_reason=run.reason,
     )
     if failure is not None:
         stable = _best_stable(structure, whole, result, [theta, theta_iter, *run.history])
