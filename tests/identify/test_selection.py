@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -116,3 +117,53 @@ def test_bad_records_are_data_errors():
         select_structure([0.0, np.nan, 1.0] * 100, np.zeros(300))
     with pytest.raises(DataError):
         select_structure(np.zeros(300), np.zeros(200))
+
+
+def _whole_record_refit_of(degree: int, n: int, broken, monkeypatch):
+    """fit_cascade whose refit of degree ``degree`` on the whole record (``n`` samples) is
+    replaced by ``broken(result)``: a refit that diverged, as seen on a real positioning record."""
+    real = _selection.fit_cascade
+
+    def fit(u, y, na, nb, d, **kw):
+        result = real(u, y, na, nb, d, **kw)
+        return broken(result) if d == degree and len(u) == n else result
+
+    monkeypatch.setattr(_selection, "fit_cascade", fit)
+
+
+def test_a_refit_that_diverged_gives_way_to_the_next_candidate_with_the_reason(example1_data, monkeypatch):
+    # the whole-record refit of the chosen structure (degree 3) ends at a pole near 1 with a huge
+    # gain, "converged" by its own tolerance: select_structure must not return it
+    def diverged(result):
+        s = result.structure
+        theta = result.theta.copy()
+        theta[s.names.index("b1")], theta[s.names.index("b2")] = -1.9999, 0.99995  # a double pole at ~1
+        return dataclasses.replace(result, model=s.model(theta), theta=theta)
+
+    _whole_record_refit_of(3, example1_data.u.size, diverged, monkeypatch)
+    sel = select_structure(example1_data.u, example1_data.noisy, na=2, nb=2, degree=(2, 3, 4))
+    first = next(r for r in sel.rows if r["degree"] == 3)
+    assert not first["chosen"] and first["refit_error"].startswith("the refit on the whole record simulates it worse")
+    assert sel.structure.degree == 4 and sel.refitted and sel.refit_error is None
+    # the kept refit is the whole record's and simulates it about as well as the truth's noise allows
+    e = example1_data.noisy - sel.fit.model.simulate(example1_data.u)
+    assert np.sqrt(np.mean(e**2)) < 1.2 * np.std(example1_data.noisy - example1_data.clean)
+    assert "passed over: cascade na=2 nb=2 degree=3: the refit on the whole record simulates it worse" in sel.summary()
+
+
+def test_when_no_refit_holds_the_estimation_fit_is_returned_and_says_why(example1_data, monkeypatch):
+    def not_converged(result):
+        return dataclasses.replace(result, converged=False, reason="iteration limit")
+
+    real = _selection.fit_cascade
+
+    def fit(u, y, *args, **kw):  # every whole-record refit stops short
+        result = real(u, y, *args, **kw)
+        return not_converged(result) if len(u) == example1_data.u.size else result
+
+    monkeypatch.setattr(_selection, "fit_cascade", fit)
+    sel = select_structure(example1_data.u, example1_data.noisy, na=2, nb=2, degree=(2, 3))
+    assert not sel.refitted and sel.fit.structure.degree == 3 and sel.structure.degree == 3
+    assert sel.refit_error == "the refit on the whole record did not converge (reason 'iteration limit')"
+    assert all(r["refit_error"] is not None for r in sel.rows)
+    assert "no refit on the whole record held" in sel.summary()

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .._docstrings import AXES, fill
 from .._json import jsonable
@@ -32,12 +32,14 @@ KINDS = ("cascade", "sandwich")
 RULE = (
     "validation band, then BIC: among the candidates that did not raise, keep those whose "
     "validation simulation RMSE is at most (1 + tolerance) times the best one; choose the lowest "
-    "BIC among them (ties: fewer parameters)"
+    "BIC among them (ties: fewer parameters); a candidate whose refit on the whole record raises, does "
+    "not converge or simulates the record worse than its fit on the head gives way to the next (the band "
+    "by BIC, then the rest by validation RMSE)"
 )
 # The table's columns, in the order summary() prints them.
 COLUMNS = (
     "kind", "na", "nb", "nr", "ns", "degree", "parameters", "estimation_rmse", "validation_rmse", "bic",
-    "raised", "error", "warnings", "seconds", "in_band", "chosen",
+    "raised", "error", "warnings", "seconds", "in_band", "chosen", "refit_error",
 )
 
 
@@ -62,8 +64,9 @@ class StructureSelection:
         from the record's start), bic (``n log(estimation_rmse**2) + p log(n)``, n the
         estimation samples after the warm-up), raised (bool), error ('ExceptionName:
         message' or None), warnings (the fit's FitWarning messages), seconds, in_band (within
-        the tolerance of the best validation RMSE) and chosen. Values that a raising
-        candidate has not are NaN.
+        the tolerance of the best validation RMSE), chosen and refit_error (why its refit on
+        the whole record was not kept, or None: tried and kept, or not tried). Values that a
+        raising candidate has not are NaN.
     chosen : int
         Index of the chosen row.
     rule : str
@@ -79,7 +82,10 @@ class StructureSelection:
     refitted : bool
         Whether ``fit`` is the refit on the whole record.
     refit_error : str or None
-        Why the refit on the whole record raised (``fit`` is then the estimation fit), or None.
+        Why no refit on the whole record held (``fit`` is then the first candidate's
+        estimation fit), or None. A refit that raised, did not converge or simulated the
+        record worse than its candidate's fit on the head was not kept: the next candidate
+        was refitted instead (its row's ``refit_error`` says why).
 
     Examples
     --------
@@ -131,11 +137,15 @@ class StructureSelection:
                 row += f"{r['estimation_rmse']:>12.5g}{r['validation_rmse']:>12.5g}{r['bic']:>11.1f}  {note}"
             lines.append(row.rstrip())
         r = self.rows[self.chosen]
+        passed_over = [i for i, row in enumerate(self.rows) if row.get("refit_error") and i != self.chosen]
         if self.refit_error is not None:
-            refit = f"the estimation fit (the refit on the whole record raised {self.refit_error})"
+            refit = f"the estimation fit (no refit on the whole record held: {self.refit_error})"
         else:
             refit = "refitted on the whole record" if self.refitted else "the estimation fit (refit=False)"
         lines.append(f"chosen (*): {r['kind']} {self.structure}, {r['parameters']} parameters; {refit}; + = within the validation band")
+        for i in passed_over if self.refit_error is None else []:
+            row = self.rows[i]
+            lines.append(f"passed over: {row['kind']} na={row['na']} nb={row['nb']} degree={row['degree']}: {row['refit_error']}")
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -373,7 +383,7 @@ def select_structure(
         row: dict[str, Any] = dict(
             kind=k, na=a, nb=b, nr=r, ns=s, degree=n, parameters=p, estimation_rmse=math.nan,
             validation_rmse=math.nan, bic=math.nan, raised=False, error=None, warnings=[], seconds=0.0,
-            in_band=False, chosen=False,
+            in_band=False, chosen=False, refit_error=None,
         )
         t0 = time.perf_counter()
         result: FitResult | None = None
@@ -413,23 +423,54 @@ def select_structure(
     band = [i for i in ok if rows[i]["validation_rmse"] <= (1.0 + tolerance) * best_val]
     for i in band:
         rows[i]["in_band"] = True
-    chosen = min(band, key=lambda i: (rows[i]["bic"], rows[i]["parameters"]))
-    rows[chosen]["chosen"] = True
-    fit = fits[chosen]
-    assert fit is not None
-    structure = fit.structure
-    refit_error = None
+    # the band by BIC (ties: fewer parameters), then the rest by validation RMSE: the order in
+    # which a candidate whose whole-record refit fails gives way to the next
+    order = sorted(band, key=lambda i: (rows[i]["bic"], rows[i]["parameters"]))
+    order += sorted((i for i in ok if i not in band), key=lambda i: rows[i]["validation_rmse"])
+    chosen, fit, refit_error = order[0], fits[order[0]], None
     if refit:
-        c = rows[chosen]
-        try:
-            fit = _fit_one(c["kind"], u_arr, y_arr, structure, warmup, options)
-        except BacklashIdError as exc:
-            refit_error = _error_text(exc)
+        for i in order:
+            head = fits[i]
+            assert head is not None
+            whole, why = _refit_whole(rows[i]["kind"], head, u_arr, y_arr, warmup, tolerance, options)
+            rows[i]["refit_error"] = why
+            if why is None:
+                chosen, fit = i, whole
+                break
+        else:  # no refit held: the first candidate's estimation fit, with its refit's failure
+            chosen, fit, refit_error = order[0], fits[order[0]], rows[order[0]]["refit_error"]
+    rows[chosen]["chosen"] = True
+    assert fit is not None
     return StructureSelection(
-        structure=structure, kind=rows[chosen]["kind"], fit=fit, rows=rows, chosen=chosen, rule=RULE,
+        structure=fit.structure, kind=rows[chosen]["kind"], fit=fit, rows=rows, chosen=chosen, rule=RULE,
         tolerance=float(tolerance), estimation_samples=n_est, validation_samples=n_val,
         seconds=time.perf_counter() - start, refitted=refit and refit_error is None, refit_error=refit_error,
     )
+
+
+def _refit_whole(
+    kind: str, head: FitResult, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, tolerance: float, options: dict[str, Any]
+) -> tuple[FitResult | None, str | None]:
+    """The refit of a candidate on the whole record and None, or None and why it is not kept:
+    it raised, did not converge, or simulates the whole record (free run from rest, after the
+    warm-up, as the validation does) worse than the candidate's estimation fit, which it was
+    meant to improve (a refit that diverged into a pole at 1 is far worse)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)  # the candidate's own fit has shown its warnings
+            whole = _fit_one(kind, u, y, head.structure, warmup, options)
+    except BacklashIdError as exc:
+        return None, f"the refit on the whole record raised {_error_text(exc)}"
+    if not whole.converged or whole.model is None:
+        return None, f"the refit on the whole record did not converge (reason {whole.reason!r})"
+    assert head.model is not None
+    errors = [float(np.sqrt(np.mean((y - m.simulate(u))[warmup:] ** 2))) for m in (whole.model, head.model)]
+    if not (math.isfinite(errors[0]) and errors[0] <= (1.0 + tolerance) * errors[1]):
+        return None, (
+            f"the refit on the whole record simulates it worse (RMSE {errors[0]:.4g}) than the fit on its head does "
+            f"({errors[1]:.4g}): it left the estimate's basin"
+        )
+    return whole, None
 
 
 def _fit_one(kind: str, u: Any, y: Any, structure: Structure, warmup: int, options: dict[str, Any]) -> FitResult:
