@@ -176,7 +176,7 @@ def _hysteresis(case: Case, prob: _base.Problem) -> list[float]:
 
 def _dynamic_friction(case: Case, prob: _base.Problem) -> list[float]:
     k_f, z_s, lam = _within(case.rng, *fx.REGISTRY["dynamic_friction"].bounds(prob))
-    return [k_f, z_s, lam or 0.01, float(case.rng.integers(2))]  # driven by x or by u
+    return [k_f, z_s, lam or 0.01, float(case.rng.integers(3))]  # driven by x, u or f
 
 
 def _feedback_hysteresis(case: Case, prob: _base.Problem) -> list[float]:

@@ -296,7 +296,7 @@ def augmented_cascade(
     friction (or stick-slip friction) and the Bouc-Wen restoring force into eq (16) from its
     past, x(t) held in the state's stop; the backlash (eq 1) on x(t) with the widths
     c + dc tau(t), tau(t) = (t0 + t) / time_scale, from y(0) = y_prev; then compliance, the
-    dynamic (Dahl) friction (driven by x, or by u), the extra plays (at rest on x_past[0]), creep (at rest on y_prev),
+    dynamic (Dahl) friction (driven by x, u or f), the extra plays (at rest on x_past[0]), creep (at rest on y_prev),
     the output offset and drift, the sensor's clip and the quantiser."""
     p = {name: [float(v) for v in params] for name, params in effects}
     known = {
@@ -325,12 +325,15 @@ def augmented_cascade(
     left = branch(m_left, x + width_drift(c_left, dc_l, tau))
     right = branch(m_right, x - width_drift(c_right, dc_r, tau))
     y = backlash(left, right, y_prev)
+    f = y  # the backlash's output, the load's motion
     if "compliance" in p and p["compliance"][0] != 0.0:
         y = compliance(y, *p["compliance"], f0=y_prev)
     if "dynamic_friction" in p and p["dynamic_friction"][0] != 0.0:
         k_f, z_s, lam, *source = p["dynamic_friction"]
         if source and source[0] == 1.0:  # driven by the measured input, u(-1) the latest past input
             y = dahl_friction(y, np.asarray(u, dtype=np.float64), k_f, z_s, lam, q0=float(u_past[0]) if len(u_past) else 0.0)
+        elif source and source[0] == 2.0:  # driven by the backlash's output, f(-1) its memory
+            y = dahl_friction(y, f, k_f, z_s, lam, q0=y_prev)
         else:
             y = dahl_friction(y, x, k_f, z_s, lam, q0=x0)
     if "hysteresis_memory" in p:

@@ -268,6 +268,13 @@ def linear_x(structure: Structure, theta: Array, u: Array) -> Array:
     return np.asarray(_core.LinearBlock(est.a, est.b).simulate(u, [0.0] * len(est.a), [0.0] * len(est.b)), dtype=np.float64)
 
 
+def load_f(structure: Structure, theta: Array, u: Array) -> Array:
+    """f, the backlash's output (eq 1) of the nominal chain of ``theta`` on the input u, from
+    rest: the load's motion (before a sandwich's output block)."""
+    chain, _ = _core_chain(structure, theta)
+    return np.asarray(_core.simulate_augmented(*chain, u, effects=[], t0=0.0, time_scale=TIME_SCALE), dtype=np.float64)
+
+
 def ar_predict(residual: Array, phi: Array) -> Array:
     """One-step prediction of an AR process from its past (zero before the record)."""
     pred = np.zeros_like(residual)

@@ -3,9 +3,10 @@ load, f + k_f w (before the sandwich's output block, which filters both; in a ca
 output), dw/dt = q'/z_s - (|q'|/z_s + lambda) w stepped exactly between samples (q linear
 within a sample): the force follows a motion q, saturates at +-k_f after a slide of a few z_s
 and relaxes at the rate lambda per sample at standstill. The motion is the linear block's
-output x (source 0: friction behind the drive's dynamics) or the measured input u (source 1:
+output x (source 0: friction behind the drive's dynamics), the measured input u (source 1:
 an imposed displacement, as in a friction damper whose input is a displacement and whose
-measured output is a force); the refit tries both. Rust:
+measured output is a force) or the backlash's output f (source 2: the load's own motion,
+which stops while the play is crossed); the refit tries each. Rust:
 ``rust/core/src/effects/dynamic_friction.rs``."""
 
 from __future__ import annotations
@@ -13,23 +14,23 @@ from __future__ import annotations
 import numpy as np
 
 from ...identify import Structure
-from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext, linear_x
+from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext, linear_x, load_f
 
 AUGMENTATION = Augmentation(
     "dynamic_friction",
     ("k_f", "z_s", "lambda", "source"),
     (0.0, 0.1, 0.0, 0.0),
-    "f + k_f w on the load, dw/dt = q'/z_s - (|q'|/z_s + lambda) w, q = x (source 0) or u (source 1) "
+    "f + k_f w on the load, dw/dt = q'/z_s - (|q'|/z_s + lambda) w, q = x (source 0), u (1) or f (2) "
     "(a Dahl/LuGre friction force relaxing at standstill)",
 )
-SOURCES = (0.0, 1.0)  # q = x, q = u
+SOURCES = (0.0, 1.0, 2.0)  # q = x, q = u, q = f
 
 PRESLIDING = (0.01, 0.03, 0.1, 0.3, 1.0)  # z_s of the start grid, in std(q)
 RELAXATION = (0.0, 0.003, 0.03)  # lambda of the start grid, per sample
 
 
 class DynamicFriction(Effect, rank=11, augmentation=AUGMENTATION):
-    """A relaxing friction force on the output, driven by the motion of x or of u."""
+    """A relaxing friction force on the load, driven by the motion of x, of u or of f."""
 
     def bounds(self, prob: Problem) -> tuple[Array, Array]:
         """Of (k_f, z_s, lambda), the source held: |k_f| <= 2 std(y) + 0.1; s = std(u) +
@@ -62,15 +63,17 @@ class DynamicFriction(Effect, rank=11, augmentation=AUGMENTATION):
     def directions(self, screen: ScreenContext) -> list[Array]:
         """The friction force of unit size driven by x at presliding displacements 0.03 and 0.3
         std(x) without relaxation and at 0.1 std(x) relaxing at 0.01 per sample, and driven by
-        u at 0.03 and 0.3 std(u) relaxing at 0.01 per sample."""
+        u and by f at 0.03 and 0.3 std of their motion relaxing at 0.01 per sample."""
         out = []
-        for source, grid in ((0.0, ((0.03, 0.0), (0.3, 0.0), (0.1, 0.01))), (1.0, ((0.03, 0.01), (0.3, 0.01)))):
+        slides = ((0.03, 0.01), (0.3, 0.01))
+        for source, grid in ((0.0, ((0.03, 0.0), (0.3, 0.0), (0.1, 0.01))), (1.0, slides), (2.0, slides)):
             sq = _motion_scale(screen.structure, screen.theta, screen.u, source)
             out += [screen.change(self.core({"k_f": 1.0, "z_s": zs * sq, "lambda": lam, "source": source})) for zs, lam in grid]
         return out
 
 
 def _motion_scale(structure: Structure, theta: Array, u: Array, source: float) -> float:
-    """std of the motion q the friction follows: x of the nominal linear block (source 0) or u."""
-    q = u if source == 1.0 else linear_x(structure, theta, u)
+    """std of the motion q the friction follows: x of the nominal linear block (source 0), u
+    (1) or the nominal backlash's output f (2)."""
+    q = u if source == 1.0 else load_f(structure, theta, u) if source == 2.0 else linear_x(structure, theta, u)
     return float(np.std(q)) + 1e-12

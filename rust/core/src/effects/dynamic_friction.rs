@@ -1,8 +1,9 @@
-//! Dynamic friction on the output (Dahl / LuGre family): a friction force whose internal
+//! Dynamic friction on the load (Dahl / LuGre family): a friction force whose internal
 //! (bristle) state follows a motion q and relaxes when the motion stops, as in a friction
 //! damper whose input is a displacement and whose measured output is a force. The motion is
-//! the linear block's output x (source 0: the friction sits behind the drive's dynamics) or the
-//! measured input u itself (source 1: an imposed displacement, the friction damper's case).
+//! the linear block's output x (source 0: the friction sits behind the drive's dynamics), the
+//! measured input u itself (source 1: an imposed displacement) or the backlash's output f
+//! (source 2: the load's own motion, which stops while the play is crossed).
 //!
 //! Continuous form, with w = z / z_s the bristle state normalised to its sliding value:
 //!
@@ -22,9 +23,10 @@
 //! so |w| <= 1 whenever it starts there (a convex combination of w(t-1) and sign(v) phi
 //! kappa |v| / z_s <= 1), without a step-size limit. Parameters: k_f (the friction force at
 //! full slip, output units; zero size 0), z_s (the presliding displacement, units of q, > 0),
-//! lambda (>= 0), source (0: q = x, 1: q = u; held in the refit, both searched). At k_f = 0
-//! it is the nominal model; w starts at rest (0), and for q = u the input before the record
-//! is the linear block's latest past input (rest: 0, held: u(0)).
+//! lambda (>= 0), source (0: q = x, 1: q = u, 2: q = f; held in the refit, each searched).
+//! At k_f = 0 it is the nominal model; w starts at rest (0); before the record q is x(0) of
+//! the state, the linear block's latest past input (rest: 0, held: u(0)) or the backlash's
+//! memory y(0).
 
 use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
@@ -41,31 +43,54 @@ pub struct DynamicFriction {
     pub presliding: f64,
     /// The relaxation rate lambda per sample.
     pub relaxation: f64,
-    /// Whether the motion is the measured input u (source 1) rather than x (source 0).
-    pub input_driven: bool,
+    /// The motion the bristles follow.
+    pub source: Source,
     w: f64,
-    /// d w / d theta (tangent simulations only).
+    /// f(t-1), the backlash's output a sample before (source 2).
+    f_prev: f64,
+    /// d w / d theta and d f(t-1) / d theta (tangent simulations only).
     dw: Vec<f64>,
+    df_prev: Vec<f64>,
 }
 
-/// From [k_f, z_s, lambda, source] (source 0: driven by x, 1: by u; [k_f, z_s, lambda]: by x).
+/// The motion q of the friction's bristles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// x, the linear block's output (source 0).
+    Drive,
+    /// u, the measured input (source 1).
+    Input,
+    /// f, the backlash's output, the load's motion (source 2).
+    Load,
+}
+
+/// From [k_f, z_s, lambda, source] (source 0: driven by x, 1: by u, 2: by f; [k_f, z_s,
+/// lambda]: by x).
 pub fn from_parameters(p: &[f64]) -> Result<DynamicFriction> {
     if p.len() != 3 {
         arity(NAME, p, "k_f, z_s, lambda, source", 4)?;
     }
-    let source = p.get(3).copied().unwrap_or(0.0);
-    if !(source == 0.0 || source == 1.0) {
-        return Err(Error::Model(format!(
-            "source = {source}: give 0 (friction driven by the linear block's output x) or 1 (by the input u)"
-        )));
-    }
+    let code = p.get(3).copied().unwrap_or(0.0);
+    let source = match code {
+        c if c == 0.0 => Source::Drive,
+        c if c == 1.0 => Source::Input,
+        c if c == 2.0 => Source::Load,
+        _ => {
+            return Err(Error::Model(format!(
+                "source = {code}: give 0 (friction driven by the linear block's output x), 1 (by the input u) \
+                 or 2 (by the backlash's output f)"
+            )))
+        }
+    };
     Ok(DynamicFriction {
         force: p[0],
         presliding: p[1],
         relaxation: p[2],
-        input_driven: source == 1.0,
+        source,
         w: 0.0,
+        f_prev: 0.0,
         dw: Vec::new(),
+        df_prev: Vec::new(),
     })
 }
 
@@ -90,10 +115,10 @@ impl DynamicFriction {
     /// The motion over sample t, v = q(t) - q(t-1).
     #[inline(always)]
     fn velocity(&self, s: &Sample) -> f64 {
-        if !self.input_driven {
-            s.x - s.x_prev
-        } else {
-            s.u[s.t] - s.u_prev
+        match self.source {
+            Source::Drive => s.x - s.x_prev,
+            Source::Input => s.u[s.t] - s.u_prev,
+            Source::Load => s.f - self.f_prev,
         }
     }
 
@@ -115,7 +140,7 @@ impl Effect for DynamicFriction {
         finite("k_f", self.force, "give a finite friction force (0 for none)")?;
         if !(self.presliding.is_finite() && self.presliding > 0.0) {
             return Err(Error::Model(format!(
-                "z_s = {}: give a positive presliding displacement (in units of x)",
+                "z_s = {}: give a positive presliding displacement (in units of the motion it follows)",
                 self.presliding
             )));
         }
@@ -127,11 +152,13 @@ impl Effect for DynamicFriction {
         }
         Ok(())
     }
-    fn start(&self, _x0: f64, _y0: f64) -> Self {
-        // the bristles at rest
+    fn start(&self, _x0: f64, y0: f64) -> Self {
+        // the bristles at rest, the load at the backlash's memory
         DynamicFriction {
             w: 0.0,
+            f_prev: y0,
             dw: Vec::new(),
+            df_prev: Vec::new(),
             ..self.clone()
         }
     }
@@ -141,6 +168,7 @@ impl Effect for DynamicFriction {
             return out;
         }
         self.w = self.step(self.velocity(s)).0;
+        self.f_prev = s.f;
         out + self.force * self.w
     }
     fn parameters(&self) -> Vec<f64> {
@@ -148,7 +176,11 @@ impl Effect for DynamicFriction {
             self.force,
             self.presliding,
             self.relaxation,
-            f64::from(u8::from(self.input_driven)),
+            match self.source {
+                Source::Drive => 0.0,
+                Source::Input => 1.0,
+                Source::Load => 2.0,
+            },
         ]
     }
     fn parameter_names(&self) -> Vec<String> {
@@ -159,24 +191,26 @@ impl Effect for DynamicFriction {
         k < 3
     }
     /// k_f free (the force's sign is the sensor's), z_s >= 0 (`feasible`: > 0), lambda >= 0,
-    /// source in {0, 1}.
+    /// source in {0, 1, 2}.
     fn bounds(&self, k: usize) -> (f64, f64) {
         match k {
             0 => (f64::NEG_INFINITY, f64::INFINITY),
-            3 => (0.0, 1.0),
+            3 => (0.0, 2.0),
             _ => (0.0, f64::INFINITY),
         }
     }
     fn start_tangent(&self, x0: f64, y0: f64, dx0: &[f64], _cols: &Columns) -> Self {
         let mut e = self.start(x0, y0);
         e.dw = vec![0.0; dx0.len()];
+        e.df_prev = vec![0.0; dx0.len()]; // y(0) of the state is a constant
         e
     }
     /// kappa = |v| / z_s + lambda: d kappa = sign(v) dv / z_s - |v| / z_s^2 dz_s + dlambda
     /// (sign(0) = 0, the one-sided derivative of |v| at rest); d w = e^-kappa dw(t-1) +
     /// (v / z_s phi' - e^-kappa w(t-1)) d kappa + phi (dv / z_s - v / z_s^2 dz_s);
     /// d out += k_f dw + w dk_f. The state runs at k_f = 0 too (w is the derivative in k_f).
-    /// Driven by u, dv = 0 (the measured input has no parameter).
+    /// Driven by x, dv = dx(t) - dx(t-1); by u, dv = 0 (the measured input has no
+    /// parameter); by f, dv = df(t) - df(t-1).
     #[inline]
     fn output_tangent(
         &mut self,
@@ -198,13 +232,21 @@ impl Effect for DynamicFriction {
         // w = e w1 + (v / z_s) phi: the coefficients of d kappa and of dv
         let c_kappa = v / zs * dp - e * self.w;
         let c_v = c_kappa * sign / zs + p / zs;
-        if self.input_driven {
-            self.dw.iter_mut().for_each(|o| *o *= e);
-        } else {
-            for ((o, a), b) in self.dw.iter_mut().zip(d.dx).zip(d.dx_prev) {
-                *o = e * *o + c_v * (a - b);
+        match self.source {
+            Source::Drive => {
+                for ((o, a), b) in self.dw.iter_mut().zip(d.dx).zip(d.dx_prev) {
+                    *o = e * *o + c_v * (a - b);
+                }
+            }
+            Source::Input => self.dw.iter_mut().for_each(|o| *o *= e),
+            Source::Load => {
+                for ((o, a), b) in self.dw.iter_mut().zip(d.df).zip(&self.df_prev) {
+                    *o = e * *o + c_v * (a - b);
+                }
+                self.df_prev.copy_from_slice(d.df);
             }
         }
+        self.f_prev = s.f;
         add_at(
             &mut self.dw,
             cols[1],

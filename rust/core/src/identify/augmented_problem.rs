@@ -698,6 +698,22 @@ mod tests {
                 &["k_f", "z_s", "lambda"],
             ),
             (
+                &[("dynamic_friction", &[0.2, 0.05, 0.01, 2.0])],
+                &["k_f", "z_s", "lambda"],
+            ),
+            (
+                &[("dynamic_friction", &[0.0, 0.05, 0.01, 2.0])],
+                &["k_f", "z_s", "lambda"],
+            ),
+            (
+                &[
+                    ("compliance", &[0.3, 0.9, 0.2]),
+                    ("dynamic_friction", &[-0.15, 0.08, 0.02, 2.0]),
+                    ("hysteresis_memory", &[0.25, 0.2]),
+                ],
+                &["k", "omega", "zeta", "k_f", "z_s", "lambda", "r_1", "w_1"],
+            ),
+            (
                 &[("feedback_hysteresis", &[0.3, 0.5, 0.2, 0.05])],
                 &["alpha", "beta", "gamma", "k_3"],
             ),
@@ -812,8 +828,9 @@ mod tests {
             for held in [false, true] {
                 let nominal = problem(&[], &[], &u, start(held));
                 let want = nominal.simulate(&THETA).unwrap();
-                let driven_by_u: (&str, &[f64]) = ("dynamic_friction", &[0.0, 0.03, 0.2, 1.0]);
-                for e in zero.iter().chain([&driven_by_u]) {
+                let by_u: (&str, &[f64]) = ("dynamic_friction", &[0.0, 0.03, 0.2, 1.0]);
+                let by_f: (&str, &[f64]) = ("dynamic_friction", &[0.0, 0.03, 0.2, 2.0]);
+                for e in zero.iter().chain([&by_u, &by_f]) {
                     let p = problem(&[*e], &[], &u, start(held));
                     assert_eq!(p.simulate(&THETA).unwrap(), want, "{e:?} on {name}");
                     assert_eq!(p.sensitivity(&THETA).unwrap().output, want);
@@ -835,6 +852,7 @@ mod tests {
             ("dynamic_friction", &[f64::NAN, 0.1, 0.0]),
             ("dynamic_friction", &[0.1, 0.1]),
             ("dynamic_friction", &[0.1, 0.1, 0.0, 0.5]),
+            ("dynamic_friction", &[0.1, 0.1, 0.0, 3.0]),
             ("dynamic_friction", &[0.1, 0.1, 0.0, 1.0, 0.0]),
             ("feedback_hysteresis", &[0.1, 0.1, 0.1]),
             ("feedback_hysteresis", &[0.1, f64::INFINITY, 0.1, 0.0]),
@@ -1293,6 +1311,22 @@ mod tests {
                     ("sensor_saturation", vec![0.7 * lo, 0.7 * hi], &["lo", "hi"]),
                     ("dead_time", vec![2.0], &[]),
                     ("quantization", vec![0.0], &[]),
+                    // the three motions a dynamic friction may follow: x, u and f
+                    (
+                        "dynamic_friction",
+                        vec![0.2, 0.05, 0.01, 0.0],
+                        &["k_f", "z_s", "lambda"],
+                    ),
+                    (
+                        "dynamic_friction",
+                        vec![-0.15, 0.08, 0.02, 1.0],
+                        &["k_f", "z_s", "lambda"],
+                    ),
+                    (
+                        "dynamic_friction",
+                        vec![0.25, 0.04, 0.01, 2.0],
+                        &["k_f", "z_s", "lambda"],
+                    ),
                 ];
                 for (name, params, free) in &cases {
                     for from in [From::Rest, From::Held, From::Busy] {
