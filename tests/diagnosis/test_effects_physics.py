@@ -247,9 +247,9 @@ def test_feedback_hysteresis_equals_the_bouc_wen_oscillator_and_is_recovered() -
     err = float(np.sqrt(np.mean((aug - want) ** 2)))
     effect = float(np.sqrt(np.mean((want - nominal) ** 2)))
     print(f"feedback_hysteresis at the mapped parameters: rms {err:.4g} of an effect of rms {effect:.4g}")
-    # the core holds the restoring force over a sample (ZOH) and steps z once a sample with
-    # x(t) - x(t-1), the oscillator feels it continuously: an error of order omega (0.12 rad
-    # a sample) of the effect; measured 0.010 of 0.41
+    # the core holds the restoring force over a sample (ZOH; z itself is stepped exactly with x
+    # linear in the sample), the oscillator feels it continuously: an error of order omega
+    # (0.12 rad a sample) of the effect; measured 0.014 of 0.41
     assert err < 0.05 * effect
     nominal_rms, fit_rms, fit = _fit_closes("feedback_hysteresis", m, gen, u, _record(6, 1.1, top=0.2))
     print(f"feedback_hysteresis: validation rms nominal refit {nominal_rms:.4g}, with the effect {fit_rms:.4g}, {fit.params}")

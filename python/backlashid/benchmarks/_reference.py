@@ -233,16 +233,37 @@ def quantiser(y: Array, q: float) -> Array:
 
 
 def bouc_wen(alpha: float, beta: float, gamma: float, k_3: float) -> Callable[[float, float, float], float]:
-    """The drive less the restoring force z(t) + k_3 x(t)^3 of a Bouc-Wen element (nu = 1)
-    stepped once a sample, as a function of (drive, x(t), x(t-1)) called once a sample in
-    order: z(t) = z(t-1) + alpha v - beta |v| z(t-1) - gamma v |z(t-1)|, v = x(t) - x(t-1),
-    z at rest (0) first."""
+    """The drive less the restoring force z(t) + k_3 x(t)^3 of a Bouc-Wen element (nu = 1),
+    as a function of (drive, x(t), x(t-1)) called once a sample in order, z at rest (0) first.
+    z solves dz/dtau = v (alpha - beta sign(v) z - gamma |z|) over the sample, x moving at
+    v = x(t) - x(t-1) a sample: while z keeps its sign s_z, z(tau) = z_eq + (z0 - z_eq)
+    e^(-k tau), k = v (beta sign(v) + gamma s_z), z_eq = v alpha / k (z0 + v alpha tau where
+    k = 0); where that reaches 0 inside the sample (at e^(-k tau0) = z_eq / (z_eq - z0)), the
+    rest of the sample from 0 with s_z = sign(v)."""
     z = 0.0
+
+    def sgn(a: float) -> float:
+        return 1.0 if a > 0.0 else (-1.0 if a < 0.0 else 0.0)
+
+    def keep_sign(z0: float, v: float, s_z: float, tau: float) -> tuple[float, float]:
+        """z after tau, and the time z reaches 0 (inf if it does not before tau)."""
+        k = v * (beta * sgn(v) + gamma * s_z)
+        if k == 0.0:
+            end = z0 + v * alpha * tau
+            return end, (-z0 / (v * alpha) if v * alpha != 0.0 and end * z0 < 0.0 else math.inf)
+        z_eq = v * alpha / k
+        end = z_eq + (z0 - z_eq) * math.exp(-k * tau)
+        if z0 != 0.0 and end * z0 < 0.0:
+            return end, math.log((z_eq - z0) / z_eq) / k
+        return end, math.inf
 
     def drive_less(drive: float, x: float, x_prev: float) -> float:
         nonlocal z
         v = x - x_prev
-        z = z + alpha * v - beta * abs(v) * z - gamma * v * abs(z)
+        if v != 0.0:
+            s_z = sgn(z) if z != 0.0 else sgn(v)
+            end, tau0 = keep_sign(z, v, s_z, 1.0)
+            z = keep_sign(0.0, v, sgn(v), 1.0 - tau0)[0] if tau0 < 1.0 else end
         return drive - z - k_3 * x * x * x
 
     return drive_less

@@ -28,7 +28,7 @@
 //! the state, the linear block's latest past input (rest: 0, held: u(0)) or the backlash's
 //! memory y(0).
 
-use super::{add_at, arity, finite, Columns, Effect, Sample, Stage, Tangent};
+use super::{add_at, arity, finite, phi, Columns, Effect, Sample, Stage, Tangent};
 use crate::error::{Error, Result};
 
 /// Name in the catalogue.
@@ -92,23 +92,6 @@ pub fn from_parameters(p: &[f64]) -> Result<DynamicFriction> {
         dw: Vec::new(),
         df_prev: Vec::new(),
     })
-}
-
-/// phi(kappa) = (1 - e^-kappa) / kappa and phi'(kappa), by their series near 0 (where the
-/// closed forms cancel).
-#[inline(always)]
-fn phi(kappa: f64) -> (f64, f64) {
-    if kappa < 1e-2 {
-        let k = kappa;
-        (
-            1.0 - k / 2.0 + k * k / 6.0 - k * k * k / 24.0 + k * k * k * k / 120.0,
-            -0.5 + k / 3.0 - k * k / 8.0 + k * k * k / 30.0 - k * k * k * k / 144.0,
-        )
-    } else {
-        let e = (-kappa).exp();
-        let p = -(-kappa).exp_m1() / kappa;
-        (p, (e - p) / kappa)
-    }
 }
 
 impl DynamicFriction {

@@ -205,6 +205,24 @@ pub(crate) fn sign(v: f64) -> f64 {
     }
 }
 
+/// phi(kappa) = (1 - e^-kappa) / kappa and phi'(kappa), the exact step of a first-order
+/// linear law over one sample (phi(0) = 1, any sign of kappa), by their series near 0 (where
+/// the closed forms cancel): dynamic friction's bristles and the Bouc-Wen state.
+#[inline(always)]
+pub(crate) fn phi(kappa: f64) -> (f64, f64) {
+    if kappa.abs() < 1e-2 {
+        let k = kappa;
+        (
+            1.0 - k / 2.0 + k * k / 6.0 - k * k * k / 24.0 + k * k * k * k / 120.0,
+            -0.5 + k / 3.0 - k * k / 8.0 + k * k * k / 30.0 - k * k * k * k / 144.0,
+        )
+    } else {
+        let e = (-kappa).exp();
+        let p = -(-kappa).exp_m1() / kappa;
+        (p, (e - p) / kappa)
+    }
+}
+
 /// Bounds lo < hi of a clip (+-inf for none), or a ModelError naming `effect`.
 pub(crate) fn check_clip(effect: &str, lo: f64, hi: f64) -> Result<()> {
     if lo.is_nan() || hi.is_nan() || lo >= hi {
