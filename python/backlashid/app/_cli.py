@@ -156,20 +156,24 @@ def _select(data: Path | None, input_: str, output: str, split: float | None, es
 
 
 def _fit_model(kind: str, u: Any, y: Any, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int,
-               max_iter: int, feedthrough: bool, coarse: int | None = None, min_moving: float = 0.02) -> Any:
-    from ..identify import fit_cascade, fit_sandwich, fit_wiener_hammerstein
+               max_iter: int, feedthrough: bool, coarse: int | None = None, min_moving: float = 0.02,
+               initial_state: str = "rest") -> Any:
+    from ..identify import fit_cascade, fit_hammerstein_backlash, fit_sandwich, fit_wiener_hammerstein
 
+    common = dict(warmup=warmup, max_iter=max_iter, coarse=coarse, min_moving=min_moving, initial_state=initial_state)
     if kind == "cascade":
-        return fit_cascade(u, y, na=na, nb=nb, degree=degree, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough,
-                           coarse=coarse, min_moving=min_moving)
+        return fit_cascade(u, y, na=na, nb=nb, degree=degree, feedthrough=feedthrough, **common)
     if kind == "sandwich":
-        return fit_sandwich(u, y, na=na, nb=nb, nr=nr, ns=ns, degree=degree, warmup=warmup, max_iter=max_iter,
-                            feedthrough=feedthrough, output_feedthrough=feedthrough, coarse=coarse, min_moving=min_moving)
+        return fit_sandwich(u, y, na=na, nb=nb, nr=nr, ns=ns, degree=degree, feedthrough=feedthrough, output_feedthrough=feedthrough, **common)
+    if kind == "hammerstein":
+        return fit_hammerstein_backlash(u, y, nr=nr, ns=ns, degree=degree, output_feedthrough=feedthrough, **common)
+    if initial_state != "rest":
+        raise DataError("--initial-state estimate: the wiener-hammerstein fit starts from rest; give --initial-state rest or a --warmup")
     return fit_wiener_hammerstein(u, y, nb=nb, ns=ns, degree=degree, warmup=warmup, feedthrough=feedthrough)
 
 
 def _select_model(kind: str, u: np.ndarray, y: np.ndarray, warmup: int, max_iter: int, feedthrough: bool,
-                  coarse: int | None = None, min_moving: float = 0.02) -> Any:
+                  coarse: int | None = None, min_moving: float = 0.02, initial_state: str = "rest") -> Any:
     """``fit --orders auto``: select_structure over its default grid (cascade: na, nb 1..3,
     degree 1..4; sandwich: na, nb, nr, ns 1..2, degree 1..3); prints the table of candidates."""
     from ..identify import select_structure
@@ -178,7 +182,7 @@ def _select_model(kind: str, u: np.ndarray, y: np.ndarray, warmup: int, max_iter
         raise DataError(f"--orders auto: the structure selection is for --model cascade or sandwich, not {kind}")
     extra: dict[str, Any] = dict(na=(1, 2), nb=(1, 2), degree=(1, 2, 3), output_feedthrough=feedthrough) if kind == "sandwich" else {}
     selection = select_structure(u, y, kind=kind, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough, coarse=coarse,
-                                 min_moving=min_moving, **extra)
+                                 min_moving=min_moving, initial_state=initial_state, **extra)
     click.echo(selection.summary())
     return selection
 
@@ -194,9 +198,17 @@ def _write_json(path: Path, payload: dict[str, Any]) -> None:
 
 def _model_options(command: F) -> F:
     options = [
-        click.option("--model", "kind", type=click.Choice(["cascade", "sandwich", "wiener-hammerstein"]), default="cascade", show_default=True,
-                     help="cascade: linear -> backlash; sandwich: linear -> backlash -> linear; wiener-hammerstein: a sandwich "
-                          "whose middle block is a static polynomial of --degree (zero-width, tied branches), G1 and G2 of orders --nb and --ns."),
+        click.option("--model", "kind", type=click.Choice(["cascade", "sandwich", "hammerstein", "wiener-hammerstein"]), default="cascade",
+                     show_default=True,
+                     help="cascade: linear -> backlash (load-side play); sandwich: linear -> backlash -> linear (two masses, play "
+                          "between); hammerstein: backlash -> linear, the input backlash of a motor -> play -> load drive (the play "
+                          "in the input's units, the load block of orders --nr, --ns); wiener-hammerstein: a sandwich whose middle "
+                          "block is a static polynomial of --degree (zero-width, tied branches), G1 and G2 of orders --nb and --ns."),
+        click.option("--initial-state", "initial_state", type=click.Choice(["rest", "estimate"]), default="rest", show_default=True,
+                     help="estimate: each record's state at its first sample is estimated with the fit (records that start "
+                          "mid-motion, positions that integrate), and the metrics start each record from the state its first "
+                          "--metrics-warmup samples (at least 20) imply; rest: every record starts at rest (cascade, sandwich, "
+                          "hammerstein)."),
         click.option("--feedthrough", is_flag=True, help="Give the linear blocks a direct (lag-0) term a_0 u(t) (and r_0 w(t))."),
         click.option("--na", default=2, show_default=True, help="Input linear block: number of a (input) coefficients."),
         click.option("--nb", default=2, show_default=True, help="Input linear block: number of b (feedback) coefficients."),
@@ -319,13 +331,14 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
 def fit(data: Path | None, input_: str, output: str, split: float | None, estimation: str | None, validation: str | None,
         estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
         input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
-        kind: str, feedthrough: bool, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
+        kind: str, initial_state: str, feedthrough: bool, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
         coarse: int | None, min_moving: float, metrics_warmup: int | None, orders: str, json_path: Path | None, plots_dir: Path | None) -> None:
-    """Identify a cascade or sandwich model from logged input/output data.
+    """Identify a cascade, sandwich or input-backlash model from logged input/output data.
 
     \b
     Examples:
       backlashid fit log.csv -i u -o y --split 0.6 --warmup 50 --json model.json --plots figs
+      backlashid fit drive.csv -i motor -o load --model hammerstein --initial-state estimate --split 0.7
       backlashid fit --estimation-file a.npz --estimation-file b.npz --validation-file c.npz -i x -o F --scale auto
     """
     from ..identify import evaluate_scaled
@@ -339,15 +352,19 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         if len(sel.estimation_parts) > 1 and kind != "wiener-hammerstein":  # several records, one model
             u_m, y_m = [scaling.input_to_model(p.u) for p in sel.estimation_parts], [scaling.output_to_model(p.y) for p in sel.estimation_parts]
         stage(f"fitting the {kind}")
-        selection = _select_model(kind, u_m, y_m, warmup, max_iter, feedthrough, coarse, min_moving) if orders == "auto" else None
-        result = selection.fit if selection is not None else _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse, min_moving)
+        selection = _select_model(kind, u_m, y_m, warmup, max_iter, feedthrough, coarse, min_moving, initial_state) if orders == "auto" else None
+        result = (selection.fit if selection is not None else
+                  _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse, min_moving, initial_state))
         if kind == "wiener-hammerstein":  # the fit's output offset joins the scaling's (the sandwich has none)
             scaling = replace(scaling, output_offset=scaling.output_offset + scaling.output_scale * result.offset)
         stage("computing metrics")
         metrics_warmup = warmup if metrics_warmup is None else metrics_warmup
-        metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, warmup=max(metrics_warmup, warmup))}
+        # an estimated start: each record from the state its first samples imply (the benchmark protocols' n_init)
+        init = max(metrics_warmup, 20) if initial_state == "estimate" else 0
+        metrics = {"estimation": evaluate_scaled(result.model, scaling, sel.estimation.u, sel.estimation.y, warmup=max(metrics_warmup, warmup),
+                                                 init_samples=init)}
         if sel.validation is not None:
-            metrics["validation"] = evaluate_scaled(result.model, scaling, sel.validation.u, sel.validation.y, warmup=metrics_warmup)
+            metrics["validation"] = evaluate_scaled(result.model, scaling, sel.validation.u, sel.validation.y, warmup=metrics_warmup, init_samples=init)
         figures: list[Path] = []
         if plots_dir:
             stage("writing figures")
