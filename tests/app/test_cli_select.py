@@ -23,7 +23,7 @@ def test_fit_orders_auto_prints_the_table_and_writes_the_chosen_model(tmp_path):
     r = run("fit", path, "-i", "u", "-o", "y", "--orders", "auto", "--json", out)
     assert r.exit_code == 0, r.output
     assert "Structure selection: 36 candidates" in r.output and "chosen (*): cascade na=2, nb=2, degree=3" in r.output
-    assert r.output.count("\n* cascade    2  2   3") == 1
+    assert r.output.count("\n* cascade       2  2   3") == 1
     payload = json.loads(out.read_text())
     model = bx.model_from_dict(payload["model"])
     assert (model.linear.na, model.linear.nb, model.backlash.degree) == (2, 2, 3)

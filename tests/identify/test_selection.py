@@ -167,3 +167,25 @@ def test_when_no_refit_holds_the_estimation_fit_is_returned_and_says_why(example
     assert sel.refit_error == "the refit on the whole record did not converge (reason 'iteration limit')"
     assert all(r["refit_error"] is not None for r in sel.rows)
     assert "no refit on the whole record held" in sel.summary()
+
+
+def test_the_structure_class_of_a_motor_play_load_drive_is_found_from_a_mid_motion_log():
+    # issue 31: a motor -> play -> load drive (input backlash, a slow load) logged mid-motion;
+    # over cascades, sandwiches and input backlashes, each from its estimated start, the input
+    # backlash validates at the noise and is chosen, and a cascade record is still a cascade
+    from backlashid.identify import hammerstein_backlash
+
+    rng = np.random.default_rng(11)
+    u = np.convolve(rng.uniform(-2.0, 2.0, 3300), np.ones(5) / 5, mode="same")
+    drive = hammerstein_backlash(bx.GeneralBacklash(0.3, 0.2, [1.0], [1.0]), bx.LinearBlock([0.0015, 0.001], [-1.9, 0.9025]))
+    noise = 0.01
+    w = (drive.simulate(u) + noise * rng.standard_normal(u.size))[300:]
+    options = dict(initial_state="estimate", warmup=20, nr=2, ns=2, degree=1)
+    sel = select_structure(u[300:], w, kind=["cascade", "sandwich", "hammerstein"], na=2, nb=2, **options)
+    assert sel.kind == "hammerstein" and sel.refitted, sel.summary()
+    chosen = sel.rows[sel.chosen]
+    assert chosen["validation_rmse"] < 1.5 * noise
+    assert min(r["validation_rmse"] for r in sel.rows if r["kind"] == "cascade" and not r["raised"]) > 1.5 * noise
+    cascade = bx.example_data(bx.example1(), 2000, snr=50, seed=5)
+    sel = select_structure(cascade.u, cascade.noisy, kind=["cascade", "hammerstein"], na=2, nb=2, nr=2, ns=2, degree=3)
+    assert sel.kind == "cascade", sel.summary()

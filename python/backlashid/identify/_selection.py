@@ -24,11 +24,14 @@ from .._json import jsonable
 from .._validation import check_finite, check_flag, check_int, check_warmup, one_record, shown
 from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ._fit import FitResult, fit_cascade, fit_sandwich
+from ._hammerstein import fit_hammerstein_backlash
+from ._state import simulate_from_samples
 from ._structure import Structure
 
 __all__ = ["StructureSelection", "select_structure"]
 
-KINDS = ("cascade", "sandwich")
+KINDS = ("cascade", "sandwich", "hammerstein")
+INIT_SAMPLES = 20  # samples that set an estimated start at least (the CLI's too)
 RULE = (
     "validation band, then BIC: among the candidates that did not raise, keep those whose "
     "validation simulation RMSE is at most (1 + tolerance) times the best one; choose the lowest "
@@ -117,18 +120,18 @@ class StructureSelection:
         str
             Several lines of text: one per candidate, then the choice.
         """
-        sandwich = any(r["kind"] == "sandwich" for r in self.rows)
+        sandwich = any(r["kind"] != "cascade" for r in self.rows)
         lines = [
             f"Structure selection: {len(self.rows)} candidates, fitted on {self.estimation_samples} samples, "
             f"validated on the next {self.validation_samples} (free-run simulation RMSE) in {self.seconds:.1f} s",
             f"rule: {self.rule}, tolerance {self.tolerance:g}",
         ]
-        head = f"  {'kind':<9}{'na':>3}{'nb':>3}" + (f"{'nr':>3}{'ns':>3}" if sandwich else "")
+        head = f"  {'kind':<12}{'na':>3}{'nb':>3}" + (f"{'nr':>3}{'ns':>3}" if sandwich else "")
         head += f"{'deg':>4}{'p':>4}{'est. RMSE':>12}{'val. RMSE':>12}{'BIC':>11}  note"
         lines.append(head)
         for i, r in enumerate(self.rows):
             mark = "*" if i == self.chosen else ("+" if r["in_band"] else " ")
-            row = f"{mark} {r['kind']:<9}{r['na']:>3}{r['nb']:>3}" + (f"{r['nr']:>3}{r['ns']:>3}" if sandwich else "")
+            row = f"{mark} {r['kind']:<12}{r['na']:>3}{r['nb']:>3}" + (f"{r['nr']:>3}{r['ns']:>3}" if sandwich else "")
             row += f"{r['degree']:>4}{r['parameters']:>4}"
             if r["raised"]:
                 row += f"{'-':>12}{'-':>12}{'-':>11}  raised {r['error']}"
@@ -262,9 +265,12 @@ def select_structure(
     """Choose the linear orders and the branch degree by held-out simulation error and BIC.
 
     Every candidate of the grid (all combinations of ``na``, ``nb``, ``degree`` and, for a
-    sandwich, ``nr``, ``ns``) is fitted by :func:`fit_cascade` / :func:`fit_sandwich` on the
-    head of the record, the first ``1 - validation`` of it. Each fitted model is then
-    simulated free-run from the start of the record and its simulation RMSE on the held-out
+    sandwich, ``nr``, ``ns``; for an input backlash ``nr``, ``ns``, ``degree``) is fitted by
+    :func:`fit_cascade` / :func:`fit_sandwich` / :func:`fit_hammerstein_backlash` on the head of
+    the record, the first ``1 - validation`` of it. Each fitted model is then simulated free-run
+    from the start of the record (from rest, or with ``initial_state="estimate"`` among the
+    options from the state its first max(warmup, 20) samples imply, as a benchmark protocol
+    starts a model on a record that starts mid-motion) and its simulation RMSE on the held-out
     tail is its validation error (the head serves as the tail's warm-up); its BIC is
     ``n log(s**2) + p log(n)`` with s the free-run simulation RMSE on the n estimation samples
     after ``warmup`` and p its number of parameters.
@@ -288,8 +294,11 @@ def select_structure(
         Input u(t), 1-D, finite.
     y : array_like
         Measured output (w for a sandwich), 1-D, finite, as long as ``u``.
-    kind : {'cascade', 'sandwich'} or sequence of them, default 'cascade'
-        The structures to try; several kinds are compared in one table.
+    kind : {'cascade', 'sandwich', 'hammerstein'} or sequence of them, default 'cascade'
+        The structures to try; several kinds are compared in one table: 'cascade' (linear ->
+        backlash, load-side play), 'sandwich' (linear -> backlash -> linear, play between two
+        masses), 'hammerstein' (backlash -> linear, the input backlash of a motor -> play ->
+        load drive: ``na``, ``nb`` unused, the grid over ``nr``, ``ns`` and ``degree``).
     na : int or sequence of int, default (1, 2, 3)
         Input lags of the (input) linear block to try (eq 16).
     nb : int or sequence of int, default (1, 2, 3)
@@ -312,7 +321,8 @@ def select_structure(
         Samples at the start left out of every fit criterion and of BIC.
     **options
         Further keywords of :func:`fit_cascade` / :func:`fit_sandwich` (``max_iter``,
-        ``feedthrough``, ``min_moving``, ...), passed to every candidate's fit.
+        ``feedthrough``, ``min_moving``, ``initial_state``, ...), passed to every candidate's
+        fit (an input backlash takes no ``feedthrough``).
 
     Returns
     -------
@@ -344,9 +354,10 @@ def select_structure(
         raise DataError(f"kind = {kind!r}: the list is empty; give 'cascade', 'sandwich' or both")
     for k in kinds:
         if k not in KINDS:
-            raise DataError(f"kind = {k!r}: use 'cascade' or 'sandwich' (or a list of them)")
+            raise DataError(f"kind = {k!r}: use 'cascade', 'sandwich' or 'hammerstein' (or a list of them)")
     grid_a, grid_b, grid_n = _grid(na, "na", 1), _grid(nb, "nb", 0), _grid(degree, "degree", 1)
-    grid_r, grid_s = (_grid(nr, "nr", 1), _grid(ns, "ns", 0)) if "sandwich" in kinds else ([0], [0])
+    with_output = "sandwich" in kinds or "hammerstein" in kinds
+    grid_r, grid_s = (_grid(nr, "nr", 1), _grid(ns, "ns", 0)) if with_output else ([0], [0])
     if isinstance(validation, bool) or not isinstance(validation, (int, float)) or not 0.0 < validation < 1.0:
         raise DataError(f"validation = {validation!r}: give the held-out fraction of the record, in (0, 1)")
     if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not 0.0 <= tolerance < 1e300:
@@ -367,15 +378,19 @@ def select_structure(
 
     candidates: list[tuple[str, int, int, int, int, int]] = []
     for k in kinds:
-        outer = itertools.product(grid_r, grid_s) if k == "sandwich" else [(0, 0)]
-        for (r, s), a, b, n in itertools.product(list(outer), grid_a, grid_b, grid_n):
+        outer = itertools.product(grid_r, grid_s) if k != "cascade" else [(0, 0)]
+        inner = itertools.product([1], [0], grid_n) if k == "hammerstein" else itertools.product(grid_a, grid_b, grid_n)  # x(t) = a_1 u(t-1)
+        for (r, s), (a, b, n) in itertools.product(list(outer), list(inner)):
             candidates.append((k, a, b, r, s, n))
+    init = max(warmup, INIT_SAMPLES) if options.get("initial_state") == "estimate" else 0
 
     rows: list[dict[str, Any]] = []
     fits: list[FitResult | None] = []
     errors: list[BacklashIdError | None] = []
     for k, a, b, r, s, n in candidates:
-        if k == "sandwich":
+        if k == "hammerstein":
+            structure = Structure(a, b, n, r, s, output_feedthrough=bool(options.get("output_feedthrough", False)))
+        elif k == "sandwich":
             structure = Structure(a, b, n, r, s, feedthrough=feedthrough, output_feedthrough=bool(options.get("output_feedthrough", False)))
         else:
             structure = Structure(a, b, n, feedthrough=feedthrough)
@@ -394,7 +409,7 @@ def select_structure(
                 result = _fit_one(k, u_est, y_est, structure, warmup, options)
                 if result.model is None:
                     raise NotConvergedError("the fit ended with no valid model", result)
-                simulated = result.model.simulate(u_arr)
+                simulated = _simulated(result.model, u_arr, y_arr, init)
                 val = float(np.sqrt(np.mean((y_arr[n_est:] - simulated[n_est:]) ** 2)))
                 if not math.isfinite(val):
                     raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
@@ -432,7 +447,7 @@ def select_structure(
         for i in order:
             head = fits[i]
             assert head is not None
-            whole, why = _refit_whole(rows[i]["kind"], head, u_arr, y_arr, warmup, tolerance, options)
+            whole, why = _refit_whole(rows[i]["kind"], head, u_arr, y_arr, warmup, init, tolerance, options)
             rows[i]["refit_error"] = why
             if why is None:
                 chosen, fit = i, whole
@@ -448,13 +463,20 @@ def select_structure(
     )
 
 
+def _simulated(model: Any, u: NDArray[np.float64], y: NDArray[np.float64], init: int) -> NDArray[np.float64]:
+    """The free run over the whole record from rest, or (``init`` > 0, an estimated start) from
+    the state its first ``init`` samples imply, as a benchmark protocol starts a model."""
+    return np.asarray(simulate_from_samples(model, u, y, init) if init else model.simulate(u), dtype=np.float64)
+
+
 def _refit_whole(
-    kind: str, head: FitResult, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, tolerance: float, options: dict[str, Any]
+    kind: str, head: FitResult, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, init: int, tolerance: float,
+    options: dict[str, Any],
 ) -> tuple[FitResult | None, str | None]:
     """The refit of a candidate on the whole record and None, or None and why it is not kept:
-    it raised, did not converge, or simulates the whole record (free run from rest, after the
-    warm-up, as the validation does) worse than the candidate's estimation fit, which it was
-    meant to improve (a refit that diverged into a pole at 1 is far worse)."""
+    it raised, did not converge, or simulates the whole record (free run from the validation's
+    start, after the warm-up) worse than the candidate's estimation fit, which it was meant to
+    improve (a refit that diverged into a pole at 1 is far worse)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)  # the candidate's own fit has shown its warnings
@@ -464,7 +486,8 @@ def _refit_whole(
     if not whole.converged or whole.model is None:
         return None, f"the refit on the whole record did not converge (reason {whole.reason!r})"
     assert head.model is not None
-    errors = [float(np.sqrt(np.mean((y - m.simulate(u))[warmup:] ** 2))) for m in (whole.model, head.model)]
+    skip = max(warmup, init)
+    errors = [float(np.sqrt(np.mean((y - _simulated(m, u, y, init))[skip:] ** 2))) for m in (whole.model, head.model)]
     if not (math.isfinite(errors[0]) and errors[0] <= (1.0 + tolerance) * errors[1]):
         return None, (
             f"the refit on the whole record simulates it worse (RMSE {errors[0]:.4g}) than the fit on its head does "
@@ -475,6 +498,9 @@ def _refit_whole(
 
 def _fit_one(kind: str, u: Any, y: Any, structure: Structure, warmup: int, options: dict[str, Any]) -> FitResult:
     s = structure
+    if kind == "hammerstein":
+        rest = {k: v for k, v in options.items() if k not in ("feedthrough", "output_feedthrough")}
+        return fit_hammerstein_backlash(u, y, s.nr, s.ns, s.degree, output_feedthrough=s.output_feedthrough, warmup=warmup, **rest)
     if kind == "sandwich":
         return fit_sandwich(u, y, s.na, s.nb, s.nr, s.ns, s.degree, warmup=warmup, **options)
     return fit_cascade(u, y, s.na, s.nb, s.degree, warmup=warmup, **options)
