@@ -54,10 +54,15 @@ def test_parameters_are_recovered_within_three_standard_errors(seed):
     z = {k: abs(errors[k]) / se[k] for k in errors}
     assert max(z.values()) < 3.0, {k: round(v, 2) for k, v in z.items()}
     # the backlash on u itself, gain folded in: the generator's
-    backlash, block = as_hammerstein(result.model)
+    backlash, block = as_hammerstein(result.model, unit_load_gain=False)
     assert backlash.c_left == pytest.approx(C_L, abs=0.02) and backlash.c_right == pytest.approx(C_R, abs=0.02)
     np.testing.assert_allclose(backlash.m_left, M_L, atol=0.03)
     np.testing.assert_allclose(block.a, R, atol=0.03)
+    # in physical units (the default): the same play, the load at unit static gain, the
+    # branches carrying the load's gain G = sum(R) / (1 + sum(S)) = 2
+    physical, load = as_hammerstein(result.model)
+    assert physical.c_left == backlash.c_left and load.static_gain() == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(physical.m_left, np.array(M_L) * 2.0, rtol=0.03, atol=0.03)
 
 
 def test_the_fit_is_the_sandwich_with_a_gain_and_a_delay_as_input_block():
@@ -69,12 +74,18 @@ def test_the_fit_is_the_sandwich_with_a_gain_and_a_delay_as_input_block():
 
 
 @pytest.mark.parametrize("gain", [2.5, -0.7])
-def test_the_gain_folds_into_the_backlash_whatever_its_sign(gain):
+@pytest.mark.parametrize("load", [LinearBlock([1.0, 0.3], [-0.4]), LinearBlock([-0.2, 0.05], [-0.6]), LinearBlock([0.1], [-1.0])])
+def test_the_gain_folds_into_the_backlash_whatever_its_sign(gain, load):
+    # a load of positive, negative and infinite static gain (an integrator: left as it is)
     bl = GeneralBacklash(0.3, 0.1, [1.0, 0.2, 0.05], [0.9, -0.1, 0.08])
-    model = SandwichModel(LinearBlock([gain]), bl, LinearBlock([1.0, 0.3], [-0.4]))
-    folded = hammerstein_backlash(*as_hammerstein(model))
+    model = SandwichModel(LinearBlock([gain]), bl, load)
     u = np.random.default_rng(5).uniform(-2.0, 2.0, 400)
-    np.testing.assert_allclose(folded.simulate(u), model.simulate(u), atol=1e-12)
+    for unit in (True, False):
+        backlash, block = as_hammerstein(model, unit_load_gain=unit)
+        np.testing.assert_allclose(hammerstein_backlash(backlash, block).simulate(u), model.simulate(u), atol=1e-12)
+        if unit and np.isfinite(load.static_gain()):
+            assert abs(block.static_gain()) == pytest.approx(1.0, abs=1e-12)
+            assert backlash.m_left[0] > 0 and backlash.m_right[0] > 0  # still a backlash
 
 
 def test_bad_arguments_are_refused_naming_them():
@@ -87,5 +98,7 @@ def test_bad_arguments_are_refused_naming_them():
         as_hammerstein(bid.example2())
     with pytest.raises(DataError, match="model"):
         as_hammerstein(bid.example1())
+    with pytest.raises(DataError, match="unit_load_gain"):
+        as_hammerstein(TRUTH, unit_load_gain="yes")
     with pytest.raises(bid.ModelError, match="output_linear"):
         hammerstein_backlash(GeneralBacklash(0.1, 0.1, [1.0], [1.0]), [1.0])

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import check_instance
+from .._validation import check_flag, check_instance
 from ..errors import DataError
 from ..models import GeneralBacklash, LinearBlock, SandwichModel
 from ._fit import FitResult, fit_sandwich
@@ -64,14 +64,18 @@ def hammerstein_backlash(backlash: GeneralBacklash, output_linear: LinearBlock) 
     return SandwichModel(LinearBlock([1.0]), backlash, output_linear)
 
 
-def as_hammerstein(model: SandwichModel) -> tuple[GeneralBacklash, LinearBlock]:
+def as_hammerstein(model: SandwichModel, *, unit_load_gain: bool = True) -> tuple[GeneralBacklash, LinearBlock]:
     """The backlash acting on u(t-1) itself and the output block of an input-backlash model
     (a sandwich whose input block is x(t) = a_1 u(t-1), e.g. from
-    :func:`fit_hammerstein_backlash`): the gain a_1 folded into the backlash.
+    :func:`fit_hammerstein_backlash`), in physical units: the play in the input's units, the
+    load block at unit static gain, so the backlash's output is in the output's units.
 
-    With a_1 > 0: c -> c / a_1 and m_i -> m_i a_1^i. With a_1 < 0 the backlash acts on -u:
-    its branches swap and change sign (L'(v) = -R(-v), R'(v) = -L(-v)) and the output block's
-    r changes sign, so that ``hammerstein_backlash(*as_hammerstein(model))`` simulates as
+    The gain a_1 folds into the backlash: with a_1 > 0, c -> c / a_1 and m_i -> m_i a_1^i. With
+    a_1 < 0 the backlash acts on -u: its branches swap and change sign (L'(v) = -R(-v), R'(v) =
+    -L(-v)) and the output block's r changes sign. Then (``unit_load_gain``) the load block's
+    static gain G moves into the branches: m_i -> m_i |G|, r -> r / |G| (a static gain of -1
+    where the load inverts; left where G is infinite or 0, a load that integrates or
+    differentiates). Either way ``hammerstein_backlash(*as_hammerstein(model))`` simulates as
     ``model``.
 
     Parameters
@@ -79,6 +83,8 @@ def as_hammerstein(model: SandwichModel) -> tuple[GeneralBacklash, LinearBlock]:
     model : SandwichModel
         A sandwich whose input block is ``LinearBlock([a_1])`` (na = 1, nb = 0, no
         feedthrough), a_1 non-zero.
+    unit_load_gain : bool, default True
+        Normalise the load block to unit static gain (False: r_1 keeps the fit's value).
 
     Returns
     -------
@@ -99,6 +105,7 @@ def as_hammerstein(model: SandwichModel) -> tuple[GeneralBacklash, LinearBlock]:
     >>> backlash.c_left, backlash.m_left.tolist()
     (0.25, [2.0])
     """
+    check_flag(unit_load_gain, "unit_load_gain")
     if not isinstance(model, SandwichModel):
         raise DataError(f"model must be a SandwichModel, got {type(model).__name__}")
     lin = model.input_linear
@@ -113,7 +120,12 @@ def as_hammerstein(model: SandwichModel) -> tuple[GeneralBacklash, LinearBlock]:
         out = LinearBlock(-out.a, out.b, feedthrough=out.feedthrough)
     k = abs(gain)
     powers = k ** np.arange(1, len(m_left) + 1)
-    return GeneralBacklash(c_left / k, c_right / k, m_left * powers, m_right * powers), out
+    m_left, m_right = m_left * powers, m_right * powers
+    load = abs(out.static_gain()) if unit_load_gain else 1.0
+    if np.isfinite(load) and load > 0.0:
+        m_left, m_right = m_left * load, m_right * load
+        out = LinearBlock(out.a / load, out.b, feedthrough=out.feedthrough)
+    return GeneralBacklash(c_left / k, c_right / k, m_left, m_right), out
 
 
 def fit_hammerstein_backlash(
@@ -179,9 +191,9 @@ def fit_hammerstein_backlash(
     >>> truth = hammerstein_backlash(bid.GeneralBacklash(0.3, 0.2, [1.0], [1.2]), bid.LinearBlock([1.0, 0.4], [-0.5]))
     >>> u = np.random.default_rng(0).uniform(-2, 2, 1000)
     >>> result = fit_hammerstein_backlash(u, truth.simulate(u), nr=2, ns=1, degree=1)
-    >>> backlash, block = bid.identify.as_hammerstein(result.model)
-    >>> round(backlash.c_left, 3), round(backlash.c_right, 3), np.round(block.a, 3).tolist()
-    (0.3, 0.2, [1.0, 0.4])
+    >>> backlash, block = bid.identify.as_hammerstein(result.model)  # the load at unit static gain
+    >>> round(backlash.c_left, 3), round(backlash.c_right, 3), round(block.static_gain(), 6), np.round(backlash.m_left, 3).tolist()
+    (0.3, 0.2, 1.0, [2.8])
     """
     for name in ("na", "nb", "feedthrough"):
         if name in options:
