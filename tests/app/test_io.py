@@ -226,3 +226,31 @@ def test_shared_friction_damper_npz():
     got = read_signals(SHARED / "friction_damper_backlash" / "d2_eq_ImperialValleyDBE.npz", ["x_in", "F_kip"])
     assert len(got["x_in"]) == 28698 and got["F_kip"].dtype == np.float64
     assert 0.5 < got["x_in"].max() < 0.6  # inches, as the README describes
+
+
+def test_a_decimated_split_has_no_filter_transient_at_its_cuts(tmp_path):
+    # issue 31: each piece was filtered alone, with zeros beyond its ends, so its ends spiked
+    # (1.74 deg on a drive); the filter now runs over the whole file first, mirrored at
+    # the file's ends. A slow offset signal (a position far from 0)
+    # split in two and decimated by 8: each piece's error against the slow signal at its ends
+    # is within 3x its interior RMS, and the pieces are the whole record's decimation
+    t = np.arange(8000)
+    slow = 5.0 + np.sin(2 * np.pi * t / 900)
+    rng = np.random.default_rng(3)
+    u = slow + 0.05 * rng.standard_normal(t.size)
+    path = write_csv(tmp_path / "drive.csv", ["u", "y"], [u, u])
+    sel = select_records(path, "u", "y", split=0.6, decimate_by=8)
+    whole = decimate(Record(u, u, "all"), 8)
+    np.testing.assert_array_equal(sel.estimation.u, whole.u[:600])
+    np.testing.assert_array_equal(sel.validation.u, whole.u[600:])
+    for piece, start in ((sel.estimation, 0), (sel.validation, 4800)):
+        err = piece.u - slow[start::8][: len(piece)]
+        interior = np.sqrt(np.mean(err[30:-30] ** 2))
+        for end in (err[:5], err[-5:]):  # the cut and the file's own ends (mirrored there)
+            assert np.max(np.abs(end)) < 3 * interior, (start, np.max(np.abs(end)), interior)
+    # ranges of one file and several files: each piece is the whole file's decimation, cut
+    sel = select_records(path, "u", "y", estimation="800:4000", validation="4000:8000", decimate_by=8)
+    np.testing.assert_array_equal(sel.estimation.u, whole.u[100:500])
+    sel = select_records(None, "u", "y", estimation_files=[path, path], estimation="800:4000", validation_files=[path], decimate_by=8)
+    np.testing.assert_array_equal(sel.estimation.u, np.concatenate([whole.u[100:500], whole.u[100:500]]))
+    np.testing.assert_array_equal(sel.validation.u, whole.u)

@@ -260,10 +260,11 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     """
     from ..identify import Scaling, fit_cascade
     from ..tracking import Tracker
-    from ._io import Record, _finite_record, _read_signals, decimate, parse_range
+    from ._io import Record, _finite_record, _read_signals, decimate_piece, parse_range
 
     signals = _read_signals(data, [input_, output])
-    record = Record(signals[input_], signals[output], str(data))
+    record = whole = Record(signals[input_], signals[output], str(data))
+    part = None
     if range_:
         part = parse_range(range_, len(record), "--range")
         record = _finite_record(record.slice(part, "--range"), input_, output, "choose a --range without it", part.start, f"--range {range_}", str(data))
@@ -271,7 +272,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
         _finite_record(record, input_, output, "select a --range without it")
     if model_file is not None:
         model, scaling, described = _read_model_file(model_file)
-        record = decimate(record, int(described.get("decimate", 1)))
+        record = decimate_piece(whole, part, int(described.get("decimate", 1)))
         start: Any = model
         started = f"the model of {model_file}"
     else:
@@ -526,21 +527,22 @@ def _whole(value: object) -> bool:
 def simulate(model_file: Path, data: Path, input_: str, output: str | None, range_: str | None, decimate_by: int | None, warmup: int, init_samples: int, out: Path) -> None:
     """Simulate a model (JSON from fit --json, or a model's to_json) on an input record."""
     from ..identify import evaluate_scaled, simulate_from_samples, simulate_scaled
-    from ._io import Record, _finite_record, _read_signals, decimate, parse_range
+    from ._io import Record, _finite_record, _read_signals, decimate_piece, parse_range
 
     model, scaling, described = _read_model_file(model_file)
     names = [input_] + ([output] if output else [])
     signals = _read_signals(data, names)  # checked finite below, on the --range used
     u = signals[input_]
     y = signals[output] if output else np.zeros_like(u)
-    record = Record(u, y, str(data))
+    record = whole = Record(u, y, str(data))
+    part = None
     if range_:
         part = parse_range(range_, len(record), "--range")
         record = _finite_record(record.slice(part, "--range"), input_, output or "y", "choose a --range without it", part.start, f"--range {range_}", str(data))
     else:
         _finite_record(record, input_, output or "y", "select a --range without it")
     factor = decimate_by if decimate_by is not None else int(described.get("decimate", 1))
-    record = decimate(record, factor)
+    record = decimate_piece(whole, part, factor)  # the filter over the whole file, then the range
     if init_samples and not output:
         raise click.UsageError("--init-samples needs the measured --output to estimate the state from")
     y_sim = simulate_scaled(model, scaling, record.u) if not init_samples else scaling.output_from_model(
@@ -584,21 +586,22 @@ def compensate(model_file: Path, reference_file: Path, column: str, range_: str 
     """
     from ..compensation import Compensator
     from ..compensation import compensate as inverse_input
-    from ._io import Record, _finite_record, _read_signals, decimate, parse_range
+    from ._io import Record, _finite_record, _read_signals, decimate_piece, parse_range
 
     model, scaling, described = _read_model_file(model_file)
     reference = _read_signals(reference_file, [column])[column]
     if not np.isfinite(offset):
         raise DataError(f"--reference-offset {offset}: give a finite number")
     reference = reference + offset
-    record = Record(reference, reference, str(reference_file))
+    record = whole = Record(reference, reference, str(reference_file))
+    part = None
     if range_:
         part = parse_range(range_, len(record), "--range")
         record = _finite_record(record.slice(part, "--range"), column, column, "choose a --range without it", part.start, f"--range {range_}", str(reference_file))
     else:
         _finite_record(record, column, column, "select a --range without it")
     factor = int(described.get("decimate", 1))
-    record = decimate(record, factor)
+    record = decimate_piece(whole, part, factor)  # the model's anti-alias filter over the whole reference, then the range
     target = scaling.output_to_model(record.u)
     compensator = Compensator(model)  # its preview and whether an inverse is approximate
     u_model = inverse_input(model, target, threshold=threshold / abs(scaling.output_scale))

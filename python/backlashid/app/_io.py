@@ -536,7 +536,10 @@ def _read_arrays(path: Path, arrays: dict[str, NDArray], names: Sequence[str], k
 def decimate(record: Record, factor: int) -> Record:
     """Keep every ``factor``-th sample after an anti-alias filter.
 
-    The filter is a zero-phase FIR low-pass (``scipy.signal.decimate``).
+    The filter is a zero-phase FIR low-pass (``scipy.signal.decimate``'s: a Hamming-window FIR
+    of order 20 ``factor``, its cut-off at the new Nyquist frequency, centred; the record
+    mirrored at both ends rather than padded with zeros), :func:`anti_alias`; then
+    :func:`keep_every`.
 
     Parameters
     ----------
@@ -564,18 +567,68 @@ def decimate(record: Record, factor: int) -> Record:
     """
     if factor == 1:
         return record
+    return keep_every(anti_alias(record, factor), factor)
+
+
+def anti_alias(record: Record, factor: int) -> Record:
+    """The record low-passed at full rate by :func:`decimate`'s filter (same length, same
+    source). A record filtered whole before it is cut leaves no filter transient at the cuts.
+
+    Parameters
+    ----------
+    record : Record
+        The record, finite.
+    factor : int
+        The decimation the filter prepares (its cut-off at 1 / factor of Nyquist), >= 1.
+
+    Returns
+    -------
+    Record
+        The filtered record.
+
+    Raises
+    ------
+    DataError
+        If ``factor`` is below 1, or the record is too short for the filter.
+    """
     if factor < 1:
         raise DataError(f"decimate {factor}: give a whole number >= 1")
-    from scipy.signal import decimate as _decimate
+    if factor == 1:
+        return record
+    from scipy.signal import firwin
 
-    need = 3 * (20 * factor + 1) + 1  # the filter's padding (order 20 * factor)
+    need = 3 * (20 * factor + 1) + 1  # three filter lengths (order 20 * factor)
     if len(record) <= need:
         raise DataError(f"{record.source}: {len(record)} samples are too few to decimate by {factor} (need more than {need})")
-    return Record(
-        _decimate(record.u, factor, ftype="fir", zero_phase=True),
-        _decimate(record.y, factor, ftype="fir", zero_phase=True),
-        f"{record.source} decimated by {factor}",
-    )
+    b = firwin(20 * factor + 1, 1.0 / factor, window="hamming")  # scipy.signal.decimate's FIR, centred: zero phase
+    h = b.size // 2
+
+    def low(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        # the record mirrored at both ends: a record far from zero, a position, gets no edge
+        # transient where zero padding would pull it to 0 (an odd extension, 2 x(0) - x(k),
+        # would double the noise of the end sample)
+        padded = np.concatenate([x[h:0:-1], x, x[-2 : -h - 2 : -1]])
+        return np.asarray(np.convolve(padded, b, mode="valid"), dtype=np.float64)
+
+    return Record(low(record.u), low(record.y), record.source)
+
+
+def decimate_piece(record: Record, part: slice | None, factor: int, label: str = "--range") -> Record:
+    """Samples ``part`` of ``record`` (all of it for None) at the decimated rate, the anti-alias
+    filter run over the whole record first (no filter transient at the cut); a record with
+    missing samples has its piece decimated alone (NaN would spread through the filter)."""
+    if factor == 1 or not (np.all(np.isfinite(record.u)) and np.all(np.isfinite(record.y))):
+        return decimate(record.slice(part, label) if part is not None else record, factor)
+    low = anti_alias(record, factor)
+    return keep_every(low.slice(part, label) if part is not None else low, factor)
+
+
+def keep_every(record: Record, factor: int) -> Record:
+    """Every ``factor``-th sample of an anti-alias filtered record (:func:`anti_alias`), from
+    its first; its source says so."""
+    if factor == 1:
+        return record
+    return Record(record.u[::factor].copy(), record.y[::factor].copy(), f"{record.source} decimated by {factor}")
 
 
 @dataclass(frozen=True)
@@ -624,7 +677,10 @@ def select_records(
     ``estimation`` and ``validation`` (the whole record is for estimation when none is given),
     or ``estimation_files`` joined one after the other (``estimation`` then selects a range of
     each file) with ``validation_files`` (or ``data``, with ``validation`` as its range) for
-    validation. Ranges count samples of the files; the decimation applies afterwards.
+    validation. Ranges count samples of the files. The decimation's anti-alias filter runs over
+    each whole file before any split or range (so the pieces carry no filter transient at
+    their cuts), then every N-th sample of each piece is kept; a file with missing samples is
+    filtered piece by piece instead.
 
     Parameters
     ----------
@@ -672,6 +728,19 @@ def select_records(
     if split is not None and (estimation or validation):
         raise DataError("give either --split or --estimation/--validation ranges, not both")
     hint = "choose --estimation / --validation ranges without it"
+    files = {str(f): _load_unchecked(f, input, output) for f in [*([data] if data is not None else []), *estimation_files, *validation_files]}
+    whole = decimate_by > 1 and all(np.all(np.isfinite(r.u)) and np.all(np.isfinite(r.y)) for r in files.values())
+    if whole:  # one anti-alias filter over each whole file, before any cut
+        files = {f: anti_alias(r, decimate_by) for f, r in files.items()}
+
+    def load(path: str | Path) -> Record:
+        """The file's record (the signals chosen above), filtered whole when decimated."""
+        return files[str(path)]
+
+    def reduced(rec: Record) -> Record:
+        """A piece at the decimated rate: every N-th sample of the filtered file's piece, or
+        the piece decimated (filter and all) where a file has missing samples."""
+        return keep_every(rec, decimate_by) if whole else decimate(rec, decimate_by)
 
     def pick(rec: Record, text: str | None, label: str) -> Record:
         """Range ``text`` of ``rec`` (all of it when None), checked finite only there."""
@@ -682,8 +751,8 @@ def select_records(
 
     val_parts: list[Record] = []
 
-    def joined(files: Sequence[str | Path], text: str | None, label: str) -> Record:
-        records = [_load_unchecked(f, input, output) for f in files]
+    def joined(paths: Sequence[str | Path], text: str | None, label: str) -> Record:
+        records = [load(f) for f in paths]
         if text:
             return pick(concatenate(records), text, label)
         checked = [_finite_record(r, input, output, hint) for r in records]
@@ -697,18 +766,18 @@ def select_records(
         if split is not None:
             raise DataError("--split divides one file; with --estimation-file give --validation-file or a DATA file for validation")
         for f in estimation_files:
-            parts.append(pick(_load_unchecked(f, input, output), estimation, "--estimation"))
+            parts.append(pick(load(f), estimation, "--estimation"))
         est = concatenate(parts)
         if validation_files:
             val = joined(validation_files, validation, "--validation")
         elif data is not None:
-            val = pick(_load_unchecked(data, input, output), validation, "--validation")
+            val = pick(load(data), validation, "--validation")
         elif validation:
             raise DataError("--validation is a range of the DATA file or the --validation-file records: give one")
     else:
         if data is None:
             raise DataError("no data: give a DATA file or --estimation-file")
-        rec = _load_unchecked(data, input, output)
+        rec = load(data)
         if split is not None:
             if validation_files:
                 val = joined(validation_files, None, "--validation-file")
@@ -722,8 +791,15 @@ def select_records(
                 val = pick(rec, validation, "--validation")
             elif validation_files:
                 val = joined(validation_files, None, "--validation-file")
-    est = decimate(est, decimate_by)
-    val = decimate(val, decimate_by) if val is not None else None
+    if estimation_files:  # each file's piece at the decimated rate, then joined
+        parts = [reduced(p) for p in parts]
+        est = concatenate(parts)
+    else:
+        est = reduced(est)
+    val = reduced(val) if val is not None and not val_parts else val
+    if val_parts:
+        val_parts[:] = [reduced(p) for p in val_parts]
+        val = concatenate(val_parts)
     description: dict[str, object] = {
         "input": input,
         "output": output,
@@ -733,5 +809,4 @@ def select_records(
         "validation_samples": len(val) if val is not None else 0,
         "decimate": decimate_by,
     }
-    parts = tuple(decimate(p, decimate_by) for p in parts) if estimation_files else ()
-    return Selection(est, val, description, parts, tuple(decimate(p, decimate_by) for p in val_parts))
+    return Selection(est, val, description, tuple(parts) if estimation_files else (), tuple(val_parts))
