@@ -71,16 +71,17 @@ pub fn from_parameters(p: &[f64]) -> Result<DynamicFriction> {
         arity(NAME, p, "k_f, z_s, lambda, source", 4)?;
     }
     let code = p.get(3).copied().unwrap_or(0.0);
-    let source = match code {
-        c if c == 0.0 => Source::Drive,
-        c if c == 1.0 => Source::Input,
-        c if c == 2.0 => Source::Load,
-        _ => {
-            return Err(Error::Model(format!(
-                "source = {code}: give 0 (friction driven by the linear block's output x), 1 (by the input u) \
-                 or 2 (by the backlash's output f)"
-            )))
-        }
+    let source = if code == 0.0 {
+        Source::Drive
+    } else if code == 1.0 {
+        Source::Input
+    } else if code == 2.0 {
+        Source::Load
+    } else {
+        return Err(Error::Model(format!(
+            "source = {code}: give 0 (friction driven by the linear block's output x), 1 (by the input u) \
+             or 2 (by the backlash's output f)"
+        )));
     };
     Ok(DynamicFriction {
         force: p[0],
