@@ -37,3 +37,26 @@ def test_fit_orders_auto_refuses_the_wiener_hammerstein_fit(tmp_path):
     np.savetxt(path, np.column_stack([data.u, data.noisy]), delimiter=",", header="u,y", comments="", fmt="%.17g")
     r = run("fit", path, "-i", "u", "-o", "y", "--orders", "auto", "--model", "wiener-hammerstein")
     assert r.exit_code == 1 and "Error: --orders auto" in r.output
+
+
+def test_fit_model_auto_finds_the_input_backlash_of_a_mid_motion_drive_log(tmp_path):
+    # issue 31: --model auto compares cascade, sandwich and input backlash (each from its
+    # estimated start here) and keeps the chosen one; the same choice as select_structure
+    from backlashid.identify import hammerstein_backlash, select_structure
+
+    rng = np.random.default_rng(11)
+    u = np.convolve(rng.uniform(-2.0, 2.0, 3300), np.ones(5) / 5, mode="same")
+    drive = hammerstein_backlash(bx.GeneralBacklash(0.3, 0.2, [1.0], [1.0]), bx.LinearBlock([0.0015, 0.001], [-1.9, 0.9025]))
+    w = (drive.simulate(u) + 0.01 * rng.standard_normal(u.size))[300:]
+    path = tmp_path / "drive.csv"
+    np.savetxt(path, np.column_stack([u[300:], w]), delimiter=",", header="motor,load", comments="", fmt="%.17g")
+    out = tmp_path / "model.json"
+    r = run("fit", path, "-i", "motor", "-o", "load", "--model", "auto", "--degree", "1", "--initial-state", "estimate",
+            "--warmup", "20", "--json", out)
+    assert r.exit_code == 0, r.output
+    assert "chosen (*): hammerstein" in r.output and "Structure selection: 3 candidates" in r.output
+    payload = json.loads(out.read_text())
+    api = select_structure(u[300:], w, kind=("cascade", "sandwich", "hammerstein"), na=2, nb=2, nr=2, ns=2, degree=1,
+                           initial_state="estimate", warmup=20)
+    assert payload["parameters"] == api.fit.parameters
+    assert payload["structure_selection"]["kind"] == "hammerstein"

@@ -173,16 +173,28 @@ def _fit_model(kind: str, u: Any, y: Any, na: int, nb: int, nr: int, ns: int, de
 
 
 def _select_model(kind: str, u: np.ndarray, y: np.ndarray, warmup: int, max_iter: int, feedthrough: bool,
-                  coarse: int | None = None, min_moving: float = 0.02, initial_state: str = "rest") -> Any:
-    """``fit --orders auto``: select_structure over its default grid (cascade: na, nb 1..3,
-    degree 1..4; sandwich: na, nb, nr, ns 1..2, degree 1..3); prints the table of candidates."""
+                  coarse: int | None = None, min_moving: float = 0.02, initial_state: str = "rest",
+                  orders: str = "auto", given: dict[str, int] | None = None) -> Any:
+    """``fit --orders auto`` and ``fit --model auto``: select_structure, its table printed.
+    ``--orders auto`` searches its default grid for one kind (cascade: na, nb 1..3, degree 1..4;
+    sandwich: na, nb, nr, ns 1..2, degree 1..3; hammerstein: nr, ns 1..2, degree 1..3);
+    ``--model auto`` compares the cascade, the sandwich and the input backlash, at the given
+    orders and degree (``given``) or, with ``--orders auto`` too, over na, nb, nr, ns 1..2 and
+    degree 1..3."""
     from ..identify import select_structure
 
-    if kind not in ("cascade", "sandwich"):
-        raise DataError(f"--orders auto: the structure selection is for --model cascade or sandwich, not {kind}")
-    extra: dict[str, Any] = dict(na=(1, 2), nb=(1, 2), degree=(1, 2, 3), output_feedthrough=feedthrough) if kind == "sandwich" else {}
-    selection = select_structure(u, y, kind=kind, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough, coarse=coarse,
-                                 min_moving=min_moving, initial_state=initial_state, **extra)
+    if kind == "wiener-hammerstein":
+        raise DataError("--orders auto: the structure selection is for --model cascade, sandwich, hammerstein or auto, not wiener-hammerstein")
+    small = dict(na=(1, 2), nb=(1, 2), nr=(1, 2), ns=(1, 2), degree=(1, 2, 3))
+    if kind == "auto":
+        kinds: Any = ("cascade", "sandwich", "hammerstein")
+        grid: dict[str, Any] = small if orders == "auto" else dict(given or {})
+    else:
+        kinds = kind
+        grid = {} if kind == "cascade" else small
+    extra = {"output_feedthrough": feedthrough} if kind != "cascade" else {}  # (an input backlash ignores feedthrough)
+    selection = select_structure(u, y, kind=kinds, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough, coarse=coarse,
+                                 min_moving=min_moving, initial_state=initial_state, **extra, **grid)
     click.echo(selection.summary())
     return selection
 
@@ -198,12 +210,14 @@ def _write_json(path: Path, payload: dict[str, Any]) -> None:
 
 def _model_options(command: F) -> F:
     options = [
-        click.option("--model", "kind", type=click.Choice(["cascade", "sandwich", "hammerstein", "wiener-hammerstein"]), default="cascade",
+        click.option("--model", "kind", type=click.Choice(["cascade", "sandwich", "hammerstein", "wiener-hammerstein", "auto"]), default="cascade",
                      show_default=True,
                      help="cascade: linear -> backlash (load-side play); sandwich: linear -> backlash -> linear (two masses, play "
                           "between); hammerstein: backlash -> linear, the input backlash of a motor -> play -> load drive (the play "
                           "in the input's units, the load block of orders --nr, --ns); wiener-hammerstein: a sandwich whose middle "
-                          "block is a static polynomial of --degree (zero-width, tied branches), G1 and G2 of orders --nb and --ns."),
+                          "block is a static polynomial of --degree (zero-width, tied branches), G1 and G2 of orders --nb and --ns; "
+                          "auto: compare cascade, sandwich and hammerstein by select_structure (at the given orders and degree, or "
+                          "over small grids with --orders auto) and keep the chosen one."),
         click.option("--initial-state", "initial_state", type=click.Choice(["rest", "estimate"]), default="rest", show_default=True,
                      help="estimate: each record's state at its first sample is estimated with the fit (records that start "
                           "mid-motion, positions that integrate), and the metrics start each record from the state its first "
@@ -344,7 +358,8 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
     """
     from ..identify import evaluate_scaled
 
-    stages = ["loading data", f"fitting the {kind}", "computing metrics"] + (["writing figures"] if plots_dir else [])
+    fitting = "comparing the structures" if kind == "auto" else f"fitting the {kind}"
+    stages = ["loading data", fitting, "computing metrics"] + (["writing figures"] if plots_dir else [])
     with _progress(stages) as stage:
         stage("loading data")
         sel = _select(data, input_, output, split, estimation, validation, estimation_files, validation_files, decimate_by)
@@ -352,8 +367,10 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
         if len(sel.estimation_parts) > 1 and kind != "wiener-hammerstein":  # several records, one model
             u_m, y_m = [scaling.input_to_model(p.u) for p in sel.estimation_parts], [scaling.output_to_model(p.y) for p in sel.estimation_parts]
-        stage(f"fitting the {kind}")
-        selection = _select_model(kind, u_m, y_m, warmup, max_iter, feedthrough, coarse, min_moving, initial_state) if orders == "auto" else None
+        stage(fitting)
+        selection = (_select_model(kind, u_m, y_m, warmup, max_iter, feedthrough, coarse, min_moving, initial_state, orders,
+                                   dict(na=na, nb=nb, nr=nr, ns=ns, degree=degree))
+                     if orders == "auto" or kind == "auto" else None)
         result = (selection.fit if selection is not None else
                   _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse, min_moving, initial_state))
         if kind == "wiener-hammerstein":  # the fit's output offset joins the scaling's (the sandwich has none)

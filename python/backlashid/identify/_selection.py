@@ -503,4 +503,5 @@ def _fit_one(kind: str, u: Any, y: Any, structure: Structure, warmup: int, optio
         return fit_hammerstein_backlash(u, y, s.nr, s.ns, s.degree, output_feedthrough=s.output_feedthrough, warmup=warmup, **rest)
     if kind == "sandwich":
         return fit_sandwich(u, y, s.na, s.nb, s.nr, s.ns, s.degree, warmup=warmup, **options)
-    return fit_cascade(u, y, s.na, s.nb, s.degree, warmup=warmup, **options)
+    rest = {k: v for k, v in options.items() if k != "output_feedthrough"}  # a sandwich's option, in a mixed table
+    return fit_cascade(u, y, s.na, s.nb, s.degree, warmup=warmup, **rest)
