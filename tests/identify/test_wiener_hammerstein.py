@@ -223,3 +223,27 @@ def test_f_continues_along_its_tangent_beyond_the_estimation_range_of_x():
 
     raw = dataclasses.replace(fit, x_range=None)
     np.testing.assert_array_equal(raw.simulate(big), fit.model.simulate(big) + fit.offset)
+
+
+def test_a_final_run_that_fails_raises_with_the_best_iterate(monkeypatch):
+    # issue 31: on a position record the final Levenberg-Marquardt run diverged and the error
+    # came bare; it carries its start now, a usable model (the stable lower-degree fit)
+    from backlashid.identify import _wiener_hammerstein as wh
+
+    real = wh._Param.fit
+
+    def failing(self, *args, **kwargs):
+        if self.degree == 6:  # the full degree's run
+            raise bid.NotConvergedError("output-error refinement: the start is unstable or diverges")
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(wh._Param, "fit", failing)
+    rng = np.random.default_rng(0)
+    u = rng.normal(0.0, 0.5, 3000)
+    w = planted().simulate(u)
+    with pytest.raises(bid.NotConvergedError, match="its start") as info:
+        fit_wiener_hammerstein(u, w, nb=2, ns=2, degree=6, warmup=50)
+    best = info.value.best
+    assert best is not None and not best.converged and best.degree == 6
+    assert np.isfinite(best.simulation_rmse) and best.simulation_rmse < 0.5 * best.baseline_rmse
+    assert np.all(np.isfinite(best.model.simulate(u)))  # a model that simulates

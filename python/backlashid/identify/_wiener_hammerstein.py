@@ -804,6 +804,44 @@ def fit_wiener_hammerstein(
     c = np.zeros(degree)
     c[: short.degree] = _rebased(c_short, short.k / x_range, full.k)
     theta = np.r_[a, b, c, r, s, o]
+
+    def fitted(theta: NDArray[np.float64], iterations: int, converged: bool) -> WienerHammersteinFit:
+        """The result at ``theta`` (f'(0) > 0 by the sign of x); NotConvergedError if f is
+        not usable as tied branches."""
+        a, b, c, r, s, o = full.split(theta)
+        m = full.monomials(c)
+        if m[0] < 0:  # f'(0) < 0: use -x as the internal signal, so that m_1 > 0
+            a, m = -a, m * (-1.0) ** np.arange(1, degree + 1)
+        try:
+            model = SandwichModel(
+                LinearBlock(a, b, feedthrough=feedthrough),
+                GeneralBacklash(0.0, 0.0, [float(v) for v in m], [float(v) for v in m]),
+                LinearBlock(r, s, feedthrough=output_feedthrough),
+            )
+        except ModelError as exc:
+            raise NotConvergedError(f"the fitted static block is not usable as tied branches: {exc}") from None
+        rmse = float(np.sqrt(np.mean((model.simulate(u_arr) + float(o[0]) - y_arr)[warmup:] ** 2)))
+        x_fit = model.input_linear.simulate(u_arr)  # f is known where the estimation data put x
+        return WienerHammersteinFit(
+            model=model,
+            baseline=baseline,
+            degree=degree,
+            nb=nb,
+            ns=ns,
+            warmup=warmup,
+            simulation_rmse=rmse,
+            baseline_rmse=baseline_rmse,
+            fit_time=time.perf_counter() - started,
+            iterations=iterations,
+            converged=converged,
+            split_rmse=tuple(item[0] for item in ranked),
+            g1_poles=np.asarray(split[0]),
+            g1_zeros=np.asarray(split[2]),
+            offset=float(o[0]),
+            x_range=(float(x_fit.min()), float(x_fit.max())),
+        )
+
+    start = theta
     try:
         n_seg = _SEGMENT_SAMPLES
         if len(u_arr) > n_seg:  # most iterations on a segment, then the whole record
@@ -812,36 +850,14 @@ def fit_wiener_hammerstein(
         else:
             theta, res = full.fit(u_arr, y_arr, warmup, theta, _SHORT_ITER + max_iter)
     except BacklashIdError as exc:
-        raise NotConvergedError(f"the final Levenberg-Marquardt run found no usable model: {exc}") from None
-    a, b, c, r, s, o = full.split(theta)
-    m = full.monomials(c)
-    if m[0] < 0:  # f'(0) < 0: use -x as the internal signal, so that m_1 > 0
-        a, m = -a, m * (-1.0) ** np.arange(1, degree + 1)
-    try:
-        model = SandwichModel(
-            LinearBlock(a, b, feedthrough=feedthrough),
-            GeneralBacklash(0.0, 0.0, [float(v) for v in m], [float(v) for v in m]),
-            LinearBlock(r, s, feedthrough=output_feedthrough),
-        )
-    except ModelError as exc:
-        raise NotConvergedError(f"the fitted static block is not usable as tied branches: {exc}") from None
-    rmse = float(np.sqrt(np.mean((model.simulate(u_arr) + float(o[0]) - y_arr)[warmup:] ** 2)))
-    x_fit = model.input_linear.simulate(u_arr)  # f is known where the estimation data put x
-    return WienerHammersteinFit(
-        model=model,
-        baseline=baseline,
-        degree=degree,
-        nb=nb,
-        ns=ns,
-        warmup=warmup,
-        simulation_rmse=rmse,
-        baseline_rmse=baseline_rmse,
-        fit_time=time.perf_counter() - started,
-        iterations=int(res.iterations),
-        converged=bool(res.converged),
-        split_rmse=tuple(item[0] for item in ranked),
-        g1_poles=np.asarray(split[0]),
-        g1_zeros=np.asarray(split[2]),
-        offset=float(o[0]),
-        x_range=(float(x_fit.min()), float(x_fit.max())),
-    )
+        # the final run's start, the stable lower-degree fit on the full degree's basis, is the
+        # best iterate there is: returned with the error, never a bare error
+        try:
+            best: WienerHammersteinFit | None = fitted(start, 0, False)
+        except BacklashIdError:
+            best = None
+        raise NotConvergedError(
+            f"the final Levenberg-Marquardt run found no usable model: {exc}; its start (the stable degree-{short.degree} "
+            "fit) is in best", best, best,
+        ) from None
+    return fitted(theta, int(res.iterations), bool(res.converged))
