@@ -45,8 +45,8 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import independent_chains as ic  # noqa: E402 (the generator beside this script)
-import independent_effects as ie  # noqa: E402
+import independent_chains as ic  # the generator beside this script
+import independent_effects as ie
 
 SEEDS = 36_303
 FAMILIES = {"cascade": "cascade", "integrating": "cascade", "sandwich": "sandwich", "hammerstein": "hammerstein"}

@@ -36,8 +36,8 @@ RULE = (
     "validation band, then BIC: among the candidates that did not raise, keep those whose "
     "validation simulation RMSE is at most (1 + tolerance) times the best one; choose the lowest "
     "BIC among them (ties: fewer parameters); a candidate whose refit on the whole record raises, does "
-    "not converge or simulates the record worse than its fit on the head gives way to the next (the band "
-    "by BIC, then the rest by validation RMSE)"
+    "not converge or simulates the record worse than its fit on the head gives way to the next of the band "
+    "by BIC; if none holds, the first one's estimation fit is kept"
 )
 # The table's columns, in the order summary() prints them.
 COLUMNS = (
@@ -87,8 +87,8 @@ class StructureSelection:
     refit_error : str or None
         Why no refit on the whole record held (``fit`` is then the first candidate's
         estimation fit), or None. A refit that raised, did not converge or simulated the
-        record worse than its candidate's fit on the head was not kept: the next candidate
-        was refitted instead (its row's ``refit_error`` says why).
+        record worse than its candidate's fit on the head was not kept: the next candidate of
+        the validation band was refitted instead (its row's ``refit_error`` says why).
 
     Examples
     --------
@@ -438,10 +438,10 @@ def select_structure(
     band = [i for i in ok if rows[i]["validation_rmse"] <= (1.0 + tolerance) * best_val]
     for i in band:
         rows[i]["in_band"] = True
-    # the band by BIC (ties: fewer parameters), then the rest by validation RMSE: the order in
-    # which a candidate whose whole-record refit fails gives way to the next
+    # the band by BIC (ties: fewer parameters): the order in which a candidate whose
+    # whole-record refit fails gives way to the next equally good one (never to one outside the
+    # band: there the first candidate's validated estimation fit is returned)
     order = sorted(band, key=lambda i: (rows[i]["bic"], rows[i]["parameters"]))
-    order += sorted((i for i in ok if i not in band), key=lambda i: rows[i]["validation_rmse"])
     chosen, fit, refit_error = order[0], fits[order[0]], None
     if refit:
         for i in order:
