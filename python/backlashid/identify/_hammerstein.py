@@ -73,7 +73,7 @@ def as_hammerstein(model: SandwichModel, *, unit_load_gain: bool = True) -> tupl
     The gain a_1 folds into the backlash: with a_1 > 0, c -> c / a_1 and m_i -> m_i a_1^i. With
     a_1 < 0 the backlash acts on -u: its branches swap and change sign (L'(v) = -R(-v), R'(v) =
     -L(-v)) and the output block's r changes sign. Then (``unit_load_gain``) the load block's
-    static gain G moves into the branches: m_i -> m_i |G|, r -> r / |G| (a static gain of -1
+    static gain G moves into the branches: m_i -> m_i abs(G), r -> r / abs(G) (a static gain of -1
     where the load inverts; left where G is infinite or 0, a load that integrates or
     differentiates). Either way ``hammerstein_backlash(*as_hammerstein(model))`` simulates as
     ``model``.
