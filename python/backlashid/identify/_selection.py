@@ -351,7 +351,7 @@ def select_structure(
     start = time.perf_counter()
     kinds = [kind] if isinstance(kind, str) else list(kind) if isinstance(kind, Sequence) else [kind]
     if not kinds:
-        raise DataError(f"kind = {kind!r}: the list is empty; give 'cascade', 'sandwich' or both")
+        raise DataError(f"kind = {kind!r}: the list is empty; give 'cascade', 'sandwich', 'hammerstein' or several of them")
     for k in kinds:
         if k not in KINDS:
             raise DataError(f"kind = {k!r}: use 'cascade', 'sandwich' or 'hammerstein' (or a list of them)")
