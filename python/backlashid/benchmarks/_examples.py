@@ -22,7 +22,6 @@ from ..models import CascadeModel, GeneralBacklash, LinearBlock, SandwichModel
 __all__ = ["example1", "example2", "ExampleData", "example_data", "shared_data_folder"]
 
 DATA_VARIABLE = "BACKLASHID_DATA"
-WORKPLACE_DATA = Path("/work/shared/data")
 
 
 def shared_data_folder(start: str | Path | None = None) -> Path:
@@ -30,7 +29,7 @@ def shared_data_folder(start: str | Path | None = None) -> Path:
 
     The records (``friction_damper_backlash/``, ``wiener_hammerstein_2009/``, ...) are read in
     place, never copied: the folder is ``$BACKLASHID_DATA`` if set, else ``shared/data`` in
-    ``start`` or one of its parents, else the workplace's ``/work/shared/data``.
+    ``start`` or one of its parents (``../shared/data`` beside a checkout).
 
     Parameters
     ----------
@@ -69,8 +68,6 @@ def shared_data_folder(start: str | Path | None = None) -> Path:
     for parent in [here, *here.parents]:
         if (parent / "shared" / "data").is_dir():
             return parent / "shared" / "data"
-    if WORKPLACE_DATA.is_dir():
-        return WORKPLACE_DATA
     raise DataError(f"no shared/data folder in {here} or its parents: set {DATA_VARIABLE} to the folder holding the benchmark records")
 
 
