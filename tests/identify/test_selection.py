@@ -190,3 +190,30 @@ def test_the_structure_class_of_a_motor_play_load_drive_is_found_from_a_mid_moti
     cascade = bx.example_data(bx.example1(), 2000, snr=50, seed=5)
     sel = select_structure(cascade.u, cascade.noisy, kind=["cascade", "hammerstein"], na=2, nb=2, nr=2, ns=2, degree=3)
     assert sel.kind == "cascade", sel.summary()
+
+
+def test_valid_backlashes_are_preferred_unless_an_invalid_one_is_much_better():
+    # issue 31: the models chosen on real records were nearly all degree >= 2 fits whose
+    # branches cross inside the data's range; the rule prefers valid backlashes
+    pick = _selection.preferred_candidates
+
+    def rows(*cands):
+        return [dict(validation_rmse=v, valid=ok, kind="cascade", degree=d) for v, ok, d in cands]
+
+    # a valid one in the band: the invalid ones leave it
+    chosen, note = pick(rows((1.00, False, 3), (1.01, True, 2), (1.5, True, 1)), [0, 1, 2], 0.02)
+    assert chosen == [1] and "left out" in note
+    # none valid in the band, the best valid within 1.25: the valid ones near it instead
+    chosen, note = pick(rows((1.00, False, 3), (1.20, True, 1), (1.21, True, 2), (1.3, True, 2)), [0, 1, 2, 3], 0.02)
+    assert chosen == [1, 2] and "1.20 times" in note
+    # the best valid one 1.5 times worse: the invalid band stays, and the note says so
+    chosen, note = pick(rows((1.00, False, 3), (1.50, True, 1)), [0, 1], 0.02)
+    assert chosen == [0] and "no valid backlash within 1.25" in note
+    # all valid: nothing changes, no note
+    assert pick(rows((1.0, True, 3), (1.01, True, 2), (2.0, True, 1)), [0, 1, 2], 0.02) == ([0, 1], "")
+
+
+def test_the_selection_table_says_which_candidates_are_valid_backlashes(example1_data):
+    sel = select_structure(example1_data.u, example1_data.noisy, na=2, nb=2, degree=(1, 3))
+    assert all(r["valid"] for r in sel.rows) and sel.note == ""
+    assert _chosen(sel) == (2, 2, 3)

@@ -26,23 +26,28 @@ from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ._fit import FitResult, fit_cascade, fit_sandwich
 from ._hammerstein import fit_hammerstein_backlash
 from ._state import simulate_from_samples
+from ._checks import branch_problems
 from ._structure import Structure
 
 __all__ = ["StructureSelection", "select_structure"]
 
 KINDS = ("cascade", "sandwich", "hammerstein")
 INIT_SAMPLES = 20  # samples that set an estimated start at least (the CLI's too)
+VALID_SLACK = 1.25  # a valid backlash is preferred unless an invalid one validates this much better
 RULE = (
     "validation band, then BIC: among the candidates that did not raise, keep those whose "
     "validation simulation RMSE is at most (1 + tolerance) times the best one; choose the lowest "
     "BIC among them (ties: fewer parameters); a candidate whose refit on the whole record raises, does "
     "not converge or simulates the record worse than its fit on the head gives way to the next of the band "
-    "by BIC; if none holds, the first one's estimation fit is kept"
+    "by BIC; if none holds, the first one's estimation fit is kept. Valid backlashes first: where the band "
+    "holds one whose branches increase and do not cross on the visited range, the invalid ones leave it; "
+    "where it holds none, the valid candidates within 1.25 times the best validation RMSE (their own band) "
+    "replace it, and an invalid model is chosen only when no valid one comes that close"
 )
 # The table's columns, in the order summary() prints them.
 COLUMNS = (
     "kind", "na", "nb", "nr", "ns", "degree", "parameters", "estimation_rmse", "validation_rmse", "bic",
-    "raised", "error", "warnings", "seconds", "in_band", "chosen", "refit_error",
+    "raised", "error", "warnings", "seconds", "in_band", "chosen", "refit_error", "valid",
 )
 
 
@@ -68,8 +73,9 @@ class StructureSelection:
         estimation samples after the warm-up), raised (bool), error ('ExceptionName:
         message' or None), warnings (the fit's FitWarning messages), seconds, in_band (within
         the tolerance of the best validation RMSE), chosen and refit_error (why its refit on
-        the whole record was not kept, or None: tried and kept, or not tried). Values that a
-        raising candidate has not are NaN.
+        the whole record was not kept, or None: tried and kept, or not tried) and valid (both
+        branches increase and do not cross on the x range the estimation record visits).
+        Values that a raising candidate has not are NaN.
     chosen : int
         Index of the chosen row.
     rule : str
@@ -89,6 +95,8 @@ class StructureSelection:
         estimation fit), or None. A refit that raised, did not converge or simulated the
         record worse than its candidate's fit on the head was not kept: the next candidate of
         the validation band was refitted instead (its row's ``refit_error`` says why).
+    note : str
+        What preferring valid backlashes did (:func:`preferred_candidates`), or "".
 
     Examples
     --------
@@ -111,6 +119,7 @@ class StructureSelection:
     seconds: float
     refitted: bool = True
     refit_error: str | None = field(default=None)
+    note: str = ""
 
     def summary(self) -> str:
         """The table of candidates as text, the chosen one marked, with the decision rule.
@@ -146,6 +155,8 @@ class StructureSelection:
         else:
             refit = "refitted on the whole record" if self.refitted else "the estimation fit (refit=False)"
         lines.append(f"chosen (*): {r['kind']} {self.structure}, {r['parameters']} parameters; {refit}; + = within the validation band")
+        if self.note:
+            lines.append(f"validity: {self.note}")
         for i in passed_over if self.refit_error is None else []:
             row = self.rows[i]
             lines.append(f"passed over: {row['kind']} na={row['na']} nb={row['nb']} degree={row['degree']}: {row['refit_error']}")
@@ -172,6 +183,7 @@ class StructureSelection:
             "seconds": float(self.seconds),
             "refitted": bool(self.refitted),
             "refit_error": self.refit_error,
+            "note": self.note,
             "rows": jsonable(self.rows),
             "fit": self.fit.to_dict(),
         }
@@ -398,7 +410,7 @@ def select_structure(
         row: dict[str, Any] = dict(
             kind=k, na=a, nb=b, nr=r, ns=s, degree=n, parameters=p, estimation_rmse=math.nan,
             validation_rmse=math.nan, bic=math.nan, raised=False, error=None, warnings=[], seconds=0.0,
-            in_band=False, chosen=False, refit_error=None,
+            in_band=False, chosen=False, refit_error=None, valid=False,
         )
         t0 = time.perf_counter()
         result: FitResult | None = None
@@ -427,6 +439,7 @@ def select_structure(
             est = float(result.simulation_rmse)
             row["estimation_rmse"], row["validation_rmse"] = est, val
             row["bic"] = n_fit * math.log(max(est, 1e-300) ** 2) + p * math.log(n_fit)
+            row["valid"] = _is_backlash(result.model, u_est, warmup)
         rows.append(row)
         fits.append(result)
         errors.append(error)
@@ -438,10 +451,11 @@ def select_structure(
     band = [i for i in ok if rows[i]["validation_rmse"] <= (1.0 + tolerance) * best_val]
     for i in band:
         rows[i]["in_band"] = True
-    # the band by BIC (ties: fewer parameters): the order in which a candidate whose
-    # whole-record refit fails gives way to the next equally good one (never to one outside the
-    # band: there the first candidate's validated estimation fit is returned)
-    order = sorted(band, key=lambda i: (rows[i]["bic"], rows[i]["parameters"]))
+    preferred, note = preferred_candidates(rows, ok, float(tolerance))
+    # the preferred candidates by BIC (ties: fewer parameters): the order in which a candidate
+    # whose whole-record refit fails gives way to the next equally good one (never to one
+    # outside them: there the first candidate's validated estimation fit is returned)
+    order = sorted(preferred, key=lambda i: (rows[i]["bic"], rows[i]["parameters"]))
     chosen, fit, refit_error = order[0], fits[order[0]], None
     if refit:
         for i in order:
@@ -459,8 +473,69 @@ def select_structure(
     return StructureSelection(
         structure=fit.structure, kind=rows[chosen]["kind"], fit=fit, rows=rows, chosen=chosen, rule=RULE,
         tolerance=float(tolerance), estimation_samples=n_est, validation_samples=n_val,
-        seconds=time.perf_counter() - start, refitted=refit and refit_error is None, refit_error=refit_error,
+        seconds=time.perf_counter() - start, refitted=refit and refit_error is None, refit_error=refit_error, note=note,
     )
+
+
+def preferred_candidates(rows: Sequence[dict[str, Any]], ok: Sequence[int], tolerance: float) -> tuple[list[int], str]:
+    """The candidates the choice is made among, valid backlashes first, and what that did in
+    words ("" when it changed nothing).
+
+    The validation band (within ``1 + tolerance`` of the best validation RMSE); its valid
+    backlashes (rows' ``valid``) where it holds any; else the valid candidates within
+    ``1 + tolerance`` of the best valid one, where that one is within VALID_SLACK of the best of
+    all; else the band as it is (no valid backlash comes close).
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        The table's rows (``validation_rmse``, ``valid``, ``kind``, ``degree``).
+    ok : sequence of int
+        The rows that did not raise.
+    tolerance : float
+        The band's relative width.
+
+    Returns
+    -------
+    list of int, str
+        The rows to choose among, and the note.
+
+    Examples
+    --------
+    >>> rows = [dict(validation_rmse=1.0, valid=False, kind="cascade", degree=3),
+    ...         dict(validation_rmse=1.1, valid=True, kind="cascade", degree=1)]
+    >>> preferred_candidates(rows, [0, 1], 0.02)[0]
+    [1]
+    """
+    val = {i: rows[i]["validation_rmse"] for i in ok}
+    best = min(val.values())
+    band = [i for i in ok if val[i] <= (1.0 + tolerance) * best]
+    valid = [i for i in ok if rows[i]["valid"]]
+    in_band = [i for i in band if rows[i]["valid"]]
+    if in_band:
+        dropped = len(band) - len(in_band)
+        return in_band, (f"{dropped} candidate(s) of the band left out: their branches fall or cross on the visited range" if dropped else "")
+    if valid:
+        best_valid = min(val[i] for i in valid)
+        if best_valid <= VALID_SLACK * best:
+            near = [i for i in valid if val[i] <= (1.0 + tolerance) * best_valid]
+            return near, (
+                f"a valid backlash preferred: the band held none; the best valid one validates {best_valid / best:.2f} times the "
+                f"best (at most {VALID_SLACK:g} allowed)"
+            )
+        return band, (
+            f"no valid backlash within {VALID_SLACK:g} times the best validation RMSE (the best valid one: "
+            f"{best_valid / best:.2f} times): the chosen model's branches fall or cross on the visited range"
+        )
+    return band, "no candidate is a valid backlash on the visited range: the chosen model's branches fall or cross there"
+
+
+def _is_backlash(model: Any, u: NDArray[np.float64], warmup: int) -> bool:
+    """Whether both branches increase and do not cross on the x range the record visits."""
+    try:
+        return branch_problems(model, u, warmup) is None
+    except BacklashIdError:
+        return False
 
 
 def _simulated(model: Any, u: NDArray[np.float64], y: NDArray[np.float64], init: int) -> NDArray[np.float64]:
