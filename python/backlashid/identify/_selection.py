@@ -23,10 +23,10 @@ from .._docstrings import AXES, fill
 from .._json import jsonable
 from .._validation import check_finite, check_flag, check_int, check_warmup, one_record, shown
 from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
+from ._checks import branch_problems
 from ._fit import FitResult, fit_cascade, fit_sandwich
 from ._hammerstein import fit_hammerstein_backlash
 from ._state import simulate_from_samples
-from ._checks import branch_problems
 from ._structure import Structure
 
 __all__ = ["StructureSelection", "select_structure"]
