@@ -124,40 +124,31 @@ def test_dynamic_friction_equals_the_dahl_generator_and_is_recovered() -> None:
     assert fit.params["lambda"] == pytest.approx(1.0 / TAU_R, rel=0.15)
 
 
-def test_input_driven_dynamic_friction_equals_the_dahl_generator_and_is_recovered() -> None:
-    """The friction damper's case: the bristles follow the imposed displacement u itself, not
-    the linear block's output; the refit chooses that source and recovers the law."""
+@pytest.mark.parametrize(
+    ("source", "motion", "seeds"),
+    [
+        # the friction damper's case: the bristles follow the imposed displacement u itself
+        (1.0, lambda m, u: u, (6, 7)),
+        # friction on the load: they follow the backlash's output, which stands still while
+        # the play is crossed
+        (2.0, lambda m, u: m.simulate(u), (8, 9)),
+    ],
+    ids=["input-driven", "load-driven"],
+)
+def test_dynamic_friction_on_another_motion_equals_the_dahl_generator_and_is_recovered(source, motion, seeds) -> None:
+    """Driven by u or by f instead of the linear block's output: the augmentation reproduces
+    the generator, and the refit chooses that source and recovers the law."""
     m = bx.example1()
-    u = _record(6, 1.5)
+    u = _record(seeds[0], 1.5)
     s = Structure(2, 2, 3)
-    gen = lambda u: m.simulate(u) + _dahl(u)  # noqa: E731
-    aug = fx.AugmentedModel("dynamic_friction", s, s.pack(m), {}, (("dynamic_friction", (F_C, F_C / SIGMA_0, 1.0 / TAU_R, 1.0)),))
+    gen = lambda u: m.simulate(u) + _dahl(motion(m, u))  # noqa: E731
+    aug = fx.AugmentedModel("dynamic_friction", s, s.pack(m), {}, (("dynamic_friction", (F_C, F_C / SIGMA_0, 1.0 / TAU_R, source)),))
     err = float(np.max(np.abs(aug.simulate(u) - gen(u))))
-    print(f"input-driven dynamic_friction at the mapped parameters: max error {err:.3g} of F_c = {F_C}")
+    print(f"dynamic_friction, source {source:g}, at the mapped parameters: max error {err:.3g} of F_c = {F_C}")
     assert err < 1e-5 * F_C
-    nominal_rms, fit_rms, fit = _fit_closes("dynamic_friction", m, gen, u, _record(7, 1.4))
-    print(f"input-driven dynamic_friction: validation rms nominal refit {nominal_rms:.4g}, with the effect {fit_rms:.4g}, {fit.params}")
-    assert fit.params["source"] == 1.0
-    assert fit_rms < 0.05 * nominal_rms
-    assert fit.params["k_f"] == pytest.approx(F_C, rel=0.05)
-    assert fit.params["z_s"] == pytest.approx(F_C / SIGMA_0, rel=0.15)
-    assert fit.params["lambda"] == pytest.approx(1.0 / TAU_R, rel=0.15)
-
-
-def test_load_driven_dynamic_friction_equals_the_dahl_generator_and_is_recovered() -> None:
-    """Friction on the load: the bristles follow the backlash's output (the load's position),
-    which stands still while the play is crossed; the refit chooses that source."""
-    m = bx.example1()
-    u = _record(8, 1.5)
-    s = Structure(2, 2, 3)
-    gen = lambda u: m.simulate(u) + _dahl(m.simulate(u))  # noqa: E731
-    aug = fx.AugmentedModel("dynamic_friction", s, s.pack(m), {}, (("dynamic_friction", (F_C, F_C / SIGMA_0, 1.0 / TAU_R, 2.0)),))
-    err = float(np.max(np.abs(aug.simulate(u) - gen(u))))
-    print(f"load-driven dynamic_friction at the mapped parameters: max error {err:.3g} of F_c = {F_C}")
-    assert err < 1e-5 * F_C
-    nominal_rms, fit_rms, fit = _fit_closes("dynamic_friction", m, gen, u, _record(9, 1.4))
-    print(f"load-driven dynamic_friction: validation rms nominal refit {nominal_rms:.4g}, with the effect {fit_rms:.4g}, {fit.params}")
-    assert fit.params["source"] == 2.0
+    nominal_rms, fit_rms, fit = _fit_closes("dynamic_friction", m, gen, u, _record(seeds[1], 1.4))
+    print(f"dynamic_friction, source {source:g}: validation rms nominal refit {nominal_rms:.4g}, with the effect {fit_rms:.4g}, {fit.params}")
+    assert fit.params["source"] == source
     assert fit_rms < 0.05 * nominal_rms
     assert fit.params["k_f"] == pytest.approx(F_C, rel=0.05)
     assert fit.params["z_s"] == pytest.approx(F_C / SIGMA_0, rel=0.15)
