@@ -404,15 +404,27 @@ class _Context:
 
 # Each effect: a shape drawn once, then its physical parameters at size s (s = 0: nominal).
 # _SHAPES[effect](ctx) -> (shape, s_start, s_max).
+def _clip_shape(v: Array, rng: np.random.Generator, name: str) -> tuple[dict[str, Any], float, float]:
+    """A clip of the signal ``v`` (named ``name`` in the shape's keys) on one or both sides: at
+    size s each limit sits s of the way from the range's end towards its median, the two ends'
+    spans drawn in [0.5, 1] of the way there."""
+    med = float(np.median(v))
+    k_hi, k_lo = rng.uniform(0.5, 1.0, 2)
+    return {f"{name}_max": float(v.max()), f"{name}_min": float(v.min()), "span_hi": k_hi * (v.max() - med), "span_lo": k_lo * (med - v.min())}, 0.2, 0.95
+
+
+def _clip_params(name: str) -> Callable[[dict[str, Any], float], dict[str, Any]]:
+    """The limits (lo, hi) at size s of a :func:`_clip_shape` of the signal ``name``."""
+
+    def params(sh: dict[str, Any], s: float) -> dict[str, Any]:
+        return {"lo": sh[f"{name}_min"] + s * sh["span_lo"], "hi": sh[f"{name}_max"] - s * sh["span_hi"]}
+
+    return params
+
+
 def _shape_saturation(ctx: _Context) -> tuple[dict[str, Any], float, float]:
-    u = ctx.u
-    med = float(np.median(u))
-    k_hi, k_lo = ctx.rng.uniform(0.5, 1.0, 2)
-    return {"u_max": float(u.max()), "u_min": float(u.min()), "span_hi": k_hi * (u.max() - med), "span_lo": k_lo * (med - u.min())}, 0.2, 0.95
-
-
-def _params_saturation(sh: dict[str, Any], s: float) -> dict[str, Any]:
-    return {"lo": sh["u_min"] + s * sh["span_lo"], "hi": sh["u_max"] - s * sh["span_hi"]}
+    """The actuator's saturation of the input u."""
+    return _clip_shape(ctx.u, ctx.rng, "u")
 
 
 def _shape_friction(ctx: _Context) -> tuple[dict[str, Any], float, float]:
@@ -567,28 +579,13 @@ def _lag_order_block(a: list[float], b: list[float], p: dict[str, Any]) -> tuple
 
 
 def _shape_state_saturation(ctx: _Context) -> tuple[dict[str, Any], float, float]:
-    """A travel stop of x on one or both sides: at size s the stop sits s of the way from the
-    range's end towards its median (as the actuator's saturation)."""
-    x = ctx.x_nom[ctx.rec]
-    med = float(np.median(x))
-    k_hi, k_lo = ctx.rng.uniform(0.5, 1.0, 2)
-    return {"x_max": float(x.max()), "x_min": float(x.min()), "span_hi": k_hi * (x.max() - med), "span_lo": k_lo * (med - x.min())}, 0.2, 0.95
-
-
-def _params_state_saturation(sh: dict[str, Any], s: float) -> dict[str, Any]:
-    return {"lo": sh["x_min"] + s * sh["span_lo"], "hi": sh["x_max"] - s * sh["span_hi"]}
+    """A travel stop of x on one or both sides (as the actuator's saturation)."""
+    return _clip_shape(ctx.x_nom[ctx.rec], ctx.rng, "x")
 
 
 def _shape_sensor_saturation(ctx: _Context) -> tuple[dict[str, Any], float, float]:
-    """A sensor range narrower than the output's: clipped s of the way from the ends."""
-    y = ctx.y_nom[ctx.rec]
-    med = float(np.median(y))
-    k_hi, k_lo = ctx.rng.uniform(0.5, 1.0, 2)
-    return {"y_max": float(y.max()), "y_min": float(y.min()), "span_hi": k_hi * (y.max() - med), "span_lo": k_lo * (med - y.min())}, 0.2, 0.95
-
-
-def _params_sensor_saturation(sh: dict[str, Any], s: float) -> dict[str, Any]:
-    return {"lo": sh["y_min"] + s * sh["span_lo"], "hi": sh["y_max"] - s * sh["span_hi"]}
+    """A sensor range narrower than the output's (as the actuator's saturation)."""
+    return _clip_shape(ctx.y_nom[ctx.rec], ctx.rng, "y")
 
 
 def _state_saturation_linear(a: list[float], b: list[float], u: Array, p: dict[str, Any]) -> Array:
@@ -758,7 +755,7 @@ _NOMINAL = _Generator(draw=_draw_nothing)
 # The benchmark's truth, one generator per effect (the catalogue's and two outside it).
 _GENERATORS: dict[str, _Generator] = {
     "dead_time": _Generator(draw=_draw_dead_time, drive=_dead_time_drive),
-    "saturation": _Generator(_shape_saturation, _params_saturation, drive=_saturation_drive),
+    "saturation": _Generator(_shape_saturation, _clip_params("u"), drive=_saturation_drive),
     "friction": _Generator(_shape_friction, _params_friction, linear=_friction_linear),
     "width_drift": _Generator(
         _shape_width_drift, _params_width_drift, branches=_width_drift_branches, backlashes=_width_drift_backlashes
@@ -773,8 +770,8 @@ _GENERATORS: dict[str, _Generator] = {
     "dynamic_friction": _Generator(_shape_dynamic_friction, _params_dynamic_friction, output=_dynamic_friction_output),
     "feedback_hysteresis": _Generator(_shape_feedback_hysteresis, _params_feedback_hysteresis, linear=_feedback_hysteresis_linear),
     "creep": _Generator(_shape_creep, _params_creep, output=_creep_output),
-    "state_saturation": _Generator(_shape_state_saturation, _params_state_saturation, linear=_state_saturation_linear),
-    "sensor_saturation": _Generator(_shape_sensor_saturation, _params_sensor_saturation, output=_sensor_saturation_output),
+    "state_saturation": _Generator(_shape_state_saturation, _clip_params("x"), linear=_state_saturation_linear),
+    "sensor_saturation": _Generator(_shape_sensor_saturation, _clip_params("y"), output=_sensor_saturation_output),
     "output_gain_drift": _Generator(_shape_gain_drift, _params_gain_drift, output=_output_gain_output),
     "input_gain_drift": _Generator(_shape_gain_drift, _params_gain_drift, drive=_input_gain_drive),
 }
