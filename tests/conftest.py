@@ -36,6 +36,23 @@ def _shared_data() -> Path:
 
 
 SHARED_DATA = _shared_data()
+BENCHES = Path(__file__).resolve().parents[1] / "benches"
+
+
+def load_bench(script: str, module: str | None = None):
+    """The benchmark script ``benches/<script>.py`` imported once as ``module`` (default: the
+    script's name) and registered in ``sys.modules`` (its dataclasses look their module up)."""
+    import importlib.util
+    import sys
+
+    name = module or script
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, BENCHES / f"{script}.py")
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+    return sys.modules[name]
 
 X_MAX = 2.0  # inputs x of the backlash are drawn from [-X_MAX, X_MAX]
 

@@ -5,32 +5,16 @@ material."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import backlashid as bid
+from conftest import load_bench
 
-_BENCHES = Path(__file__).resolve().parents[2] / "benches"
-
-
-def _load(name: str):
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, _BENCHES / f"{name}.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
-
-
-IE = _load("independent_effects")
-C = _load("detectability_ceiling")
+IE = load_bench("independent_effects")
+C = load_bench("detectability_ceiling")
 
 
 def test_threshold_is_the_order_statistic_that_keeps_95_percent():

@@ -5,22 +5,15 @@ says, its cases hit the requested ENR, and its seeds and decision rules are as d
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import backlashid as bid
+from conftest import load_bench
 
-_PATH = Path(__file__).resolve().parents[2] / "benches" / "independent_chains.py"
-_spec = importlib.util.spec_from_file_location("independent_chains", _PATH)
-assert _spec is not None and _spec.loader is not None
-C = importlib.util.module_from_spec(_spec)
-sys.modules["independent_chains"] = C  # its dataclasses look their module up
-_spec.loader.exec_module(C)
+C = load_bench("independent_chains")
 IE = C.ie
 
 

@@ -4,21 +4,13 @@ package's cascade exactly, and its seed sets are reproducible and disjoint."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import backlashid as bid
+from conftest import load_bench
 
-_PATH = Path(__file__).resolve().parents[2] / "benches" / "independent_effects.py"
-_spec = importlib.util.spec_from_file_location("independent_effects", _PATH)
-assert _spec is not None and _spec.loader is not None
-B = importlib.util.module_from_spec(_spec)
-sys.modules["independent_effects"] = B  # its dataclass looks its module up
-_spec.loader.exec_module(B)
+B = load_bench("independent_effects")
 
 
 @pytest.mark.parametrize(

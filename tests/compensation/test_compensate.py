@@ -2,28 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
 import pickle
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import backlashid as bid
 from backlashid import CascadeState, DataError, ModelError, SandwichState
-
-_BENCH = Path(__file__).resolve().parents[2] / "benches" / "compensation.py"
+from conftest import load_bench
 
 
 def _bench():
-    if "compensation_bench" not in sys.modules:
-        spec = importlib.util.spec_from_file_location("compensation_bench", _BENCH)
-        assert spec is not None and spec.loader is not None
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules["compensation_bench"] = mod  # dataclasses look their module up
-        spec.loader.exec_module(mod)
-    return sys.modules["compensation_bench"]
+    return load_bench("compensation", "compensation_bench")
 
 
 def _reference(n: int = 800) -> np.ndarray:
