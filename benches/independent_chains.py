@@ -160,7 +160,6 @@ import math
 import os
 import sys
 import time
-import warnings
 import zlib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -978,16 +977,9 @@ def run_case(row: str, level: float, index: int, seeds: str, check: bool) -> dic
         return out
     out.update(c.describe())
     out["generate_seconds"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            fit = fit_nominal(c)
-        out["fit_warnings"] = [f"{w.category.__name__}: {w.message}"[:300] for w in caught]
-    except Exception as exc:
-        out.update(reported="fit_error", error=f"{type(exc).__name__}: {exc}", fit_seconds=time.perf_counter() - t0)
+    fit = ie.recorded(out, "fit", lambda: fit_nominal(c))
+    if fit is None:
         return out
-    out["fit_seconds"] = time.perf_counter() - t0
     u_val, y_val = c.u[N_EST:], c.y[N_EST:]
     try:
         if c.family == "integrating":  # mid-motion: the state estimated on the first samples
@@ -1008,16 +1000,9 @@ def run_case(row: str, level: float, index: int, seeds: str, check: bool) -> dic
         out["reported"] = None
         return out
     options: dict[str, Any] = {"compose": True} if len(ROWS[row].effects) > 1 else {}
-    t1 = time.perf_counter()
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            report = bid.diagnose(fit.model, (c.u[:N_EST], c.y[:N_EST]), (u_val, y_val), **options)
-        out["diagnose_warnings"] = [f"{w.category.__name__}: {w.message}"[:300] for w in caught]
-        out["diagnose_seconds"] = time.perf_counter() - t1
-        out.update(_report_fields(report))
-    except Exception as exc:
-        out.update(reported="diagnose_error", error=f"{type(exc).__name__}: {exc}", diagnose_seconds=time.perf_counter() - t1)
+    fields = ie.recorded(out, "diagnose", lambda: _report_fields(bid.diagnose(fit.model, (c.u[:N_EST], c.y[:N_EST]), (u_val, y_val), **options)))
+    if fields is not None:
+        out.update(fields)
     return out
 
 

@@ -772,6 +772,23 @@ def _simulation_rmse(model: Any, c: Case) -> float:
     return rms((c.y - ysim)[N_EST:])
 
 
+def recorded(out: dict[str, Any], stage: str, call: Any) -> Any:
+    """``call()`` with its warnings kept in ``out[stage + "_warnings"]`` and its time in
+    ``out[stage + "_seconds"]``; an exception ends the case as a result (``reported`` =
+    ``stage + "_error"``, the error in words) and gives None."""
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            value = call()
+    except Exception as exc:
+        out.update({"reported": f"{stage}_error", "error": f"{type(exc).__name__}: {exc}", f"{stage}_seconds": time.perf_counter() - t0})
+        return None
+    out[f"{stage}_warnings"] = [f"{w.category.__name__}: {w.message}"[:300] for w in caught]
+    out[f"{stage}_seconds"] = time.perf_counter() - t0
+    return value
+
+
 def run_case(effect: str, level: float, index: int, seeds: str, check: bool) -> dict[str, Any]:
     """Generate, fit, (diagnose). Never raises: errors are results."""
     import backlashid as bid
@@ -785,16 +802,9 @@ def run_case(effect: str, level: float, index: int, seeds: str, check: bool) -> 
         return out
     out.update(c.describe())
     out["generate_seconds"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            fit = bid.fit_cascade(c.u_est, c.y_est, na=2, nb=2, degree=3)
-        out["fit_warnings"] = [f"{w.category.__name__}: {w.message}"[:300] for w in caught]
-    except Exception as exc:
-        out.update(reported="fit_error", error=f"{type(exc).__name__}: {exc}", fit_seconds=time.perf_counter() - t0)
+    fit = recorded(out, "fit", lambda: bid.fit_cascade(c.u_est, c.y_est, na=2, nb=2, degree=3))
+    if fit is None:
         return out
-    out["fit_seconds"] = time.perf_counter() - t0
     try:
         out["val_rmse_over_sigma"] = _simulation_rmse(fit.model, c) / c.noise_std
     except Exception as exc:  # a nominal model that cannot be simulated is still diagnosed
@@ -803,19 +813,18 @@ def run_case(effect: str, level: float, index: int, seeds: str, check: bool) -> 
     if check:
         out["reported"] = None
         return out
-    t1 = time.perf_counter()
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            report = bid.diagnose(fit.model, (c.u_est, c.y_est), (c.u_val, c.y_val))
-        out["diagnose_warnings"] = [f"{w.category.__name__}: {w.message}"[:300] for w in caught]
-    except Exception as exc:
-        out.update(reported="diagnose_error", error=f"{type(exc).__name__}: {exc}", diagnose_seconds=time.perf_counter() - t1)
-        return out
-    out["diagnose_seconds"] = time.perf_counter() - t1
-    out["elapsed"] = float(report.elapsed)
-    out["reported"] = report.best_effect
-    out["ranking"] = [[cand.effect, float(cand.gap_closed)] for cand in report.ranking]
+
+    def diagnosed() -> dict[str, Any]:
+        report = bid.diagnose(fit.model, (c.u_est, c.y_est), (c.u_val, c.y_val))
+        return {
+            "elapsed": float(report.elapsed),
+            "reported": report.best_effect,
+            "ranking": [[cand.effect, float(cand.gap_closed)] for cand in report.ranking],
+        }
+
+    fields = recorded(out, "diagnose", diagnosed)
+    if fields is not None:
+        out.update(fields)
     return out
 
 
