@@ -87,29 +87,7 @@ impl D {
             d: self.d.map(|x| df * x),
         }
     }
-    fn exp(self) -> D {
-        let e = self.v.exp();
-        self.chain(e, e)
-    }
-    fn phi(self) -> D {
-        let (p, dp) = phi(self.v);
-        self.chain(p, dp)
-    }
-    /// L(q) = -ln(1 - q) / q (L(0) = 1), by its series near 0.
-    fn log_ratio(self) -> D {
-        let q = self.v;
-        let (l, dl) = if q.abs() < 1e-4 {
-            (
-                1.0 + q / 2.0 + q * q / 3.0 + q * q * q / 4.0,
-                0.5 + 2.0 * q / 3.0 + 0.75 * q * q,
-            )
-        } else {
-            let ln = (-q).ln_1p();
-            (-ln / q, (q / (1.0 - q) + ln) / (q * q))
-        };
-        self.chain(l, dl)
-    }
-    fn div(self, o: D) -> D {
+    fn quotient(self, o: D) -> D {
         let v = self.v / o.v;
         let mut d = [0.0; 5];
         for (k, x) in d.iter_mut().enumerate() {
@@ -166,31 +144,108 @@ impl Mul<f64> for D {
     }
 }
 
+/// L(q) = -ln(1 - q) / q (L(0) = 1) and L'(q), by their series near 0.
+#[inline(always)]
+fn log_ratio(q: f64) -> (f64, f64) {
+    if q.abs() < 1e-4 {
+        (
+            1.0 + q / 2.0 + q * q / 3.0 + q * q * q / 4.0,
+            0.5 + 2.0 * q / 3.0 + 0.75 * q * q,
+        )
+    } else {
+        let ln = (-q).ln_1p();
+        (-ln / q, (q / (1.0 - q) + ln) / (q * q))
+    }
+}
+
+/// The numbers the exact step is written in: f64 for the value pass, D (with the partials)
+/// for the tangent pass; one formula serves both.
+trait Number: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Neg<Output = Self> {
+    fn of(v: f64) -> Self;
+    fn value(self) -> f64;
+    fn exp(self) -> Self;
+    fn phi(self) -> Self;
+    fn log_ratio(self) -> Self;
+    fn div(self, o: Self) -> Self;
+    fn scaled(self, c: f64) -> Self;
+}
+
+impl Number for f64 {
+    fn of(v: f64) -> f64 {
+        v
+    }
+    fn value(self) -> f64 {
+        self
+    }
+    fn exp(self) -> f64 {
+        f64::exp(self)
+    }
+    fn phi(self) -> f64 {
+        phi(self).0
+    }
+    fn log_ratio(self) -> f64 {
+        log_ratio(self).0
+    }
+    fn div(self, o: f64) -> f64 {
+        self / o
+    }
+    fn scaled(self, c: f64) -> f64 {
+        self * c
+    }
+}
+
+impl Number for D {
+    fn of(v: f64) -> D {
+        D::c(v)
+    }
+    fn value(self) -> f64 {
+        self.v
+    }
+    fn exp(self) -> D {
+        let e = self.v.exp();
+        self.chain(e, e)
+    }
+    fn phi(self) -> D {
+        let (p, dp) = phi(self.v);
+        self.chain(p, dp)
+    }
+    fn log_ratio(self) -> D {
+        let (l, dl) = log_ratio(self.v);
+        self.chain(l, dl)
+    }
+    fn div(self, o: D) -> D {
+        self.quotient(o)
+    }
+    fn scaled(self, c: f64) -> D {
+        self * c
+    }
+}
+
 /// z after a time `tau` of the sample from `z0` while z keeps the sign `sigma`:
 /// e^(-kappa tau) z0 + v alpha tau phi(kappa tau), kappa = beta |v| + gamma v sigma.
-fn phase(z0: D, tau: D, sigma: f64, v: D, alpha: D, beta: D, gamma: D) -> D {
-    let kappa = beta * v * sign(v.v) + gamma * v * sigma;
+fn phase<T: Number>(z0: T, tau: T, sigma: f64, v: T, alpha: T, beta: T, gamma: T) -> T {
+    let kappa = (beta * v).scaled(sign(v.value())) + (gamma * v).scaled(sigma);
     let k_tau = kappa * tau;
     (-k_tau).exp() * z0 + v * alpha * tau * k_tau.phi()
 }
 
 /// The exact step of the Bouc-Wen law over one sample of velocity `v` from `z0` (the module's
-/// formulas), with its partial derivatives.
-fn exact_step(z0: D, v: D, alpha: D, beta: D, gamma: D) -> D {
-    if v.v == 0.0 {
+/// formulas); in D, with its partial derivatives.
+fn exact_step<T: Number>(z0: T, v: T, alpha: T, beta: T, gamma: T) -> T {
+    if v.value() == 0.0 {
         return z0; // no motion, no change
     }
-    let s = sign(v.v);
-    let sigma = if z0.v != 0.0 { sign(z0.v) } else { s };
-    let whole = phase(z0, D::c(1.0), sigma, v, alpha, beta, gamma);
-    if z0.v == 0.0 || sign(whole.v) != -sigma {
+    let s = sign(v.value());
+    let sigma = if z0.value() != 0.0 { sign(z0.value()) } else { s };
+    let whole = phase(z0, T::of(1.0), sigma, v, alpha, beta, gamma);
+    if z0.value() == 0.0 || sign(whole.value()) != -sigma {
         return whole;
     }
     // z crosses 0 at tau* inside the sample (alpha v != 0 there: with alpha = 0, z only decays)
-    let kappa = beta * v * s + gamma * v * sigma;
+    let kappa = (beta * v).scaled(s) + (gamma * v).scaled(sigma);
     let va = v * alpha;
     let tau_star = (-z0).div(va) * (z0 * kappa).div(va).log_ratio();
-    phase(D::c(0.0), D::c(1.0) - tau_star, s, v, alpha, beta, gamma)
+    phase(T::of(0.0), T::of(1.0) - tau_star, s, v, alpha, beta, gamma)
 }
 
 impl FeedbackHysteresis {
@@ -201,8 +256,7 @@ impl FeedbackHysteresis {
     /// z(t) from `z1` = z(t-1) and the velocity v, at the hysteretic stiffness `alpha`.
     #[inline(always)]
     fn next(&self, z1: f64, v: f64, alpha: f64) -> f64 {
-        let c = D::c;
-        exact_step(c(z1), c(v), c(alpha), c(self.beta), c(self.gamma)).v
+        exact_step(z1, v, alpha, self.beta, self.gamma)
     }
 }
 
@@ -354,6 +408,8 @@ mod tests {
         ];
         for (z0, v, p) in cases {
             let z = step(z0, v, p);
+            // the value pass (plain f64) is the tangent pass's value, bit for bit
+            assert_eq!(exact_step(z0, v, p[0], p[1], p[2]).to_bits(), z.v.to_bits());
             let want = rk4(z0, v, p[0], p[1], p[2], 200_000);
             assert!((z.v - want).abs() <= 1e-9 * (1.0 + want.abs()), "{z0} {v} {p:?}: {} vs {want}", z.v);
             let h = 1e-6;
