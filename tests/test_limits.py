@@ -58,7 +58,7 @@ resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
         "bid.example1().linear.simulate(u)",
         "bid.example1().backlash.simulate(u)",
         "bid.example1().simulate(u, internals=True)",
-        "Structure(2, 2, 3).problem(u, u)",
+        "Structure(2, 2, 3).problem(u, u).simulate(Structure(2, 2, 3).pack(bid.example1()))",
     ],
 )
 def test_an_allocation_that_cannot_be_satisfied_raises_memory_error(call: str) -> None:
@@ -75,6 +75,23 @@ except MemoryError as exc:
     out, err = child.communicate(timeout=120)
     assert child.returncode == 0, err[-2000:]  # no abort (SIGABRT: -6)
     assert out.startswith("MemoryError: cannot allocate"), (out, err[-2000:])
+
+
+@pytest.mark.skipif(not LINUX, reason="address-space limits (RLIMIT_AS) are Linux only")
+def test_a_problem_reads_its_record_in_place_and_sums_its_cost_without_a_record_sized_buffer() -> None:
+    # the room above holds less than one more signal: compiling the problem (no copy of u, y)
+    # and its cost (summed as the simulation runs) fit in it
+    child = _child(
+        _LIMITED
+        + """
+s = Structure(2, 2, 3)
+print("cost", s.problem(u, u).cost(s.pack(bid.example1())))
+"""
+    )
+    out, err = child.communicate(timeout=120)
+    assert child.returncode == 0, err[-2000:]
+    assert out.startswith("cost "), (out, err[-2000:])
+    assert float(out.split()[1]) > 0
 
 
 def test_absurd_orders_are_refused_before_anything_is_built() -> None:

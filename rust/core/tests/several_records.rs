@@ -259,7 +259,7 @@ fn bad_records_are_refused_naming_the_record() {
     let mut recs = records(false);
     recs[0].0[5] = f64::NAN;
     assert!(data(Problem::several(s, recs)).starts_with("u[0][5]"));
-    assert!(data(Problem::several(s, vec![])).contains("no records"));
+    assert!(data(Problem::several::<Vec<f64>, Vec<f64>>(s, vec![])).contains("no records"));
     let joint = Problem::several(s, records(false)).unwrap();
     assert!(matches!(joint.cost(&[0.0; 3]), Err(Error::Data(_))));
 }

@@ -10,9 +10,7 @@ use backlashid_core as core;
 use pyo3::prelude::*;
 
 use crate::augmented::{past, rest_y_past};
-use crate::convert::{
-    factor_out, owned_signal, vec_f64, FactorOut, MatrixOut, SignalIn, SignalOut,
-};
+use crate::convert::{factor_out, kept_signal, vec_f64, FactorOut, MatrixOut, SignalIn, SignalOut};
 use crate::errors::run;
 use crate::problem::{warmup_of, whole};
 use numpy::{IntoPyArray, PyArrayMethods};
@@ -66,7 +64,7 @@ impl PyAugmentedProblem {
             })
         };
         let (nr, ns) = (order(nr, "nr")?, order(ns, "ns")?);
-        let (u, y) = (owned_signal("u", &u)?, owned_signal("y", &y)?);
+        let (u, y) = (kept_signal("u", &u)?, kept_signal("y", &y)?);
         let warmup = match warmup {
             Some(w) => warmup_of(w, u.len())?,
             None => 0,

@@ -40,13 +40,42 @@ pub(crate) fn signal<'a>(name: &str, arr: &'a SignalIn<'_>) -> PyResult<Cow<'a, 
     })
 }
 
-/// A signal the core keeps (a compiled problem's record): `signal`, copied into memory the
-/// core owns (MemoryError where it cannot be allocated).
-pub(crate) fn owned_signal(name: &str, arr: &SignalIn<'_>) -> PyResult<Vec<f64>> {
+/// A signal the core keeps (a compiled problem's record): a contiguous array read in place
+/// for as long as the problem lives, else `signal`'s copy (MemoryError where it cannot be
+/// allocated). In place, a 1e8-sample record costs the problem no memory of its own.
+pub(crate) fn kept_signal(name: &str, arr: &SignalIn<'_>) -> PyResult<core::identify::Samples> {
     Ok(match signal(name, arr)? {
-        Cow::Borrowed(s) => core::guard::copied(s, name).map_err(CoreError)?,
-        Cow::Owned(v) => v,
+        Cow::Borrowed(s) if !s.is_empty() => core::identify::Samples::shared(NumpySamples {
+            ptr: s.as_ptr(),
+            len: s.len(),
+            _array: arr.as_any().clone().unbind(),
+        }),
+        Cow::Borrowed(s) => core::identify::Samples::from(s.to_vec()),
+        Cow::Owned(v) => core::identify::Samples::from(v),
     })
+}
+
+/// The values of a C-contiguous float64 NumPy array, read in place. The array is referenced
+/// (`_array`), so it stays alive and NumPy refuses to resize it; the package compiles a
+/// problem on arrays it does not write while the problem lives (as any NumPy function that
+/// releases the GIL, a caller writing them from another thread meanwhile races the read).
+struct NumpySamples {
+    ptr: *const f64,
+    len: usize,
+    _array: Py<PyAny>,
+}
+
+// SAFETY: the pointer is into an array kept alive by `_array` and only read; `Py` is Send
+// and Sync.
+unsafe impl Send for NumpySamples {}
+unsafe impl Sync for NumpySamples {}
+
+impl AsRef<[f64]> for NumpySamples {
+    fn as_ref(&self) -> &[f64] {
+        // SAFETY: `ptr` is non-null and aligned (a non-empty slice's), `len` values long,
+        // valid while `_array` is held (see the struct).
+        unsafe { std::slice::from_raw_parts(self.ptr, self.len) }
+    }
 }
 
 /// A row-major matrix: its values in logical order and its shape (rows, cols).

@@ -9,7 +9,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyBool;
 
 use crate::convert::{
-    factor_out, ls_out, owned_signal, vec_f64, FactorOut, LsOut, SignalIn, SignalOut,
+    factor_out, kept_signal, ls_out, vec_f64, FactorOut, LsOut, SignalIn, SignalOut,
 };
 use crate::errors::{run, DataError};
 
@@ -103,7 +103,7 @@ impl PyProblem {
     ) -> PyResult<Self> {
         let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?
             .with_initial_state(initial_state);
-        let (u, y) = (owned_signal("u", &u)?, owned_signal("y", &y)?);
+        let (u, y) = (kept_signal("u", &u)?, kept_signal("y", &y)?);
         let warmup = match warmup {
             Some(w) => warmup_of(w, u.len())?,
             None => 0,
@@ -150,8 +150,8 @@ impl PyProblem {
         };
         let mut records = Vec::with_capacity(u.len());
         for (i, (ui, yi)) in u.iter().zip(&y).enumerate() {
-            let ui = owned_signal(&format!("u[{i}]"), ui)?;
-            let yi = owned_signal(&format!("y[{i}]"), yi)?;
+            let ui = kept_signal(&format!("u[{i}]"), ui)?;
+            let yi = kept_signal(&format!("y[{i}]"), yi)?;
             records.push((ui, yi, warmup));
         }
         let inner = run(py, || core::Problem::several(s, records))?;

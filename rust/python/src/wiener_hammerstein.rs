@@ -5,7 +5,7 @@
 use backlashid_core as core;
 use pyo3::prelude::*;
 
-use crate::convert::{factor_out, owned_signal, vec_f64, FactorOut, SignalIn, SignalOut};
+use crate::convert::{factor_out, kept_signal, vec_f64, FactorOut, SignalIn, SignalOut};
 use crate::errors::run;
 use crate::problem::{warmup_of, whole};
 
@@ -45,7 +45,7 @@ impl PyWienerHammersteinProblem {
             offset,
         )
         .map_err(|e| PyErr::from(crate::errors::CoreError(e)))?;
-        let (u, y) = (owned_signal("u", &u)?, owned_signal("y", &y)?);
+        let (u, y) = (kept_signal("u", &u)?, kept_signal("y", &y)?);
         let warmup = match warmup {
             Some(w) => warmup_of(w, u.len())?,
             None => 0,

@@ -18,6 +18,7 @@ use crate::identify::augmented_sensitivity::{
 use crate::identify::gradient::OeGradient;
 use crate::identify::output_error_cost;
 use crate::identify::problem::Structure;
+use crate::identify::samples::Samples;
 use crate::identify::sensitivity::{check_pair, oe_threads, Sensitivity};
 use crate::linalg::TriangularFactor;
 use crate::model::backlash::check_memory;
@@ -61,8 +62,8 @@ pub struct AugmentedProblem {
     /// (effect, parameter) of each free name, in theta's order after the nominal part.
     free: Vec<(usize, usize)>,
     names: Vec<String>,
-    u: Vec<f64>,
-    y: Vec<f64>,
+    u: Samples,
+    y: Samples,
     warmup: usize,
     start: RecordStart,
 }
@@ -82,11 +83,12 @@ impl AugmentedProblem {
         structure: Structure,
         effects: &[(String, Vec<f64>)],
         free: &[String],
-        u: Vec<f64>,
-        y: Vec<f64>,
+        u: impl Into<Samples>,
+        y: impl Into<Samples>,
         warmup: usize,
         start: RecordStart,
     ) -> Result<Self> {
+        let (u, y): (Samples, Samples) = (u.into(), y.into());
         if structure.feedthrough || structure.output_feedthrough || structure.initial_state {
             return Err(Error::Data(
                 "the augmented chain takes a cascade or sandwich structure without feedthrough \

@@ -12,6 +12,7 @@ pub mod initial;
 pub mod problem;
 pub mod regressor;
 mod rows;
+pub mod samples;
 pub mod sensitivity;
 pub mod wiener_hammerstein;
 
@@ -23,6 +24,7 @@ pub use problem::{Iteration, Problem, Record, Structure};
 pub use regressor::{
     solve_factor, ArxRegression, CascadeRegression, Regression, RowRegression, SandwichRegression,
 };
+pub use samples::Samples;
 pub use sensitivity::{
     cascade_oe_factor, cascade_sensitivity, sandwich_oe_factor, sandwich_sensitivity, Sensitivity,
 };
@@ -35,11 +37,17 @@ pub(crate) fn output_error_cost(
     y_sim: &[f64],
     warmup: usize,
 ) -> crate::error::Result<f64> {
-    let cost: f64 = y[warmup..]
-        .iter()
-        .zip(&y_sim[warmup..])
-        .map(|(y, s)| (y - s) * (y - s))
-        .sum();
+    finite_cost(
+        y[warmup..]
+            .iter()
+            .zip(&y_sim[warmup..])
+            .map(|(y, s)| (y - s) * (y - s))
+            .sum(),
+    )
+}
+
+/// The cost, or the ModelError of a diverged simulation (a non-finite cost).
+pub(crate) fn finite_cost(cost: f64) -> crate::error::Result<f64> {
     if !cost.is_finite() {
         return Err(crate::error::Error::Model(
             "the simulated output of the estimate diverges (a non-finite output error); start \

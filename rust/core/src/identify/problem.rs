@@ -26,9 +26,12 @@ use crate::identify::gradient::{
 };
 use crate::identify::gradient::{Motion, OeGradient};
 use crate::identify::initial::{self, InitialState, Start};
-use crate::identify::output_error_cost;
 use crate::identify::regressor::solve_factor;
-use crate::identify::sensitivity::{cascade_oe_factor_from, oe_threads, sandwich_oe_factor_from};
+use crate::identify::samples::Samples;
+use crate::identify::sensitivity::{
+    cascade_oe_factor_from, oe_threads, sandwich_oe_factor_from, XChunks,
+};
+use crate::identify::{finite_cost, output_error_cost};
 use crate::identify::{CascadeRegression, SandwichRegression};
 use crate::linalg::{LeastSquares, TriangularFactor};
 use crate::model::backlash::{GeneralBacklash, Step};
@@ -36,6 +39,7 @@ use crate::model::cascade::CascadeModel;
 use crate::model::linear::{blame_feeding_block, LinearBlock, MAX_ORDER};
 use crate::model::sandwich::SandwichModel;
 use crate::model::signal::{check_same_length, check_signal};
+use crate::model::sink::ErrorSum;
 
 /// The structure of an identification: the (input) linear block's orders, the branches'
 /// degree, the sandwich's output block's orders (nr = 0 for a cascade) and the feedthroughs.
@@ -339,15 +343,15 @@ pub struct Iteration {
 /// One record of an identification: input, measured output and its warm-up.
 #[derive(Debug, Clone)]
 pub struct Record {
-    pub u: Vec<f64>,
-    pub y: Vec<f64>,
+    pub u: Samples,
+    pub y: Samples,
     pub warmup: usize,
 }
 
 impl Record {
     /// Checks u and y (non-empty, finite, one length) and 0 <= warmup < len(u); `at` names
     /// the record in the messages of several (None: the one record, the plain messages).
-    fn new(u: Vec<f64>, y: Vec<f64>, warmup: usize, at: Option<usize>) -> Result<Self> {
+    fn new(u: Samples, y: Samples, warmup: usize, at: Option<usize>) -> Result<Self> {
         let (u_name, y_name) = match at {
             Some(i) => (format!("u[{i}]"), format!("y[{i}]")),
             None => ("u".into(), "y".into()),
@@ -429,39 +433,55 @@ impl Clone for MotionCache {
     }
 }
 
-/// The `Motion` over t >= warmup of the backlash driven by x from memory y0; an overflowing
-/// output is the simulation's ModelError.
-fn motion_along(step: impl Step, x: &[f64], y0: f64, warmup: usize) -> Result<Motion> {
-    let mut motion = Motion::empty();
-    let mut y_prev = y0;
-    for (t, &xt) in x.iter().enumerate() {
-        let (v, case) = step.step_case(xt, y_prev);
+/// Records longer than this take their gradient from the output-error factor: the cascade's
+/// reverse pass keeps x, y and the case of every sample (17 bytes each: 71 MB here, 1.7 GB at
+/// 1e8 samples), the factor's forward pass a few rows.
+pub const BUFFERED_GRADIENT_SAMPLES: usize = 1 << 22;
+
+/// Adds to `motion` the samples t >= warmup of the backlash driven by x (the record's samples
+/// `from..from + x.len()`) from memory `y_prev`, which it leaves at the last output; an
+/// overflowing output is the simulation's ModelError.
+fn motion_along(
+    step: impl Step,
+    x: &[f64],
+    from: usize,
+    y_prev: &mut f64,
+    warmup: usize,
+    motion: &mut Motion,
+) -> Result<()> {
+    for (k, &xt) in x.iter().enumerate() {
+        let (v, case) = step.step_case(xt, *y_prev);
         if !v.is_finite() {
-            return Err(crate::model::backlash::output_overflow(t, xt));
+            return Err(crate::model::backlash::output_overflow(from + k, xt));
         }
-        if t >= warmup {
+        if from + k >= warmup {
             motion.add(&[xt], &[case]);
         }
-        y_prev = v;
+        *y_prev = v;
     }
-    Ok(motion)
+    Ok(())
 }
 
 impl Problem {
     /// Checks u and y (non-empty, finite, one length) and 0 <= warmup < len(u).
-    pub fn new(structure: Structure, u: Vec<f64>, y: Vec<f64>, warmup: usize) -> Result<Self> {
+    pub fn new(
+        structure: Structure,
+        u: impl Into<Samples>,
+        y: impl Into<Samples>,
+        warmup: usize,
+    ) -> Result<Self> {
         Ok(Self {
             structure,
-            records: vec![Record::new(u, y, warmup, None)?],
+            records: vec![Record::new(u.into(), y.into(), warmup, None)?],
             motion: MotionCache::default(),
         })
     }
 
     /// Several records (u_i, y_i, warmup_i) of one system, each checked as `new` checks
     /// one (messages name the record, counted from 0); at least one.
-    pub fn several(
+    pub fn several<U: Into<Samples>, Y: Into<Samples>>(
         structure: Structure,
-        records: Vec<(Vec<f64>, Vec<f64>, usize)>,
+        records: Vec<(U, Y, usize)>,
     ) -> Result<Self> {
         if records.is_empty() {
             return Err(Error::Data(
@@ -471,7 +491,7 @@ impl Problem {
         let records = records
             .into_iter()
             .enumerate()
-            .map(|(i, (u, y, w))| Record::new(u, y, w, Some(i)))
+            .map(|(i, (u, y, w))| Record::new(u.into(), y.into(), w, Some(i)))
             .collect::<Result<Vec<_>>>()?;
         Ok(Self {
             structure,
@@ -606,10 +626,30 @@ impl Problem {
     pub fn cost(&self, theta: &[f64]) -> Result<f64> {
         let mut cost = 0.0;
         for ((blocks, _), rec) in self.unpack_all(theta)?.into_iter().zip(&self.records) {
-            let sim = Self::simulate_blocks(blocks, &rec.u)?;
-            cost += output_error_cost(&rec.y, &sim, rec.warmup)?;
+            cost += Self::record_cost(blocks, rec)?;
         }
         Ok(cost)
+    }
+
+    /// One record's output-error cost: from rest folded as the simulation runs (no
+    /// N-sample buffer), from an initial state on the simulated output.
+    fn record_cost(blocks: Blocks, rec: &Record) -> Result<f64> {
+        if blocks.initial.is_some() {
+            let sim = Self::simulate_blocks(blocks, &rec.u)?;
+            return output_error_cost(&rec.y, &sim, rec.warmup);
+        }
+        let mut sum = ErrorSum::new(&rec.y, rec.warmup);
+        match blocks.output {
+            None => {
+                let m = CascadeModel::new(blocks.linear, blocks.backlash);
+                m.simulate_into(&rec.u, &m.rest_state(), &mut sum)?;
+            }
+            Some(out) => {
+                let m = SandwichModel::new(blocks.linear, blocks.backlash, out);
+                m.simulate_into(&rec.u, &m.rest_state(), &mut sum)?;
+            }
+        }
+        finite_cost(sum.sum)
     }
 
     /// The stability guard of the output-error search: every linear block of theta has its
@@ -768,9 +808,19 @@ impl Problem {
             .map(|state| Start { state, col: p0 })
     }
 
-    /// g = J^T (y - y_sim) over t >= warmup and the cost, one pass without the factor;
-    /// several records: the records' gradients summed into theta's columns.
+    /// g = J^T (y - y_sim) over t >= warmup and the cost, one pass without the factor
+    /// (beyond `BUFFERED_GRADIENT_SAMPLES` samples in all: R^T Q^T r of the factor, in bounded
+    /// memory); several records: the records' gradients summed into theta's columns.
     pub fn gradient(&self, theta: &[f64]) -> Result<OeGradient> {
+        if self.samples() > BUFFERED_GRADIENT_SAMPLES {
+            // g = R^T (Q^T r) of the output-error factor: bounded memory, about 1.5 gradient
+            // passes of time
+            let (factor, cost) = self.oe_factor(theta)?;
+            return Ok(OeGradient {
+                gradient: factor.gradient(),
+                cost,
+            });
+        }
         let all = self.unpack_all(theta)?;
         let p0 = self.structure.model_size();
         if self.records.len() == 1 {
@@ -821,18 +871,18 @@ impl Problem {
             return Ok(m);
         }
         let rec = &self.records[0];
-        let (x, y0) = match &b.initial {
-            Some(init) => (
-                initial::simulate_from(&b.linear, &rec.u, &init.x0)?,
-                init.y_prev,
-            ),
-            None => (b.linear.simulate(&rec.u, &b.linear.rest_state())?, 0.0),
-        };
-        let motion = match b.backlash.padded_step() {
-            Some(padded) => motion_along(padded, &x, y0, rec.warmup),
-            None => motion_along(&b.backlash, &x, y0, rec.warmup),
-        }
-        .map_err(|e| blame_feeding_block(e, &b.linear, "input"))?;
+        let x0 = b.initial.as_ref().map(|init| &init.x0[..]);
+        let mut y_prev = b.initial.as_ref().map_or(0.0, |init| init.y_prev);
+        let mut motion = Motion::empty();
+        // x a chunk at a time: bounded memory on any record length
+        XChunks::new(&b.linear, &rec.u, x0)?.each(|from, x| {
+            let (y, w, m) = (&mut y_prev, rec.warmup, &mut motion);
+            match b.backlash.padded_step() {
+                Some(padded) => motion_along(padded, x, from, y, w, m),
+                None => motion_along(&b.backlash, x, from, y, w, m),
+            }
+            .map_err(|e| blame_feeding_block(e, &b.linear, "input"))
+        })?;
         *self.motion.lock() = Some((theta.to_vec(), motion));
         Ok(motion)
     }

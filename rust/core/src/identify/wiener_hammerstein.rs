@@ -22,6 +22,7 @@ use crate::error::{Error, Result};
 use crate::guard;
 use crate::identify::gradient::OeGradient;
 use crate::identify::output_error_cost;
+use crate::identify::samples::Samples;
 use crate::identify::sensitivity::{oe_threads, overflowed};
 use crate::linalg::streaming::default_threads;
 use crate::linalg::streaming::{fold_stream_shared, TriangularFactor};
@@ -207,8 +208,8 @@ fn diverged(signal: &str, t: usize) -> Error {
 pub struct WienerHammersteinProblem {
     structure: WhStructure,
     k: f64,
-    u: Vec<f64>,
-    y: Vec<f64>,
+    u: Samples,
+    y: Samples,
     warmup: usize,
     /// Per parameter of the structure: Some(value) when fixed (left out of theta).
     fixed: Vec<Option<f64>>,
@@ -221,10 +222,11 @@ impl WienerHammersteinProblem {
     pub fn new(
         structure: WhStructure,
         k: f64,
-        u: Vec<f64>,
-        y: Vec<f64>,
+        u: impl Into<Samples>,
+        y: impl Into<Samples>,
         warmup: usize,
     ) -> Result<Self> {
+        let (u, y): (Samples, Samples) = (u.into(), y.into());
         check_signal("u", &u)?;
         check_signal("y", &y)?;
         check_same_length(&u, &y, "y")?;
