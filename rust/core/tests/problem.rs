@@ -40,6 +40,15 @@ fn cascade_blocks(t: &[f64]) -> (LinearBlock, GeneralBacklash) {
     (lin, bl)
 }
 
+/// sum (y - y_sim)^2 over t >= warmup, in time order.
+fn squared_error(y: &[f64], y_sim: &[f64], warmup: usize) -> f64 {
+    y[warmup..]
+        .iter()
+        .zip(&y_sim[warmup..])
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum()
+}
+
 fn names(s: &[&str]) -> Vec<String> {
     s.iter().map(|k| k.to_string()).collect()
 }
@@ -75,6 +84,8 @@ fn the_cascade_problem_equals_the_functions_on_example1() {
         let model = CascadeModel::new(lin.clone(), bl.clone());
         let y_sim = model.simulate(&u, &model.rest_state()).unwrap();
         close(&p.simulate(&theta).unwrap(), &y_sim);
+        // the cost folded as the simulation runs: the sum over the kept output, bit for bit
+        assert_eq!(p.cost(&theta).unwrap(), squared_error(&y, &y_sim, warmup));
         for (simulated, y_switch) in [(false, &y), (true, &y_sim)] {
             let it = p.iteration(&theta, simulated).unwrap();
             let reg = CascadeRegression::new(&lin, &bl, &u, &y, y_switch).unwrap();
@@ -112,10 +123,9 @@ fn the_sandwich_problem_equals_the_functions_on_example2() {
         close(&g.gradient, &want.gradient);
         close(&[g.cost], &[want.cost]);
         let model = SandwichModel::new(lin.clone(), bl.clone(), out.clone());
-        close(
-            &p.simulate(&theta).unwrap(),
-            &model.simulate(&u, &model.rest_state()).unwrap(),
-        );
+        let w_sim = model.simulate(&u, &model.rest_state()).unwrap();
+        close(&p.simulate(&theta).unwrap(), &w_sim);
+        assert_eq!(p.cost(&theta).unwrap(), squared_error(&w, &w_sim, warmup));
         let it = p.iteration(&theta, false).unwrap();
         let (factor, moving) = SandwichRegression::new(&lin, &bl, &out, &u, &w)
             .unwrap()
@@ -257,4 +267,41 @@ fn motion_is_the_models_moving_count_and_x_range_with_or_without_a_gradient_pass
         several.motion(&EXAMPLE1_THETA),
         Err(Error::Data(_))
     ));
+}
+
+/// A record longer than `BUFFERED_GRADIENT_SAMPLES` (three chunks of x): the gradient comes
+/// from the output-error factor and the motion from x simulated a chunk at a time; both agree
+/// with the buffered reverse pass and the model's own count over the whole record.
+#[test]
+fn a_long_record_has_the_gradient_and_motion_of_the_buffered_passes() {
+    use backlashid_core::identify::problem::BUFFERED_GRADIENT_SAMPLES;
+    let s = Structure::new(2, 2, 3, 0, 0, false, false).unwrap();
+    let u = input(BUFFERED_GRADIENT_SAMPLES + 12_345);
+    let y = noisy(
+        &example1_model()
+            .simulate(&u, &example1_model().rest_state())
+            .unwrap(),
+        4,
+    );
+    let warmup = 1000;
+    let p = Problem::new(s, u.clone(), y.clone(), warmup).unwrap();
+    let theta = perturbed(EXAMPLE1_THETA);
+    let (lin, bl) = cascade_blocks(&theta);
+    let (got, want) = (
+        p.gradient(&theta).unwrap(),
+        cascade_oe_gradient(&lin, &bl, &u, &y, warmup).unwrap(),
+    );
+    let scale = want.gradient.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    for (g, w) in got.gradient.iter().zip(&want.gradient) {
+        assert!((g - w).abs() <= 1e-9 * scale, "{g} vs {w}");
+    }
+    assert!((got.cost - want.cost).abs() <= 1e-10 * want.cost);
+    let m = CascadeModel::new(lin.clone(), bl);
+    let x = lin.simulate(&u, &lin.rest_state()).unwrap();
+    let count = m.moving_count(&u, &m.rest_state(), warmup).unwrap();
+    let motion = p.motion(&theta).unwrap();
+    assert_eq!(
+        (motion.moving, motion.x_min, motion.x_max),
+        motion_by_hand(&x, count, warmup)
+    );
 }

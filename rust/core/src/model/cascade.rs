@@ -7,6 +7,7 @@ use crate::model::linear::{
     blame_feeding_block, LinearBlock, LinearState, Recursion, RecursionUser,
 };
 use crate::model::signal::check_signal;
+use crate::model::sink::OutputSink;
 use crate::model::switching::switching;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -52,14 +53,28 @@ impl CascadeModel {
     /// x all through and a finite last u thus mean a finite u. On any failure the linear
     /// block is rerun alone, which names the first culprit exactly as separate checks would.
     pub fn simulate(&self, u: &[f64], state: &CascadeState) -> Result<Vec<f64>> {
+        let mut y = guard::buffer(u.len(), "y")?;
+        self.simulate_into(u, state, &mut y)?;
+        Ok(y)
+    }
+
+    /// `simulate`, its output handed to `sink` chunk by chunk instead of kept (the output
+    /// error of a long record in constant memory: `ErrorSum`).
+    pub fn simulate_into(
+        &self,
+        u: &[f64],
+        state: &CascadeState,
+        sink: &mut impl OutputSink,
+    ) -> Result<()> {
         self.check_start(u, state)?;
         let run = CascadeRun {
             backlash: &self.backlash,
             u,
             y0: state.y_prev,
+            sink,
         };
         match self.linear.with_recursion(&state.linear, run)? {
-            (y, true) if u.last().is_some_and(|v| v.is_finite()) => Ok(y),
+            true if u.last().is_some_and(|v| v.is_finite()) => Ok(()),
             _ => {
                 let x = self.linear.simulate(u, &state.linear)?;
                 self.backlash
@@ -175,47 +190,44 @@ impl CascadeCount<'_> {
 }
 
 /// The loop of `CascadeModel::simulate`: y, and whether every x and y was finite.
-struct CascadeRun<'a> {
+struct CascadeRun<'a, K> {
     backlash: &'a GeneralBacklash,
     u: &'a [f64],
     y0: f64,
+    sink: &'a mut K,
 }
 
-impl RecursionUser for CascadeRun<'_> {
-    type Output = Result<(Vec<f64>, bool)>;
+impl<K: OutputSink> RecursionUser for CascadeRun<'_, K> {
+    /// Whether x and y stayed finite.
+    type Output = Result<bool>;
 
     fn run<R: Recursion>(self, linear: R) -> Self::Output {
-        match self.backlash.padded_step() {
+        let backlash = self.backlash;
+        match backlash.padded_step() {
             Some(step) => self.run_with(linear, step),
-            None => self.run_with(linear, self.backlash),
+            None => self.run_with(linear, backlash),
         }
     }
 }
 
-impl CascadeRun<'_> {
-    /// `collect` on a slice's `map` writes into one exact allocation without capacity checks
-    /// (`push` has them, and its rarely taken call makes the compiler spill the recursion's
-    /// registers). So no early exit: a non-finite x only clears the `finite` flag.
-    /// (`extend` from a slice's `map` is the same exact write, a chunk of samples at a time
-    /// between the interruption checks.)
-    fn run_with<R: Recursion, S: Step>(
-        &self,
-        mut linear: R,
-        backlash: S,
-    ) -> Result<(Vec<f64>, bool)> {
+impl<K: OutputSink> CascadeRun<'_, K> {
+    /// The sink takes each chunk as a slice's `map`: into a vector, `extend` writes it into
+    /// one exact allocation without capacity checks (`push` has them, and its rarely taken
+    /// call makes the compiler spill the recursion's registers). So no early exit: a
+    /// non-finite x only clears the `finite` flag.
+    fn run_with<R: Recursion, S: Step>(self, mut linear: R, backlash: S) -> Result<bool> {
         let mut finite = true;
         let mut y_prev = self.y0;
-        let mut y = guard::buffer(self.u.len(), "y")?;
         for chunk in self.u.chunks(guard::CHUNK) {
             guard::check()?;
-            y.extend(chunk.iter().map(|&ut| {
+            self.sink.take(chunk.iter().map(|&ut| {
                 let xt = linear.next(ut);
                 y_prev = backlash.step(xt, y_prev);
                 finite &= xt.is_finite() & y_prev.is_finite();
                 y_prev
             }));
         }
-        Ok((y, finite))
+        Ok(finite)
     }
 }
 

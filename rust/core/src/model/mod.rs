@@ -10,6 +10,7 @@ pub mod linear;
 pub mod polynomial;
 pub mod sandwich;
 pub mod signal;
+pub mod sink;
 pub mod state_space;
 pub mod switching;
 

@@ -10,6 +10,7 @@ use crate::model::linear::{
     RecursionUser,
 };
 use crate::model::signal::check_signal;
+use crate::model::sink::OutputSink;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct SandwichModel {
@@ -91,6 +92,19 @@ impl SandwichModel {
     /// two stages also spares compiling one loop per pair of block orders.) The checks of
     /// u, x and w ride along as in `CascadeModel::simulate`; on a failure `run` names it.
     pub fn simulate(&self, u: &[f64], state: &SandwichState) -> Result<Vec<f64>> {
+        let mut w = guard::buffer(u.len(), "w")?;
+        self.simulate_into(u, state, &mut w)?;
+        Ok(w)
+    }
+
+    /// `simulate`, its output handed to `sink` block by block instead of kept (the output
+    /// error of a long record in constant memory: `ErrorSum`).
+    pub fn simulate_into(
+        &self,
+        u: &[f64],
+        state: &SandwichState,
+        sink: &mut impl OutputSink,
+    ) -> Result<()> {
         const BLOCK: usize = 256;
         let ready = self.check_state(state);
         if u.is_empty() || ready.is_err() {
@@ -103,7 +117,6 @@ impl SandwichModel {
         };
         let mut x_then_y = self.input_linear.with_recursion(&state.input, first_two);
         let mut output = self.output_linear.with_recursion(&state.output, Boxed);
-        let mut w = guard::buffer(u.len(), "w")?;
         let (mut x_block, mut y_block, mut w_block) = ([0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK]);
         let mut finite = true;
         for (i, u_block) in u.chunks(BLOCK).enumerate() {
@@ -120,10 +133,10 @@ impl SandwichModel {
                 .chain(&*y_block)
                 .chain(&*w_block)
                 .all(|v| v.is_finite());
-            w.extend_from_slice(w_block);
+            sink.take(w_block.iter().copied());
         }
         if finite && u.last().is_some_and(|v| v.is_finite()) {
-            Ok(w)
+            Ok(())
         } else {
             self.run(u, state)?;
             unreachable_error()
