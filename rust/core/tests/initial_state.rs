@@ -267,3 +267,17 @@ fn a_bad_initial_state_is_refused_and_the_iteration_ignores_it() {
     let without = p.iteration(&EXAMPLE1_THETA, false).unwrap(); // theta without the state
     assert_eq!(without.ls.theta, from_rest.ls.theta);
 }
+
+/// The sensitivity walk simulates x a chunk of 2^20 samples at a time; on a record of three
+/// chunks its output equals one whole-record simulation bit for bit (cascade and sandwich).
+#[test]
+fn the_walk_across_chunks_of_x_equals_one_whole_record_simulation() {
+    use backlashid_core::identify::{cascade_sensitivity, sandwich_sensitivity};
+    let u = smooth_input((1 << 21) + 12_345);
+    let m = example1_model();
+    let walked = cascade_sensitivity(&m.linear, &m.backlash, &u).unwrap();
+    assert!(walked.output == m.simulate(&u, &m.rest_state()).unwrap());
+    let m = example2_model();
+    let walked = sandwich_sensitivity(&m.input_linear, &m.backlash, &m.output_linear, &u).unwrap();
+    assert!(walked.output == m.simulate(&u, &m.rest_state()).unwrap());
+}

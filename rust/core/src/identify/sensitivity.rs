@@ -133,7 +133,8 @@ struct ChainStepper<'a> {
     slopes: Option<(PaddedSlope, PaddedSlope)>,
     b: &'a [f64],
     u: &'a [f64],
-    x: Vec<f64>,
+    /// x(t) of the linear block, a chunk at a time: memory bounded on any record length.
+    x: XChunks<'a>,
     lay: Layout,
     /// w_u(t-1), w_u(t-2), .. and w_x(t-1), .. (max(na, nb) lags; 0 before the record).
     wu: Vec<f64>,
@@ -151,7 +152,7 @@ impl<'a> ChainStepper<'a> {
     fn new(
         linear: &'a LinearBlock,
         backlash: &'a GeneralBacklash,
-        start: Option<&Start>,
+        start: Option<&Start<'a>>,
         u: &'a [f64],
         cols: usize,
     ) -> Result<Self> {
@@ -161,10 +162,7 @@ impl<'a> ChainStepper<'a> {
             nb: linear.nb(),
             n,
         };
-        let x = match start {
-            None => linear.simulate(u, &linear.rest_state())?,
-            Some(st) => simulate_from(linear, u, &st.state.x0)?,
-        };
+        let x = XChunks::new(linear, u, start.map(|st| &st.state.x0[..]))?;
         let lags = lay.na.max(lay.nb);
         let mut dy = vec![0.0; cols];
         if let Some(st) = start {
@@ -199,7 +197,7 @@ impl<'a> ChainStepper<'a> {
             None => 0.0,
         };
         let bl = self.backlash;
-        let xt = self.x[t];
+        let xt = self.x.at(t)?;
         let yp = self.y_prev;
         // eq (1) in its case order, each branch evaluated once (`GeneralBacklash::step`)
         let lv = match &self.padded {
@@ -288,6 +286,97 @@ impl<'a> ChainStepper<'a> {
         self.y_prev = yt;
         Ok((yt, mv))
     }
+}
+
+/// Samples of x held at a time (8 MB).
+const X_CHUNK: usize = guard::CHUNK;
+
+/// x of a linear block over a record, from rest or from an initial state x0, simulated
+/// `X_CHUNK` samples at a time: each chunk continues the recursion from the state the
+/// previous one ended in, the same numbers as one simulation of the whole record.
+pub(crate) struct XChunks<'a> {
+    linear: &'a LinearBlock,
+    u: &'a [f64],
+    /// The initial state's parameters x0 (added at the record's first samples), if any.
+    x0: Option<&'a [f64]>,
+    /// x(t) for t in `from..from + x.len()`.
+    x: Vec<f64>,
+    from: usize,
+}
+
+impl<'a> XChunks<'a> {
+    /// The first chunk simulated; errors as one simulation of the whole record reports them.
+    pub(crate) fn new(
+        linear: &'a LinearBlock,
+        u: &'a [f64],
+        x0: Option<&'a [f64]>,
+    ) -> Result<Self> {
+        let x = first_x(linear, &u[..u.len().min(X_CHUNK)], x0)
+            .or_else(|e| whole_x_error(linear, u, x0, e))?;
+        Ok(Self {
+            linear,
+            u,
+            x0,
+            x,
+            from: 0,
+        })
+    }
+
+    /// x(t), for t = 0, 1, ... in order.
+    #[inline(always)]
+    pub(crate) fn at(&mut self, t: usize) -> Result<f64> {
+        if t >= self.from + self.x.len() {
+            self.advance()?;
+        }
+        Ok(self.x[t - self.from])
+    }
+
+    /// `visit(from, x)` for every chunk in order (`from` the index of its first sample).
+    pub(crate) fn each(mut self, mut visit: impl FnMut(usize, &[f64]) -> Result<()>) -> Result<()> {
+        loop {
+            visit(self.from, &self.x)?;
+            if self.from + self.x.len() >= self.u.len() {
+                return Ok(());
+            }
+            self.advance()?;
+        }
+    }
+
+    #[cold]
+    fn advance(&mut self) -> Result<()> {
+        let from = self.from + self.x.len();
+        let u_held = &self.u[self.from..from];
+        let state = self
+            .linear
+            .state_after(&self.linear.rest_state(), u_held, &self.x);
+        let to = (from + X_CHUNK).min(self.u.len());
+        self.x = self
+            .linear
+            .simulate(&self.u[from..to], &state)
+            .or_else(|e| whole_x_error(self.linear, self.u, self.x0, e))?;
+        self.from = from;
+        Ok(())
+    }
+}
+
+/// x over the first samples of a record, from rest or from the initial state x0.
+fn first_x(linear: &LinearBlock, u: &[f64], x0: Option<&[f64]>) -> Result<Vec<f64>> {
+    match x0 {
+        None => linear.simulate(u, &linear.rest_state()),
+        Some(x0) => simulate_from(linear, u, x0),
+    }
+}
+
+/// The error of simulating x over the whole record `u` (which names the sample of the
+/// record, not of a chunk), for a chunk's simulation that failed with `chunk_error`.
+#[cold]
+fn whole_x_error(
+    linear: &LinearBlock,
+    u: &[f64],
+    x0: Option<&[f64]>,
+    chunk_error: Error,
+) -> Result<Vec<f64>> {
+    first_x(linear, u, x0).and(Err(chunk_error))
 }
 
 /// s(t) - sum_k b_k w(t-k), with `lags` = [w(t-1), w(t-2), ..].

@@ -262,6 +262,15 @@ impl TriangularFactor {
         Ok(())
     }
 
+    /// A^T b of the rows folded so far, as R^T (Q^T b) (R_aug^T R_aug = [A | b]^T [A | b]):
+    /// the output-error gradient J^T r of a factor of [J | r].
+    pub fn gradient(&self) -> Vec<f64> {
+        let (p, n) = (self.p, self.p + 1);
+        (0..p)
+            .map(|j| (0..=j).map(|i| self.r[i * n + j] * self.r[i * n + p]).sum())
+            .collect()
+    }
+
     /// The least-squares solution min ||A theta - b|| of the rows folded so far, with the
     /// checks and statistics of `lstsq::solve`.
     pub fn solve(&self, names: &[String]) -> Result<LeastSquares> {
@@ -881,6 +890,20 @@ mod tests {
     impl Lcg {
         fn next(&mut self) -> f64 {
             lcg_unit(&mut self.0) * 2.0 - 1.0
+        }
+    }
+
+    #[test]
+    fn the_factors_gradient_is_a_transpose_b() {
+        let (rows, p) = (3000, 6);
+        let (a, b) = problem(rows, p, 17);
+        let mut factor = TriangularFactor::new(p);
+        factor.fold(&a, &b).unwrap();
+        let want: Vec<f64> = (0..p)
+            .map(|j| (0..rows).map(|r| a[r * p + j] * b[r]).sum())
+            .collect();
+        for (g, w) in factor.gradient().iter().zip(&want) {
+            assert!((g - w).abs() <= 1e-10 * w.abs().max(1.0), "{g} vs {w}");
         }
     }
 
