@@ -49,6 +49,25 @@ def test_the_input_makes_the_scaled_model_follow_the_reference(tmp_path: Path, r
     assert (tmp_path / "figs" / "c.png").stat().st_size > 10_000
 
 
+def test_a_decimated_models_reference_is_filtered_and_decimated_as_its_records_were(tmp_path: Path) -> None:
+    # a reference with a fast ripple the decimated model never saw: it comes out filtered, at
+    # the model's rate, and the output says so and how to apply u
+    t = np.arange(1200)
+    ripple = 0.3 * np.sin(2 * np.pi * t / 3.0)
+    reference = tmp_path / "reference.csv"
+    np.savetxt(reference, np.column_stack([t, np.sin(2 * np.pi * t / 400) + ripple]), delimiter=",", header="t,position", comments="")
+    fit_file = tmp_path / "fit.json"
+    fit_file.write_text(json.dumps({"model": bx.example1().to_dict(), "data": {"decimate": 4}}))
+    out = tmp_path / "u.csv"
+    res = run("compensate", fit_file, reference, "-r", "position", "--out", out)
+    assert res.exit_code == 0, res.output
+    cols = read(out)
+    assert len(cols["reference"]) == 300
+    slow = np.sin(2 * np.pi * t[::4] / 400)
+    assert np.max(np.abs(cols["reference"][20:-20] - slow[20:-20])) < 0.05  # the ripple (0.3) filtered out
+    assert "low-pass filtered and decimated by 4" in res.output and "hold each value for 4 samples" in res.output
+
+
 def test_offset_range_and_threshold(tmp_path: Path, reference_file: Path) -> None:
     model_file = tmp_path / "model.json"
     model_file.write_text(bx.example2().to_json())

@@ -630,7 +630,9 @@ def compensate(model_file: Path, reference_file: Path, column: str, range_: str 
     d = compensator.delay
     error = columns["y_model"][d:] - record.u[d:]
     rmse = float(np.sqrt(np.mean(error**2))) if error.size else float("nan")
-    click.echo(f"computed the input for {len(record)} samples of {record.source}" + (f" (decimated by {factor})" if factor > 1 else "")
+    decimated = (f" (the reference low-pass filtered and decimated by {factor} as the model's records were; u is at that rate: "
+                 f"hold each value for {factor} samples)") if factor > 1 else ""
+    click.echo(f"computed the input for {len(record)} samples of {record.source}" + decimated
                + f"; preview {d} sample{'s' if d != 1 else ''} (u[t] aims at reference[t + {d}])"
                + ("; a linear block is non-minimum phase: its inverse is the stable approximation" if compensator.approximate else ""))
     click.echo(f"tracking RMSE of the model's simulated output after the first {d} samples: {rmse:.6g} (simulation on the model)")
