@@ -243,6 +243,9 @@ fn motion_is_the_models_moving_count_and_x_range_with_or_without_a_gradient_pass
             p.gradient(&theta).unwrap();
             let after = p.motion(&theta).unwrap();
             assert_eq!((after.moving, after.x_min, after.x_max), want);
+            p.oe_factor(&theta).unwrap(); // the factor's walk leaves its motion too
+            let folded = p.motion(&theta).unwrap();
+            assert_eq!((folded.moving, folded.x_min, folded.x_max), want);
         }
     }
     // the sandwich: the input block's x and the backlash, as SandwichModel counts them
@@ -270,8 +273,9 @@ fn motion_is_the_models_moving_count_and_x_range_with_or_without_a_gradient_pass
 }
 
 /// A record longer than `BUFFERED_GRADIENT_SAMPLES` (three chunks of x): the gradient comes
-/// from the output-error factor and the motion from x simulated a chunk at a time; both agree
-/// with the buffered reverse pass and the model's own count over the whole record.
+/// from the output-error factor (walked in two halves) and the motion from that walk; both
+/// agree with the buffered reverse pass and the model's own count over the whole record, as
+/// does the motion of x simulated a chunk at a time (another theta, no walk before it).
 #[test]
 fn a_long_record_has_the_gradient_and_motion_of_the_buffered_passes() {
     use backlashid_core::identify::problem::BUFFERED_GRADIENT_SAMPLES;
@@ -304,4 +308,50 @@ fn a_long_record_has_the_gradient_and_motion_of_the_buffered_passes() {
         (motion.moving, motion.x_min, motion.x_max),
         motion_by_hand(&x, count, warmup)
     );
+    let (lin, bl) = cascade_blocks(&EXAMPLE1_THETA);
+    let m = CascadeModel::new(lin.clone(), bl);
+    let x = lin.simulate(&u, &lin.rest_state()).unwrap();
+    let count = m.moving_count(&u, &m.rest_state(), warmup).unwrap();
+    let motion = p.motion(&EXAMPLE1_THETA).unwrap();
+    assert_eq!(
+        (motion.moving, motion.x_min, motion.x_max),
+        motion_by_hand(&x, count, warmup)
+    );
+}
+
+/// From 2^21 samples the cascade's factor walks two halves on two threads, the second from a
+/// guessed state that must meet the exact walk: the factor equals the one-thread walk's to
+/// rounding; where the record stands still around the meeting point (the guessed backlash
+/// memory never meets the exact one) it falls back on the one-pass walk, bit for bit.
+#[test]
+fn the_factor_walked_in_two_halves_equals_the_one_pass_walk() {
+    use backlashid_core::identify::sensitivity::cascade_oe_factor_threads;
+    let n = (1 << 21) + 1000;
+    let mut u = input(n);
+    let y = noisy(
+        &example1_model()
+            .simulate(&u, &example1_model().rest_state())
+            .unwrap(),
+        6,
+    );
+    let theta = perturbed(EXAMPLE1_THETA);
+    let (lin, bl) = cascade_blocks(&theta);
+    let one = cascade_oe_factor_threads(&lin, &bl, &u, &y, 50, 1).unwrap();
+    let two = cascade_oe_factor_threads(&lin, &bl, &u, &y, 50, 2).unwrap();
+    let scale = one.0.r_aug().iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    for (a, b) in two.0.r_aug().iter().zip(one.0.r_aug()) {
+        assert!((a.abs() - b.abs()).abs() <= 1e-9 * scale, "{a} vs {b}");
+    }
+    assert!((two.1 - one.1).abs() <= 1e-11 * one.1);
+    assert_eq!(two.0.rows(), one.0.rows());
+    assert!(
+        two != one,
+        "the halves ran (their merge differs from one pass by rounding)"
+    );
+    for v in &mut u[n / 2 - 6000..n / 2 + 6000] {
+        *v = 0.0;
+    }
+    let one = cascade_oe_factor_threads(&lin, &bl, &u, &y, 50, 1).unwrap();
+    let two = cascade_oe_factor_threads(&lin, &bl, &u, &y, 50, 2).unwrap();
+    assert_eq!(two, one);
 }

@@ -76,6 +76,15 @@ impl Motion {
         }
     }
 
+    /// The motion of two sets of samples.
+    pub(crate) fn join(&self, other: &Motion) -> Motion {
+        Motion {
+            moving: self.moving + other.moving,
+            x_min: self.x_min.min(other.x_min),
+            x_max: self.x_max.max(other.x_max),
+        }
+    }
+
     /// Add samples: their x and case (f1 + 2 f2, 0 when holding).
     #[inline]
     pub(crate) fn add(&mut self, x: &[f64], case: &[u8]) {

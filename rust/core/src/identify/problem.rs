@@ -29,7 +29,8 @@ use crate::identify::initial::{self, InitialState, Start};
 use crate::identify::regressor::solve_factor;
 use crate::identify::samples::Samples;
 use crate::identify::sensitivity::{
-    cascade_oe_factor_from, oe_threads, sandwich_oe_factor_from, XChunks,
+    cascade_oe_factor_from, cascade_oe_factor_motion_from, oe_threads, sandwich_oe_factor_from,
+    XChunks,
 };
 use crate::identify::{finite_cost, output_error_cost};
 use crate::identify::{CascadeRegression, SandwichRegression};
@@ -765,8 +766,24 @@ impl Problem {
     pub fn oe_factor(&self, theta: &[f64]) -> Result<(TriangularFactor, f64)> {
         let all = self.unpack_all(theta)?;
         let p0 = self.structure.model_size();
-        if self.records.len() == 1 {
-            return self.record_factor(&all[0].0, &self.records[0], p0);
+        if let ([(b, _)], [rec]) = (&all[..], &self.records[..]) {
+            if b.output.is_none() {
+                // the cascade's walk has the motion too: kept for `motion` at this theta
+                let (u, y, threads) = (&rec.u[..], &rec.y[..], oe_threads(rec.u.len()));
+                let start = Self::start(b, p0);
+                let (factor, cost, motion) = cascade_oe_factor_motion_from(
+                    &b.linear,
+                    &b.backlash,
+                    start.as_ref(),
+                    u,
+                    y,
+                    rec.warmup,
+                    threads,
+                )?;
+                *self.motion.lock() = Some((theta.to_vec(), motion));
+                return Ok((factor, cost));
+            }
+            return self.record_factor(b, rec, p0);
         }
         let mut parts = Vec::with_capacity(all.len());
         let (mut cost, mut rows) = (0.0, 0);

@@ -13,9 +13,12 @@
 
 use crate::error::{Error, Result};
 use crate::guard;
+use crate::identify::gradient::Motion;
 use crate::identify::initial::{simulate_from, start_cols, Start};
 use crate::identify::problem::Layout;
-use crate::linalg::streaming::{default_threads, fold_stream, fold_stream_parts, TriangularFactor};
+use crate::linalg::streaming::{
+    default_threads, fold_stream, fold_stream_parts, RowSink, StreamedParts, TriangularFactor,
+};
 use crate::model::backlash::{GeneralBacklash, PaddedSlope, PaddedStep};
 use crate::model::linear::LinearBlock;
 use crate::model::signal::{check_same_length, check_signal};
@@ -141,6 +144,8 @@ struct ChainStepper<'a> {
     wx: Vec<f64>,
     /// dy(t) after `step(t)` (dy(t-1) before it).
     dy: Vec<f64>,
+    /// x(t) after `step(t)`.
+    xt: f64,
     y_prev: f64,
     /// With an initial state: the column of x0_1 and g(t-1), g(t-2), .. (n lags), g the
     /// impulse response of 1/B, dx(t)/dx0_k = g(t-k) (0-based t, k = 0..n).
@@ -156,18 +161,50 @@ impl<'a> ChainStepper<'a> {
         u: &'a [f64],
         cols: usize,
     ) -> Result<Self> {
+        let x = XChunks::new(linear, u, start.map(|st| &st.state.x0[..]))?;
+        let mut chain = Self::with_x(linear, backlash, start, u, cols, x)?;
+        if let Some(st) = start {
+            chain.dy[st.y_prev_col()] = 1.0; // dy(-1)/dy_prev: y(0) is the memory itself
+            chain.y_prev = st.state.y_prev;
+        }
+        Ok(chain)
+    }
+
+    /// A walk of the samples from `from` on started from a guess (every past and lag zero, the
+    /// memory y 0), to be checked against the exact walk where the two meet (`snapshot`): the
+    /// linear recursions forget their start as the poles' powers, the backlash at its first
+    /// move across the band. None where the guessed walk's x overflows.
+    fn guessed(
+        linear: &'a LinearBlock,
+        backlash: &'a GeneralBacklash,
+        start: Option<&Start<'a>>,
+        u: &'a [f64],
+        cols: usize,
+        from: usize,
+    ) -> Result<Option<Self>> {
+        match XChunks::from_rest_at(linear, u, from) {
+            Some(x) => Self::with_x(linear, backlash, start, u, cols, x).map(Some),
+            None => Ok(None),
+        }
+    }
+
+    /// The walk over x, every lag zero, the memory y 0 (the initial state's columns, if any,
+    /// after the model's).
+    fn with_x(
+        linear: &'a LinearBlock,
+        backlash: &'a GeneralBacklash,
+        start: Option<&Start<'a>>,
+        u: &'a [f64],
+        cols: usize,
+        x: XChunks<'a>,
+    ) -> Result<Self> {
         let n = branch_degree(backlash)?;
         let lay = Layout {
             na: linear.na(),
             nb: linear.nb(),
             n,
         };
-        let x = XChunks::new(linear, u, start.map(|st| &st.state.x0[..]))?;
         let lags = lay.na.max(lay.nb);
-        let mut dy = vec![0.0; cols];
-        if let Some(st) = start {
-            dy[st.y_prev_col()] = 1.0; // dy(-1)/dy_prev: y(0) is the memory itself
-        }
         Ok(Self {
             backlash,
             padded: backlash.padded_step(),
@@ -177,11 +214,24 @@ impl<'a> ChainStepper<'a> {
             x,
             wu: vec![0.0; lags],
             wx: vec![0.0; lags],
-            dy,
+            dy: vec![0.0; cols],
+            xt: 0.0,
             lay,
-            y_prev: start.map_or(0.0, |st| st.state.y_prev),
+            y_prev: 0.0,
             init_col: start.map(|st| st.col),
             g: vec![0.0; start.map_or(0, Start::nx)],
+        })
+    }
+
+    /// The walk's state after sample t: the last x values, y(t), the lags and dy(t).
+    fn snapshot(&self, t: usize, on_right: bool) -> Option<WalkState> {
+        let lags = self.lay.na.max(self.lay.nb);
+        Some(WalkState {
+            x: self.x.recent(t, lags)?.to_vec(),
+            y: self.y_prev,
+            lags: [&self.wu[..], &self.wx[..], &self.g[..]].concat(),
+            dy: self.dy.clone(),
+            on_right,
         })
     }
 
@@ -198,6 +248,7 @@ impl<'a> ChainStepper<'a> {
         };
         let bl = self.backlash;
         let xt = self.x.at(t)?;
+        self.xt = xt;
         let yp = self.y_prev;
         // eq (1) in its case order, each branch evaluated once (`GeneralBacklash::step`)
         let lv = match &self.padded {
@@ -329,6 +380,26 @@ impl<'a> XChunks<'a> {
             self.advance()?;
         }
         Ok(self.x[t - self.from])
+    }
+
+    /// x from sample `from` on, the linear block started there at rest (a guess: see
+    /// `ChainStepper::guessed`); None where it overflows.
+    fn from_rest_at(linear: &'a LinearBlock, u: &'a [f64], from: usize) -> Option<Self> {
+        let to = (from + X_CHUNK).min(u.len());
+        let x = linear.simulate(&u[from..to], &linear.rest_state()).ok()?;
+        Some(Self {
+            linear,
+            u,
+            x0: None,
+            x,
+            from,
+        })
+    }
+
+    /// x(t - k + 1..=t), if the chunk held has them.
+    fn recent(&self, t: usize, k: usize) -> Option<&[f64]> {
+        let end = (t + 1).checked_sub(self.from)?;
+        self.x.get(end.checked_sub(k)?..end)
     }
 
     /// `visit(from, x)` for every chunk in order (`from` the index of its first sample).
@@ -468,8 +539,8 @@ pub fn cascade_oe_factor_threads(
     cascade_oe_factor_from(linear, backlash, None, u, y, warmup, threads)
 }
 
-/// `cascade_oe_factor_threads` of a record checked before (`Problem`) from an initial state (its columns after the model's), or from
-/// rest (None).
+/// `cascade_oe_factor_threads` of a record checked before (`Problem`) from an initial state
+/// (its columns after the model's), or from rest (None).
 pub(crate) fn cascade_oe_factor_from(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
@@ -479,6 +550,21 @@ pub(crate) fn cascade_oe_factor_from(
     warmup: usize,
     threads: usize,
 ) -> Result<(TriangularFactor, f64)> {
+    cascade_oe_factor_motion_from(linear, backlash, start, u, y, warmup, threads)
+        .map(|(factor, cost, _)| (factor, cost))
+}
+
+/// `cascade_oe_factor_from` with the record's `Motion` over t >= warmup at theta (the walk's
+/// x and cases).
+pub(crate) fn cascade_oe_factor_motion_from(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    start: Option<&Start>,
+    u: &[f64],
+    y: &[f64],
+    warmup: usize,
+    threads: usize,
+) -> Result<(TriangularFactor, f64, Motion)> {
     let model = cascade_cols(linear, backlash);
     let cols = model + start_cols(start);
     let nl = linear.na() + linear.nb();
@@ -487,27 +573,52 @@ pub(crate) fn cascade_oe_factor_from(
     let split = nl + backlash.left().coefficients().len();
     let left: Vec<usize> = (0..split).chain(model..cols).collect();
     let right: Vec<usize> = (0..nl).chain(split..cols).collect();
-    let streamed = fold_stream_parts(&[left.len(), right.len()], threads, |sink| {
-        let mut on_right = false; // the branch of dy (before any move: only y_prev's column)
-        walk_cascade(linear, backlash, start, u, |t, yt, mv, dy| {
-            match mv {
-                Move::Left => on_right = false,
-                Move::Right => on_right = true,
-                Move::Hold => {}
-            }
-            if t < warmup {
-                return Ok(());
-            }
-            let r = y[t] - yt;
-            if mv == Move::Hold && sink.repeat(r) {
-                return Ok(());
-            }
-            match on_right {
-                false => sink.push_part(0, &[&dy[..split], &dy[model..]], r),
-                true => sink.push_part(1, &[&dy[..nl], &dy[split..]], r),
-            }
-        })
-    })?;
+    // the rows of sample t into their branch's part (`on_right` the branch of dy; before any
+    // move only y_prev's column), its x and case into the motion
+    let feed = |sink: &mut RowSink, walked: &mut Walked, t: usize, chain: &ChainStepper| {
+        let (yt, mv) = (chain.y_prev, walked.mv);
+        match mv {
+            Move::Left => walked.on_right = false,
+            Move::Right => walked.on_right = true,
+            Move::Hold => {}
+        }
+        if t < warmup {
+            return Ok(());
+        }
+        walked
+            .motion
+            .add(&[chain.xt], &[u8::from(mv != Move::Hold)]);
+        let (r, dy) = (y[t] - yt, &chain.dy);
+        if mv == Move::Hold && sink.repeat(r) {
+            return Ok(());
+        }
+        match walked.on_right {
+            false => sink.push_part(0, &[&dy[..split], &dy[model..]], r),
+            true => sink.push_part(1, &[&dy[..nl], &dy[split..]], r),
+        }
+    };
+    let widths = [left.len(), right.len()];
+    let halves = match time_split(linear, u.len(), threads) {
+        Some((m, lead)) => {
+            walk_in_halves(linear, backlash, start, u, cols, &widths, m, lead, &feed)?
+        }
+        None => None,
+    };
+    let (streamed, motion) = match halves {
+        Some(halves) => halves,
+        None => {
+            let mut walked = Walked::new();
+            let streamed = fold_stream_parts(&widths, threads, |sink| {
+                let mut chain = ChainStepper::new(linear, backlash, start, u, cols)?;
+                for t in 0..u.len() {
+                    walked.mv = chain.step(t)?.1;
+                    feed(sink, &mut walked, t, &chain)?;
+                }
+                Ok(())
+            })?;
+            (streamed, walked.motion)
+        }
+    };
     let factor = TriangularFactor::embed_sum(
         cols,
         &[
@@ -517,7 +628,151 @@ pub(crate) fn cascade_oe_factor_from(
         streamed.rows,
         streamed.dispersion,
     );
-    finish(factor.map(|f| (f, streamed.sum_squares)))
+    finish(factor.map(|f| (f, streamed.sum_squares))).map(|(f, c)| (f, c, motion))
+}
+
+/// What a walk that feeds a factor carries from sample to sample: the case of the sample just
+/// stepped, the branch of dy and the motion so far.
+struct Walked {
+    mv: Move,
+    on_right: bool,
+    motion: Motion,
+}
+
+impl Walked {
+    fn new() -> Self {
+        Self {
+            mv: Move::Hold,
+            on_right: false,
+            motion: Motion::empty(),
+        }
+    }
+}
+
+/// Records from which the cascade's factor walks its two halves on two threads (each walk is
+/// about four fifths of a one-thread factor's time).
+const TIME_SPLIT_FROM: usize = 1 << 21;
+
+/// (M, lead): the second half's rows start at M, its walk `lead` samples earlier from a
+/// guessed state (the poles' powers below 1e-20 over the lead); None for one thread, short
+/// records or slow poles.
+fn time_split(linear: &LinearBlock, len: usize, threads: usize) -> Option<(usize, usize)> {
+    let rho = linear.spectral_radius();
+    if threads < 2 || len < TIME_SPLIT_FROM || rho.is_nan() || rho >= 1.0 {
+        return None;
+    }
+    let forget = if rho > 0.0 {
+        (1e-20f64.ln() / rho.ln()).ceil()
+    } else {
+        1.0
+    };
+    let lead = (4.0 * forget).max(4096.0) as usize;
+    (lead <= len / 8).then_some(((len + lead) / 2, lead))
+}
+
+/// The walk's state after a sample (`ChainStepper::snapshot`).
+struct WalkState {
+    x: Vec<f64>,
+    y: f64,
+    lags: Vec<f64>,
+    dy: Vec<f64>,
+    on_right: bool,
+}
+
+impl WalkState {
+    /// Equal to rounding: each vector within 1e-12 of its largest value.
+    fn meets(&self, exact: &WalkState) -> bool {
+        let close = |a: &[f64], b: &[f64]| {
+            let scale = b.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+            a.len() == b.len() && a.iter().zip(b).all(|(p, q)| (p - q).abs() <= 1e-12 * scale)
+        };
+        self.on_right == exact.on_right
+            && close(&[self.y], &[exact.y])
+            && close(&self.x, &exact.x)
+            && close(&self.lags, &exact.lags)
+            && close(&self.dy, &exact.dy)
+    }
+}
+
+/// The factor's rows of samples < M walked on this thread and those >= M on a second one,
+/// whose walk starts `lead` samples before M from a guess; their parts merged when the
+/// guessed walk has met the exact one at M (else None: the caller walks the record in one
+/// pass, which also reports any error of the guessed part). The result differs from the
+/// one-pass walk's by rounding.
+#[allow(clippy::too_many_arguments)]
+fn walk_in_halves<F>(
+    linear: &LinearBlock,
+    backlash: &GeneralBacklash,
+    start: Option<&Start>,
+    u: &[f64],
+    cols: usize,
+    widths: &[usize],
+    m: usize,
+    lead: usize,
+    feed: &F,
+) -> Result<Option<(StreamedParts, Motion)>>
+where
+    F: Fn(&mut RowSink, &mut Walked, usize, &ChainStepper) -> Result<()> + Sync,
+{
+    let stop = guard::scope();
+    std::thread::scope(|scope| {
+        let tail = scope.spawn(
+            move || -> Result<Option<(WalkState, StreamedParts, Motion)>> {
+                guard::adopt(stop);
+                let guessed = ChainStepper::guessed(linear, backlash, start, u, cols, m - lead)?;
+                let Some(mut chain) = guessed else {
+                    return Ok(None);
+                };
+                let mut walked = Walked::new();
+                for t in m - lead..m {
+                    match chain.step(t) {
+                        Ok((_, Move::Left)) => walked.on_right = false,
+                        Ok((_, Move::Right)) => walked.on_right = true,
+                        Ok(_) => {}
+                        Err(_) => return Ok(None),
+                    }
+                }
+                let Some(at_m) = chain.snapshot(m - 1, walked.on_right) else {
+                    return Ok(None);
+                };
+                let parts = fold_stream_parts(widths, 1, |sink| {
+                    for t in m..u.len() {
+                        walked.mv = chain.step(t)?.1;
+                        feed(sink, &mut walked, t, &chain)?;
+                    }
+                    Ok(())
+                });
+                Ok(parts.ok().map(|p| (at_m, p, walked.motion)))
+            },
+        );
+        let mut chain = ChainStepper::new(linear, backlash, start, u, cols)?;
+        let mut walked = Walked::new();
+        let mut head = fold_stream_parts(widths, 1, |sink| {
+            for t in 0..m {
+                walked.mv = chain.step(t)?.1;
+                feed(sink, &mut walked, t, &chain)?;
+            }
+            Ok(())
+        })?;
+        let exact = chain.snapshot(m - 1, walked.on_right);
+        let tail = match tail.join() {
+            Ok(tail) => tail?,
+            Err(panic) => std::panic::resume_unwind(panic),
+        };
+        let (Some(exact), Some((guessed, tail, tail_motion))) = (exact, tail) else {
+            return Ok(None);
+        };
+        if !guessed.meets(&exact) {
+            return Ok(None);
+        }
+        for (h, t) in head.factors.iter_mut().zip(&tail.factors) {
+            h.merge(t)?;
+        }
+        head.rows += tail.rows;
+        head.sum_squares += tail.sum_squares;
+        head.dispersion += tail.dispersion;
+        Ok(Some((head, walked.motion.join(&tail_motion))))
+    })
 }
 
 /// The cascade's output y(t), its case and Jacobian row dy(t), handed to `visit(t, y(t),
