@@ -40,6 +40,41 @@ def test_a_fit_whose_branches_cross_warns():
     assert all(w.filename == __file__ for w in caught)
 
 
+def test_valid_keeps_the_fit_a_backlash_on_the_range_it_visits_and_says_so():
+    # the crossing fit above, asked to stay a backlash: the search continues from the
+    # degree-4 fit among models whose branches increase and do not cross where x goes
+    data = bid.example_data(bid.example1(), 300, snr=3, seed=37)
+    with pytest.warns(FitWarning) as caught:
+        result = bid.fit_cascade(data.u, data.noisy, degree=5, valid=True)
+    x = result.model.simulate(data.u, internals=True).x
+    assert result.model.backlash.check_branches(x.min(), x.max()).is_valid
+    assert result.converged and result.model.backlash.degree == 5
+    texts = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
+    said = [t for t in texts if "the best fit of degree 5 is no backlash: branch R does not increase on x in [" in t]
+    assert len(said) == 1 and "the result is the best valid model found from the degree-4 fit" in said[0]
+    assert "whose branches increase and do not cross on the x range visited" in said[0]
+    assert not [t for t in texts if "try a lower degree, a longer record" in t]  # the result's own branches hold
+    with pytest.raises(bid.DataError, match="valid"):
+        bid.fit_cascade(data.u, data.noisy, valid="yes")
+
+
+def test_select_structure_keeps_its_candidates_backlashes_unless_told_otherwise():
+    # seed 37 at 430 samples: the head's (70 %) unconstrained degree-5 fit crosses where x goes;
+    # the selection's candidate is the constrained fit unless valid=False is given
+    data = bid.example_data(bid.example1(), 430, snr=3, seed=37)
+    head = int(round(0.7 * 430))
+    u, y = data.u[:head], data.noisy[:head]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        kept = bid.select_structure(data.u, data.noisy, na=2, nb=2, degree=5, refit=False)
+        free = bid.select_structure(data.u, data.noisy, na=2, nb=2, degree=5, refit=False, valid=False)
+        constrained, unconstrained = bid.fit_cascade(u, y, degree=5, valid=True), bid.fit_cascade(u, y, degree=5)
+    assert kept.fit.parameters == constrained.parameters and free.fit.parameters == unconstrained.parameters
+    for fit, valid in ((kept.fit, True), (free.fit, False)):
+        x = fit.model.simulate(u, internals=True).x
+        assert fit.model.backlash.check_branches(x.min(), x.max()).is_valid is valid
+
+
 def test_the_branch_check_on_a_constructed_model():
     # L(x) = (x + 0.1) - (x + 0.1)^3 increases only for |x + 0.1| < 1/sqrt(3): valid across
     # the dead band, turning inside the range a unit-amplitude input drives

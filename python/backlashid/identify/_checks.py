@@ -23,10 +23,13 @@ def _intervals(found: list[tuple[float, float]]) -> str:
     return ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in found)
 
 
-def branch_problems(model: Any, u: NDArray[np.float64], warmup: int, x_range: tuple[float, float] | None = None) -> str | None:
+def branch_problems(
+    model: Any, u: NDArray[np.float64], warmup: int, x_range: tuple[float, float] | None = None, advice: bool = True
+) -> str | None:
     """What is wrong with the fitted branches on the x range the record visits (after the
     warm-up), in words, or None when both increase and do not cross there. ``x_range``: that
-    range (finite) where the fit has it already, else x is simulated."""
+    range (finite) where the fit has it already, else x is simulated. Without ``advice``: what
+    is wrong and the range only."""
     if x_range is not None:
         lo, hi = x_range
     else:
@@ -53,6 +56,8 @@ def branch_problems(model: Any, u: NDArray[np.float64], warmup: int, x_range: tu
             parts.append(f"branch {name} does not increase on x in {_intervals(found)}")
     if check.crossed:
         parts.append(f"the branches cross (L(x) <= R(x)) on x in {_intervals(check.crossed)}")
+    if not advice:
+        return "; ".join(parts) + f" inside the range of x visited [{check.x_min:.4g}, {check.x_max:.4g}]"
     return (
         "; ".join(parts)
         + f", inside the range of x the data visit [{check.x_min:.4g}, {check.x_max:.4g}]: the estimate is no "

@@ -767,7 +767,7 @@ def _check_options(arguments: dict[str, Any]) -> None:
     a = arguments
     check_choice(a["initial_state"], "initial_state", ("rest", "estimate"))
     check_choice(a["switching"], "switching", ("measured", "simulated"))
-    for name in ("refine", "paper"):
+    for name in ("refine", "paper", "valid"):
         check_flag(a[name], name)
     if not is_real(a["step"]):
         raise DataError(f"step = {shown(a['step'])}: give a step factor in (0, 1]")
@@ -810,6 +810,7 @@ def _fit(
     coarse: int | None = None,
     initial_state: str = "rest",
     time_budget: float | None = None,
+    valid: bool = False,
 ) -> FitResult:
     arguments = dict(locals())  # the call, for a fit of lower degree (_lower_degree_fallback)
     _check_options(arguments)
@@ -896,13 +897,13 @@ def _fit(
     why = guard = None
     checked: tuple[NDArray[np.float64], float | None] | None = None  # a theta and its moving fraction
     if refined is not None and structure.degree > 1:
-        why, moved = acceptable_motion(structure, whole, refined.theta, u_arr, user_warmup, min_moving)
+        why, moved = acceptable_motion(structure, whole, refined.theta, u_arr, user_warmup, min_moving, valid)
         checked = refined.theta, moved
         lower = _lower_degree_fallback(structure, whole, u_arr, user_warmup, min_moving, arguments) if why else None
         if lower is None:
             why = None
         else:
-            refined, guard = lower, (u_arr, user_warmup, min_moving)
+            refined, guard = lower, (u_arr, user_warmup, min_moving, valid)
     state: dict[str, float] | list[dict[str, float]] | None = None
     if initial_state == "estimate" and refined is not None:
         # the shifted record's first `shift` samples are zeros, right only from rest
@@ -914,10 +915,10 @@ def _fit(
 
         kept = refined
         refined, state = with_state(kept, guard)  # type: ignore[assignment]
-        if guard is None and why_not_acceptable(structure, whole, refined.theta, u_arr, user_warmup, min_moving) is not None:
-            if why_not_acceptable(structure, whole, kept.theta, u_arr, user_warmup, min_moving) is None:
+        if guard is None and why_not_acceptable(structure, whole, refined.theta, u_arr, user_warmup, min_moving, valid) is not None:
+            if why_not_acceptable(structure, whole, kept.theta, u_arr, user_warmup, min_moving, valid) is None:
                 # the state's refinement left the valid models: again, kept among them
-                refined, state = with_state(kept, (u_arr, user_warmup, min_moving))  # type: ignore[assignment]
+                refined, state = with_state(kept, (u_arr, user_warmup, min_moving, valid))  # type: ignore[assignment]
         state = [state] if several and isinstance(state, dict) else state  # one dict per record
     theta, steps = (refined.theta, refined.iterations) if refined is not None else (theta_iter, 0)
     # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
@@ -1010,7 +1011,9 @@ def _fit(
         warnings.warn(
             f"{'fit_sandwich' if structure.is_sandwich else 'fit_cascade'}: the best fit of degree {structure.degree} {why}; "
             f"the result is the best valid model found from the degree-{structure.degree - 1} fit, the search kept among "
-            "valid backlash models that move (it may lie on their boundary: a branch turning at the dead band's edge)",
+            "valid backlash models that move"
+            + (" and whose branches increase and do not cross on the x range visited" if valid else "")
+            + " (it may lie on their boundary: a branch turning at the dead band's edge)",
             FitWarning,
             stacklevel=4,
         )
@@ -1030,7 +1033,8 @@ def _lower_degree_fallback(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
             lower = _fit(**lower_args)
-        return levenberg_marquardt(ValidOnly(whole, structure, u, warmup, min_moving), structure.pack(lower.model))  # type: ignore[arg-type]
+        guarded = ValidOnly(whole, structure, u, warmup, min_moving, arguments["valid"])
+        return levenberg_marquardt(guarded, structure.pack(lower.model))  # type: ignore[arg-type]
     except BacklashIdError:
         return None
 
@@ -1065,7 +1069,7 @@ def _refine_with_state(
     restarts: int,
     perturbation: float,
     seed: int,
-    guard: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float] | None = None,
+    guard: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool] | None = None,
 ) -> tuple[_StateFit, dict[str, float] | list[dict[str, float]]]:
     """The output-error refinement of the model's estimate with the record's initial state as
     further parameters, from the state x0 = 0, w0 = 0 and (cascade) y_prev at the first
@@ -1079,7 +1083,7 @@ def _refine_with_state(
     if not structure.is_sandwich:
         for k, first in _records.y_prev_starts(names, y, warmup):
             start[k] = first
-    if guard is not None:  # (u, warm-up, min_moving): kept among valid models that move (_valid.py)
+    if guard is not None:  # (u, warm-up, min_moving, branches): kept among valid models that move (_valid.py)
         prob = ValidOnly(prob, with_state, *guard)  # type: ignore[assignment]
         # the state first, the model held: on the boundary of the valid models the joint
         # steps are rejected, and the state would stay at its start
@@ -1190,7 +1194,13 @@ time_budget : float, optional
     ``NotConvergedError`` whose ``best`` and ``best_stable`` hold its best estimate so far.
     None (the default): no limit, since the time grows with the record (a default limit
     would fail long records that converge); ``max_iter`` bounds the paper's iterations and
-    each search is bounded in iterations anyway. Ctrl-C interrupts a fit at any time."""
+    each search is bounded in iterations anyway. Ctrl-C interrupts a fit at any time.
+valid : bool, default False
+    Keep the result a backlash on the range of x the record visits: where the best fit's
+    branches fall or cross there (a FitWarning by default), the fit continues from the fit of
+    the next lower degree with the search kept among models whose branches increase and do
+    not cross on the visited range (and that are stable and move), and says so in a
+    FitWarning. Degree 1 is never replaced. ``select_structure`` fits with it on."""
 _DATA_DOC = """u : array_like or list of array_like
     Input u(t), 1-D, finite; or a list of records of one system (several experiments), fitted
     as one model: one parameter vector, each record run from its own start (``warmup`` and
@@ -1221,7 +1231,7 @@ NotConvergedError
     ``time_budget``; its ``best`` holds it."""
 _OPTIONS = (
     "starts", "max_iter", "tol", "refine", "paper", "warmup", "min_moving", "restarts", "perturbation", "seed", "coarse", "initial_state",
-    "time_budget",
+    "time_budget", "valid",
 )
 
 

@@ -334,7 +334,9 @@ def select_structure(
     **options
         Further keywords of :func:`fit_cascade` / :func:`fit_sandwich` (``max_iter``,
         ``feedthrough``, ``min_moving``, ``initial_state``, ...), passed to every candidate's
-        fit (an input backlash takes no ``feedthrough``).
+        fit (an input backlash takes no ``feedthrough``). ``valid`` is on unless given
+        (``valid=False``): a candidate whose branches fall or cross on the x range it visits
+        is replaced by its constrained fit, a backlash there.
 
     Returns
     -------
@@ -386,6 +388,7 @@ def select_structure(
     warmup = check_warmup(warmup, n_est)
     n_fit = n_est - warmup
     feedthrough = bool(options.get("feedthrough", False))
+    options = {"valid": True, **options}  # every candidate a backlash where it is used
     u_est, y_est = u_arr[:n_est], y_arr[:n_est]
 
     candidates: list[tuple[str, int, int, int, int, int]] = []

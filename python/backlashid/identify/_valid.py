@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from ..errors import BacklashIdError, ModelError
 from . import _records
+from ._checks import branch_problems
 from ._structure import Structure
 
 __all__ = ["ValidOnly", "acceptable_motion", "record_motion", "why_not_acceptable"]
@@ -57,10 +58,13 @@ def why_not_acceptable(
     u: NDArray[np.float64] | list[NDArray[np.float64]],
     warmup: int,
     min_moving: float,
+    branches: bool = False,
 ) -> str | None:
     """None for a stable, valid model that moves the backlash on at least ``min_moving`` of
-    the samples after ``warmup`` (from rest; over every record of a list), else what is wrong."""
-    return acceptable_motion(structure, prob, theta, u, warmup, min_moving)[0]
+    the samples after ``warmup`` (from rest; over every record of a list) and, with
+    ``branches``, whose branches increase and do not cross on the x range it visits there;
+    else what is wrong."""
+    return acceptable_motion(structure, prob, theta, u, warmup, min_moving, branches)[0]
 
 
 def acceptable_motion(
@@ -70,6 +74,7 @@ def acceptable_motion(
     u: NDArray[np.float64] | list[NDArray[np.float64]],
     warmup: int,
     min_moving: float,
+    branches: bool = False,
 ) -> tuple[str | None, float | None]:
     """:func:`why_not_acceptable` and the moving fraction it found (None if it stopped
     before simulating), which the fit reports without simulating the record again."""
@@ -86,18 +91,36 @@ def acceptable_motion(
         return f"does not simulate ({exc})", None
     if moving < min_moving:
         return f"moves the backlash on only {100 * moving:.1f} % of samples (min_moving = {min_moving:g})", moving
+    if branches:
+        try:
+            problems = branch_problems(model, u, warmup, found[1] if found is not None else None, advice=False)
+        except ModelError as exc:
+            return f"does not simulate ({exc})", moving
+        if problems is not None:
+            return f"is no backlash: {problems}", moving
     return None, moving
 
 
 class ValidOnly:
     """A compiled problem whose ``feasible`` also requires a valid model that moves enough
-    (:func:`why_not_acceptable`); everything else is the problem's."""
+    and, with ``branches``, is a backlash on the x range it visits (:func:`why_not_acceptable`);
+    everything else is the problem's."""
 
-    def __init__(self, prob: Any, structure: Structure, u: NDArray[np.float64] | list[NDArray[np.float64]], warmup: int, min_moving: float) -> None:
+    def __init__(
+        self,
+        prob: Any,
+        structure: Structure,
+        u: NDArray[np.float64] | list[NDArray[np.float64]],
+        warmup: int,
+        min_moving: float,
+        branches: bool = False,
+    ) -> None:
         self._prob, self._structure, self._u, self._warmup, self._min_moving = prob, structure, u, warmup, min_moving
+        self._branches = branches
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._prob, name)
 
     def feasible(self, theta: NDArray[np.float64]) -> bool:
-        return why_not_acceptable(self._structure, self._prob, theta, self._u, self._warmup, self._min_moving) is None
+        why = why_not_acceptable(self._structure, self._prob, theta, self._u, self._warmup, self._min_moving, self._branches)
+        return why is None
