@@ -247,3 +247,13 @@ def test_a_final_run_that_fails_raises_with_the_best_iterate(monkeypatch):
     assert best is not None and not best.converged and best.degree == 6
     assert np.isfinite(best.simulation_rmse) and best.simulation_rmse < 0.5 * best.baseline_rmse
     assert np.all(np.isfinite(best.model.simulate(u)))  # a model that simulates
+
+
+def test_an_integrating_plant_raises_not_converged_with_what_to_do_instead():
+    # a position output: the best linear approximation has a pole at 1, which no model with
+    # stable blocks holds; a NotConvergedError that says so, not the package's base error
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal(3000)
+    y = 0.1 * np.cumsum(u) + 0.01 * rng.standard_normal(3000)
+    with pytest.raises(bid.NotConvergedError, match="integrating plant.*initial_state='estimate'"):
+        fit_wiener_hammerstein(u, y)

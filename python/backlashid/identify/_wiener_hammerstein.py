@@ -563,7 +563,8 @@ def _best_linear(u: NDArray[np.float64], y: NDArray[np.float64], order: int, fee
         arx = _core.lstsq(regressors, y[lag:], [f"theta{j}" for j in range(regressors.shape[1])])[0]
     except BacklashIdError:
         arx = np.linalg.lstsq(regressors, y[lag:], rcond=None)[0]
-    if _core.spectral_radius([float(v) for v in arx[n_num : n_num + order]]) >= _UNSTABLE:
+    arx_radius = _core.spectral_radius([float(v) for v in arx[n_num : n_num + order]])
+    if arx_radius >= _UNSTABLE:
         # keep the ARX numerator, damp the poles
         arx[n_num : n_num + order] = np.poly(0.9 * np.exp(1j * np.linspace(0.3, 2.5, order))).real[1:]
     lin = _Param(order, 1, 1, feedthrough, output_feedthrough)
@@ -576,7 +577,18 @@ def _best_linear(u: NDArray[np.float64], y: NDArray[np.float64], order: int, fee
     linear = np.zeros(theta.size, dtype=bool)
     linear[: lin.sizes[0]] = True  # with f(x) = x and G2 held the output is affine in G1's numerator
     linear[-1] = True  # and the offset
-    th, _ = lin.fit(u, y, warmup, theta, 200, held, linear)
+    try:
+        th, _ = lin.fit(u, y, warmup, theta, 200, held, linear)
+    except BacklashIdError as exc:
+        raise NotConvergedError(
+            f"the best linear approximation (order {order}) has no stable output-error fit ({exc}); its ARX start has "
+            f"pole radius {arx_radius:.4f}"
+            + (": a pole on or beyond the unit circle is an integrating plant, e.g. a position output, which no "
+               "Wiener-Hammerstein model with stable blocks holds: fit a cascade or sandwich with "
+               "initial_state='estimate', or model the velocity" if arx_radius >= 0.999 else
+               ": try other orders nb, ns, a warm-up or a longer record")
+            + "; no iterate exists to return"
+        ) from None
     return np.r_[np.zeros(delay), th[:n_num]], np.r_[1.0, th[lin.sizes[0] : lin.sizes[0] + order]], float(th[-1])
 
 
@@ -729,7 +741,9 @@ def fit_wiener_hammerstein(
     DataError
         For bad data (including a constant input) or settings.
     NotConvergedError
-        If no split gives a stable model, or f is no usable pair of tied branches.
+        If the best linear approximation has no stable fit (an integrating plant, e.g. a
+        position output), no split gives a stable model, or f is no usable pair of tied
+        branches.
 
     Examples
     --------
@@ -790,7 +804,15 @@ def fit_wiener_hammerstein(
         if short_problem.feasible(theta_more) and rmse_more < rmse:
             ranked[j] = (rmse_more, theta_more, split, res.converged)
     if not ranked:
-        raise NotConvergedError("no split of the best linear approximation's poles and zeros gives a stable start")
+        radius = float(np.max(np.abs(poles))) if poles.size else 0.0
+        raise NotConvergedError(
+            "no split of the best linear approximation's poles and zeros gives a stable start (its largest pole "
+            f"radius is {radius:.4f}"
+            + ("; a pole on or beyond the unit circle is an integrating plant, e.g. a position output, which no "
+               "Wiener-Hammerstein model with stable blocks holds: fit a cascade or sandwich with "
+               "initial_state='estimate', or model the velocity" if radius >= 0.999 else "")
+            + "); no iterate exists to return: try other orders nb, ns or a longer record"
+        )
     ranked.sort(key=lambda item: item[0])
     _, theta_short, split, _ = ranked[0]
 

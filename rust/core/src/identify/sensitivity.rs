@@ -30,8 +30,8 @@ use crate::model::signal::{check_same_length, check_signal};
 const OE_SECOND_THREAD_FROM: usize = 50_000;
 
 /// Threads of the default output-error factors for `rows` samples: the recursion, plus one
-/// folding thread on long records when the machine has a second core (the same bits
-/// either way).
+/// folding thread on long records when the machine has a second core (the same bits either
+/// way), or from `TIME_SPLIT_FROM` samples the cascade's two halves (the same to rounding).
 pub(crate) fn oe_threads(rows: usize) -> usize {
     if rows < OE_SECOND_THREAD_FROM {
         1
@@ -526,7 +526,8 @@ pub fn cascade_oe_factor(
 }
 
 /// `cascade_oe_factor` with the folding on a second thread when `threads` >= 2 (the same
-/// bits either way).
+/// bits either way); from `TIME_SPLIT_FROM` samples the record's two halves walked on two
+/// threads instead (the same to rounding, `walk_in_halves`).
 pub fn cascade_oe_factor_threads(
     linear: &LinearBlock,
     backlash: &GeneralBacklash,
