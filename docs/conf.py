@@ -75,6 +75,7 @@ html_css_files = ["parameters.css", "math.css"]  # the Parameters sections as ta
 API_MODULES = [  # each page opens with the module's own docstring
     "backlashid",
     "backlashid.models",
+    "backlashid.plotting",
     "backlashid.identify",
     "backlashid.diagnosis",
     "backlashid.diagnosis.analyses",

@@ -21,7 +21,7 @@ import pytest
 import backlashid
 
 PACKAGE = Path(backlashid.__file__).parent
-SHARED = {"_validation", "_json", "_optional", "_core", "_docstrings", "_numerics", "_files", "errors"}
+SHARED = {"_validation", "_json", "_optional", "_core", "_docstrings", "_numerics", "_files", "_version", "_measures", "errors"}
 ENTRY_POINTS = {"backlashid.__main__"}  # ``python -m backlashid`` runs app._cli's main, as the console script does
 
 TOP_LEVEL_ALL = [
@@ -222,3 +222,57 @@ def test_the_import_check_catches_private_imports(source: str, name: str, expect
 )
 def test_the_import_check_allows_public_and_shared_imports(source: str, name: str) -> None:
     assert violations(source, name) == []
+
+
+def _layer_of(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] in layers() else None
+
+
+def test_the_only_imports_of_the_package_root_are_the_extension() -> None:
+    # import-linter ignores imports of the root ("from .. import _core" reads to it as one, the
+    # compiled extension being no module it sees): this keeps that ignore to the extension
+    found = []
+    for path in package_modules():
+        name = module_name(path)
+        if name == "backlashid" or name in ENTRY_POINTS:
+            continue
+        for line, target, imported in imports(path.read_text(), name, path.name == "__init__.py"):
+            if target == "backlashid" and imported != "_core":
+                found.append(f"{name}:{line} imports {imported} from the package root")
+    assert found == []
+
+
+def test_no_import_cycle_crosses_a_subpackage() -> None:
+    # the static graph of every import (function-local ones too, not those under TYPE_CHECKING)
+    # between subpackages has no cycle; the root facade and the extension are no layer
+    edges: dict[str, set[str]] = {layer: set() for layer in layers()}
+    for path in package_modules():
+        name = module_name(path)
+        own = _layer_of(name)
+        if own is None:
+            continue
+        tree = ast.parse(path.read_text())
+        checking = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+                    for n in ast.walk(node)}
+        for node in ast.walk(tree):
+            if id(node) in checking or not isinstance(node, (ast.Import, ast.ImportFrom)):
+                continue
+            for _, target, _ in imports(ast.unparse(node), name, path.name == "__init__.py"):
+                other = _layer_of(target)
+                if other is not None and other != own:
+                    edges[own].add(other)
+    state: dict[str, int] = {}
+
+    def visit(layer: str, trail: list[str]) -> list[str] | None:
+        state[layer] = 1
+        for nxt in sorted(edges[layer]):
+            if state.get(nxt) == 1:
+                return trail + [layer, nxt]
+            if nxt not in state and (cycle := visit(nxt, trail + [layer])) is not None:
+                return cycle
+        state[layer] = 2
+        return None
+
+    cycles = [c for layer in sorted(edges) if layer not in state and (c := visit(layer, [])) is not None]
+    assert cycles == [], " -> ".join(cycles[0])

@@ -93,23 +93,14 @@ _LAZY = {
     "diagnose": "diagnosis",
     "fit_effect": "diagnosis",
 }
-_SUBPACKAGES = ("app", "benchmarks", "compensation", "diagnosis", "export", "identify", "models", "tracking")
-
-
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("backlashid")
-    except PackageNotFoundError:  # running from a source tree
-        return "0.0.0"
+_SUBPACKAGES = ("app", "benchmarks", "compensation", "diagnosis", "export", "identify", "models", "plotting", "tracking")
 
 
 def __getattr__(name: str) -> Any:
     if name in _LAZY:
         value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
     elif name == "__version__":
-        value = _version()
+        from ._version import __version__ as value
     elif name in _SUBPACKAGES:
         return importlib.import_module(f".{name}", __name__)
     else:

@@ -143,15 +143,6 @@ def check_seed(value: Any, name: str = "seed") -> int:
     return check_int(value, name, 0)
 
 
-def check_model(value: Any, name: str = "model") -> Any:
-    """A CascadeModel or SandwichModel (the models layer sits above: imported when called)."""
-    from .models import CascadeModel, SandwichModel
-
-    if not isinstance(value, (CascadeModel, SandwichModel)):
-        raise DataError(f"{name} must be a CascadeModel or SandwichModel, got {type(value).__name__}")
-    return value
-
-
 def frozen(values: list[float]) -> NDArray[np.float64]:
     """A read-only float64 array, so a model's parameters cannot be changed behind its back."""
     arr = np.array(values, dtype=np.float64)

@@ -12,9 +12,9 @@ import pytest
 
 import backlashid as bx
 from backlashid.app import plot_branches_comparison, plot_characteristic, plot_residuals, plot_simulation, plot_trajectories
-from backlashid.app._plotting import _correlation
 from backlashid.errors import DataError
 from backlashid.identify import fit_percent
+from backlashid.plotting._figures import _correlation
 
 
 @pytest.fixture(autouse=True)

@@ -64,7 +64,7 @@ def test_the_state_vector_maps_both_ways() -> None:
         state_from_vector(bid.example1(), [0.0] * 4)
     with pytest.raises(bid.DataError, match="SandwichState"):
         state_vector(bid.example2(), bid.example1().rest_state())
-    with pytest.raises(bid.DataError, match="CascadeModel or a SandwichModel"):
+    with pytest.raises(bid.DataError, match="CascadeModel or SandwichModel"):
         state_vector(bid.LinearBlock([1.0]))
 
 

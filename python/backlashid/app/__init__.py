@@ -4,10 +4,10 @@ the ``backlashid`` command line (``backlashid.app._cli``).
 
 from __future__ import annotations
 
-from ._dashboard import plot_diagnosis
+from ..diagnosis import plot_diagnosis
+from ..plotting import plot_branches_comparison, plot_characteristic, plot_residuals, plot_simulation, plot_trajectories
 from ._io import Record, Selection, concatenate, decimate, load_record, parse_range, read_signals, select_records, split_fraction
 from ._parallel import diagnose_many, fit_many, track_many
-from ._plotting import plot_branches_comparison, plot_characteristic, plot_residuals, plot_simulation, plot_trajectories
 
 __all__ = [
     "Record",

@@ -21,8 +21,8 @@ from typing import Any, Callable, TypeVar
 import click
 import numpy as np
 
-from .. import __version__
 from .._files import atomic_write, save_figure, write_text
+from .._version import __version__
 from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ..models import SandwichModel
 
@@ -433,7 +433,7 @@ def _dashboard_units(output: str, decimate_by: int) -> dict[str, Any]:
 def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup: int) -> list[Path]:
     from .._optional import pyplot
     from ..identify import simulate_scaled
-    from ._plotting import plot_characteristic, plot_residuals, plot_simulation, plot_trajectories
+    from ..plotting import plot_characteristic, plot_residuals, plot_simulation, plot_trajectories
 
     plt = pyplot()
     out.mkdir(parents=True, exist_ok=True)
@@ -749,7 +749,7 @@ def demo(n: int, snr: float, seed: int, out: Path) -> None:
     from .._optional import pyplot
     from ..benchmarks import example1, example_data
     from ..identify import fit_cascade
-    from ._plotting import plot_branches_comparison, plot_characteristic, plot_trajectories
+    from ..plotting import plot_branches_comparison, plot_characteristic, plot_trajectories
 
     try:
         truth = example1()

@@ -15,9 +15,9 @@ from typing import Union
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import check_int, check_model, check_real, check_seed
+from .._validation import check_int, check_real, check_seed
 from ..errors import DataError
-from ..models import CascadeModel, GeneralBacklash, LinearBlock, SandwichModel
+from ..models import CascadeModel, GeneralBacklash, LinearBlock, SandwichModel, check_model
 
 __all__ = ["example1", "example2", "ExampleData", "example_data", "shared_data_folder"]
 

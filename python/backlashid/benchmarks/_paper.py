@@ -242,7 +242,7 @@ def write_figures(run: ExampleRun, out_dir: Path) -> list[Path]:
         If matplotlib is not installed.
     """
     from .._optional import pyplot
-    from ..app import plot_branches_comparison, plot_trajectories
+    from ..plotting import plot_branches_comparison, plot_trajectories
 
     plt = pyplot()
     out_dir.mkdir(parents=True, exist_ok=True)

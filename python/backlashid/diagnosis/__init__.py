@@ -8,6 +8,7 @@ a :class:`DiagnosisReport`.
 
 from __future__ import annotations
 
+from ._dashboard import plot_diagnosis
 from ._diagnose import default_warmup, diagnose, estimated_start, held_state
 from ._report import Candidate, CompositionStep, DiagnosisDetails, DiagnosisReport
 from .effects import EFFECTS, REGISTRY, Effect, fit_effect, screen
@@ -25,5 +26,6 @@ __all__ = [
     "estimated_start",
     "fit_effect",
     "held_state",
+    "plot_diagnosis",
     "screen",
 ]

@@ -572,6 +572,6 @@ class DiagnosisReport:
         TypeError
             If an unknown keyword is given.
         """
-        from ..app import plot_diagnosis
+        from ._dashboard import plot_diagnosis
 
         return plot_diagnosis(self, path, **kw)

@@ -13,8 +13,7 @@ operations in the same order. The state vector of Example 1:
 
 from __future__ import annotations
 
-from ._c import to_c
-from ._python_control import to_python_control
-from ._state import state_from_vector, state_names, state_vector
+# the implementation lives with the models, whose to_c / to_python_control methods call it
+from ..models import state_from_vector, state_names, state_vector, to_c, to_python_control
 
 __all__ = ["state_from_vector", "state_names", "state_vector", "to_c", "to_python_control"]

@@ -391,7 +391,7 @@ class FitResult:
             The true system, drawn as dotted lines.
         {axes}
         """
-        from ..app import plot_trajectories
+        from ..plotting import plot_trajectories
 
         values = dict(zip(self.names, map(float, self.structure.pack(truth)))) if truth is not None else None
         return plot_trajectories(

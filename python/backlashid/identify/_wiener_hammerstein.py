@@ -198,7 +198,7 @@ class LinearBaseline:
             Samples at the start shaded and left out of the fit % shown.
         {axes}
         """
-        from ..app import plot_simulation
+        from ..plotting import plot_simulation
 
         return plot_simulation(y, self.simulate(u), warmup=warmup, ax=ax, title=title or "Measured output and linear baseline")
 
@@ -458,7 +458,7 @@ class WienerHammersteinFit:
             [-1, 1], about the range of x on the estimation data.
         {axes}
         """
-        from ..app import plot_characteristic
+        from ..plotting import plot_characteristic
 
         title = title or f"Static nonlinearity f, degree {self.degree}"
         if u is None:

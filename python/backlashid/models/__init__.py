@@ -9,10 +9,13 @@ from __future__ import annotations
 
 from ._backlash import BacklashState, BranchCheck, GeneralBacklash, SwitchingSignals
 from ._cascade import CascadeModel, CascadeSimulation, CascadeState
+from ._export_c import to_c
+from ._export_python_control import to_python_control
 from ._linear import LinearBlock
 from ._prediction import ParameterCovariance, Prediction, sample_band
 from ._sandwich import SandwichModel, SandwichSimulation, SandwichState
-from ._serialization import Model, model_from_dict, model_from_json
+from ._serialization import Model, check_model, model_from_dict, model_from_json
+from ._state_vector import state_from_vector, state_names, state_vector
 
 __all__ = [
     "BacklashState",
@@ -29,7 +32,13 @@ __all__ = [
     "SandwichSimulation",
     "SandwichState",
     "SwitchingSignals",
+    "check_model",
     "model_from_dict",
     "model_from_json",
     "sample_band",
+    "state_from_vector",
+    "state_names",
+    "state_vector",
+    "to_c",
+    "to_python_control",
 ]

@@ -227,7 +227,7 @@ class _ModelIO(ABC):
         DataError
             If ``dt`` is not True or a sample time > 0.
         """
-        from ..export import to_python_control
+        from ._export_python_control import to_python_control
 
         return to_python_control(self, name, dt=dt)  # type: ignore[arg-type]
 
@@ -258,7 +258,7 @@ class _ModelIO(ABC):
         DataError
             If ``prefix`` is not a C identifier, or the folder of ``path`` does not exist.
         """
-        from ..export import to_c
+        from ._export_c import to_c
 
         return to_c(self, path, prefix=prefix)  # type: ignore[arg-type]
 

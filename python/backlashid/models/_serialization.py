@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any, Union
 
 from .._validation import is_real
-from ..errors import ModelError
+from ..errors import DataError, ModelError
 from ._backlash import GeneralBacklash
 from ._cascade import CascadeModel
 from ._chain import FORMAT_VERSION, _parse_json
@@ -13,10 +13,41 @@ from ._linear import LinearBlock
 from ._prediction import ParameterCovariance
 from ._sandwich import SandwichModel
 
-__all__ = ["Model", "model_from_dict", "model_from_json"]
+__all__ = ["Model", "check_model", "model_from_dict", "model_from_json"]
 
 Model = Union[CascadeModel, SandwichModel]
 """Either model kind: what the fits, the metrics and the diagnosis accept."""
+
+
+def check_model(value: Any, name: str = "model") -> Model:
+    """``value`` if it is a CascadeModel or SandwichModel, else a DataError naming ``name``.
+
+    Parameters
+    ----------
+    value : object
+        What a caller passed as a model.
+    name : str, default "model"
+        The argument's name in the error message.
+
+    Returns
+    -------
+    CascadeModel or SandwichModel
+        ``value`` itself.
+
+    Raises
+    ------
+    DataError
+        If ``value`` is neither.
+
+    Examples
+    --------
+    >>> from backlashid.models import check_model
+    >>> check_model(bid.example1()) is not None
+    True
+    """
+    if not isinstance(value, (CascadeModel, SandwichModel)):
+        raise DataError(f"{name} must be a CascadeModel or SandwichModel, got {type(value).__name__}")
+    return value
 
 
 def model_from_dict(data: dict[str, Any]) -> Model:

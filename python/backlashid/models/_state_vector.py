@@ -22,16 +22,12 @@ from numpy.typing import ArrayLike, NDArray
 from .. import _core
 from .._validation import as_signal, check_instance
 from ..errors import DataError
-from ..models import CascadeModel, CascadeState, LinearBlock, SandwichModel, SandwichState
+from ._cascade import CascadeModel, CascadeState
+from ._linear import LinearBlock
+from ._sandwich import SandwichModel, SandwichState
+from ._serialization import check_model
 
 AnyModel = Union[CascadeModel, SandwichModel]
-
-
-def check_model(model: Any) -> AnyModel:
-    """The model, or DataError naming what it is instead."""
-    if not isinstance(model, (CascadeModel, SandwichModel)):
-        raise DataError(f"model must be a CascadeModel or a SandwichModel, got {type(model).__name__}")
-    return model
 
 
 def _native_block(block: LinearBlock) -> Any:

@@ -16,8 +16,10 @@ from __future__ import annotations
 from typing import Any
 
 from .. import _core
-from ..models import CascadeModel, LinearBlock, SandwichModel
-from ._c_inverse import c_literal
+from ._cascade import CascadeModel
+from ._export_c_inverse import c_literal
+from ._linear import LinearBlock
+from ._sandwich import SandwichModel
 
 
 def _inverse_filter(block: LinearBlock, name: str) -> tuple[float, list[float], list[float], int, bool]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..models import GeneralBacklash
+from ._backlash import GeneralBacklash
 
 
 def c_literal(value: float) -> str:

@@ -17,14 +17,16 @@ import re
 from pathlib import Path
 from typing import Any
 
-from .. import __version__
 from .._files import write_text
 from .._validation import shown
+from .._version import __version__
 from ..errors import DataError, ModelError
-from ..models import CascadeModel, LinearBlock
-from ._c_compensator import compensator_c
-from ._c_inverse import backlash_inverse_c, c_literal
-from ._state import AnyModel, check_model, state_names
+from ._cascade import CascadeModel
+from ._export_c_compensator import compensator_c
+from ._export_c_inverse import backlash_inverse_c, c_literal
+from ._linear import LinearBlock
+from ._serialization import check_model
+from ._state_vector import AnyModel, state_names
 
 _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _C_KEYWORDS = {

@@ -9,7 +9,8 @@ import numpy as np
 from .._optional import python_control
 from .._validation import check_real, shown
 from ..errors import DataError
-from ._state import AnyModel, check_model, native, output_name, state_names
+from ._serialization import check_model
+from ._state_vector import AnyModel, native, output_name, state_names
 
 
 def _check_dt(dt: Any) -> bool | float:

@@ -297,7 +297,7 @@ def _shown_candidate(report: Any) -> tuple[Any, Any, str]:
         return top, np.asarray(kept, dtype=float), f"best candidate, not named: {top.effect}"
     try:
         if hasattr(top.model, "simulator"):
-            from ..diagnosis import estimated_start
+            from ._start import estimated_start
 
             span = (float(y.min()), float(y.max()))
             sim = top.model.simulator()

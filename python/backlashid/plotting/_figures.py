@@ -379,7 +379,7 @@ def plot_simulation(
     >>> ax.lines[1].get_label()  # doctest: +ELLIPSIS
     'simulated (free run): fit 9... %, RMSE ...'
     """
-    from ..identify import fit_percent, rmse
+    from .._measures import fit_percent, rmse
 
     plt = pyplot()
     ys, sims = as_signal(y, "y").ravel(), as_signal(y_sim, "y_sim").ravel()
