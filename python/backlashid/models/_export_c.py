@@ -71,43 +71,9 @@ def c_source(model: AnyModel, prefix: str = "bl", header: str | None = None) -> 
     p = check_prefix(prefix)
     P = p.upper()
     header = header or f"{p}.h"
-    names = state_names(model)
     cascade = isinstance(model, CascadeModel)
-    kind = "cascade u -> x -> y (Section 3, Fig. 2)" if cascade else "sandwich u -> x -> y -> w (Section 4, Fig. 3)"
-    out = "y" if cascade else "w"
-    layout = "\n".join(f" *   s[{k}] = {name}" for k, name in enumerate(names))
     guard = f"{P}_MODEL_H"
-    h = f"""/* {header}: a backlashid {__version__} model, exported by model.to_c(): the {kind}.
- * Dependency-free C99 (no library, not even libm).
- *
- * {p}_step(&state, u) is one sample of model.simulate(u): it returns {out}(t) for the input u(t) and
- * advances the state. It computes what the Rust core computes, in the same order, with the
- * coefficients as exact hexadecimal literals: compiled for IEEE-754 doubles without fused
- * multiply-adds (GCC and Clang in -std=c99 mode, or -ffp-contract=off), it reproduces the
- * simulation to the last bit. It does not check its input: a non-finite u or an unstable
- * model gives non-finite outputs.
- *
- * The state vector s (most recent values first; before the first sample: the model state's
- * u_past, x_past, {"y_prev" if cascade else "y_past, w_past"} one after the other; {p}_init sets the paper's rest, all zero):
-{layout}
- */
-#ifndef {guard}
-#define {guard}
-
-#define {P}_NSTATE {len(names)}
-
-typedef struct {{
-    double s[{P}_NSTATE];
-}} {p}_state;
-
-/* The state at rest: every past value zero. */
-void {p}_init({p}_state *state);
-
-/* One sample: {out}(t) for the input u(t); the state moves on by one sample. */
-double {p}_step({p}_state *state, double u);
-
-#endif /* {guard} */
-"""
+    h = _model_header(model, p, header, guard)
     functions: list[str] = []
 
     def function(signature: str, body: list[str]) -> None:
@@ -177,6 +143,48 @@ double {p}_step({p}_state *state, double u);
     c = (f'/* The model of {header} (backlashid {__version__}, model.to_c()). */\n#include <stdint.h>\n\n#include "{header}"\n\n'
          + "\n".join(functions) + "\n" + inverse_c + ("\n" + compensator_c_text if compensator_c_text else ""))
     return h, c
+
+
+def _model_header(model: AnyModel, p: str, header: str, guard: str) -> str:
+    """The header's declarations of the model's step: what it computes, the state vector's layout,
+    ``<p>_init`` and ``<p>_step`` (the inverse and the compensator are added after)."""
+    P = p.upper()
+    names = state_names(model)
+    cascade = isinstance(model, CascadeModel)
+    kind = "cascade u -> x -> y (Section 3, Fig. 2)" if cascade else "sandwich u -> x -> y -> w (Section 4, Fig. 3)"
+    out = "y" if cascade else "w"
+    layout = "\n".join(f" *   s[{k}] = {name}" for k, name in enumerate(names))
+    return f"""/* {header}: a backlashid {__version__} model, exported by model.to_c(): the {kind}.
+ * Dependency-free C99 (no library, not even libm).
+ *
+ * {p}_step(&state, u) is one sample of model.simulate(u): it returns {out}(t) for the input u(t) and
+ * advances the state. It computes what the Rust core computes, in the same order, with the
+ * coefficients as exact hexadecimal literals: compiled for IEEE-754 doubles without fused
+ * multiply-adds (GCC and Clang in -std=c99 mode, or -ffp-contract=off), it reproduces the
+ * simulation to the last bit. It does not check its input: a non-finite u or an unstable
+ * model gives non-finite outputs.
+ *
+ * The state vector s (most recent values first; before the first sample: the model state's
+ * u_past, x_past, {"y_prev" if cascade else "y_past, w_past"} one after the other; {p}_init sets the paper's rest, all zero):
+{layout}
+ */
+#ifndef {guard}
+#define {guard}
+
+#define {P}_NSTATE {len(names)}
+
+typedef struct {{
+    double s[{P}_NSTATE];
+}} {p}_state;
+
+/* The state at rest: every past value zero. */
+void {p}_init({p}_state *state);
+
+/* One sample: {out}(t) for the input u(t); the state moves on by one sample. */
+double {p}_step({p}_state *state, double u);
+
+#endif /* {guard} */
+"""
 
 
 def _paths(path: Any, prefix: str) -> tuple[Path, Path]:

@@ -57,117 +57,61 @@ int {p}_backlash_inverse_init({p}_backlash_inverse *inverse, double y0, double x
  * finite, 2 if the branch cannot reach the level (it turns or overflows first). */
 int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double *x);
 """
+    functions = [_c_function(f"static int {p}_finite(double v)", ["    return v - v == 0.0; /* false for inf and NaN */"])]
+    if len(backlash.m_left) > 1 or len(backlash.m_right) > 1:  # a root search (unused, and so left out, for two straight branches)
+        functions += _root_search_functions(backlash, p)
+    return header, "\n".join(functions + _branch_root_functions(backlash, p) + _inverse_functions(p))
+
+
+def _c_function(signature: str, body: list[str]) -> str:
+    """A C function of ``signature`` with the body's lines."""
+    return signature + "\n{\n" + "\n".join(body) + "\n}\n"
+
+
+def _root_search_functions(backlash: GeneralBacklash, p: str) -> list[str]:
+    """abs, ulp, the branches' slopes and the bracketed Newton search of the core's inverse."""
     functions: list[str] = []
 
     def function(signature: str, body: list[str]) -> None:
-        functions.append(signature + "\n{\n" + "\n".join(body) + "\n}\n")
+        functions.append(_c_function(signature, body))
 
-    function(f"static int {p}_finite(double v)", ["    return v - v == 0.0; /* false for inf and NaN */"])
-    if len(backlash.m_left) > 1 or len(backlash.m_right) > 1:  # a root search (unused, and so left out, for two straight branches)
-        function(
-            f"/* abs(v): the sign bit cleared (f64::abs) */\nstatic double {p}_abs(double v)",
-            ["    union {", "        double d;", "        uint64_t u;", "    } bits;", "    bits.d = v;",
-             "    bits.u &= ~((uint64_t)1 << 63);", "    return bits.d;"],
-        )  # fmt: skip
-        function(
-            f"/* one ulp of v: the gap to the next float away from zero */\nstatic double {p}_ulp(double v)",
-            ["    union {", "        double d;", "        uint64_t u;", "    } bits;", f"    const double a = {p}_abs(v);",
-             "    if (a == 0.0) {", "        return 0x1p-1022; /* f64::MIN_POSITIVE */", "    }", "    bits.d = a;", "    bits.u += 1;",
-             "    return bits.d - a;"],
-        )  # fmt: skip
-        function(f"/* dL/dx */\nstatic double {p}_left_slope(double x)", _slope_lines(backlash.m_left, backlash.c_left))
-        function(f"/* dR/dx */\nstatic double {p}_right_slope(double x)", _slope_lines(backlash.m_right, -backlash.c_right))
-        function(
-            f"static double {p}_branch(int right, double x)",
-            [f"    return right ? {p}_right(x) : {p}_left(x);"],
-        )
-        function(
-            f"static double {p}_branch_slope(int right, double x)",
-            [f"    return right ? {p}_right_slope(x) : {p}_left_slope(x);"],
-        )
-        # branch_root of inverse.rs for a branch of degree >= 2
-        function(
-            f"/* the x with branch(x) = level searched from start (inverse.rs: branch_root); 0 or 2 (unreachable) */\n"
-            f"static int {p}_root_search(int right, double shift, double level, double start, double *root)",
-            [
-                f"    const double limit = 1e12 * (1.0 + {p}_abs(start));",
-                "    double a = start;",
-                f"    double fa = {p}_branch(right, start) - level;",
-                "    double d, h, b, fb, x, lo, hi, step_old, step;",
-                "    int k;",
-                f"    if (!{p}_finite(fa)) {{",
-                "        return 2;",
-                "    }",
-                "    if (fa == 0.0) {",
-                "        *root = start;",
-                "        return 0;",
-                "    }",
-                "    d = (fa < 0.0) ? 1.0 : -1.0;",
-                f"    h = 1e-3 * (1.0 + {p}_abs(start));",
-                "    for (;;) {",
-                "        b = a + d * h;",
-                f"        fb = {p}_branch(right, b) - level;",
-                f"        if (!{p}_finite(fb) || {p}_abs(b + shift) > limit) {{",
-                "            return 2;",
-                "        }",
-                "        if (fb == 0.0) {",
-                "            *root = b;",
-                "            return 0;",
-                "        }",
-                "        if ((fb < 0.0) != (fa < 0.0)) {",
-                "            break;",
-                "        }",
-                "        a = b;",
-                "        fa = fb;",
-                "        h *= 2.0;",
-                "    }",
-                f"    x = ({p}_abs(fb) < {p}_abs(fa)) ? b : a;",
-                "    if (fa < 0.0) {",
-                "        lo = a;",
-                "        hi = b;",
-                "    } else {",
-                "        lo = b;",
-                "        hi = a;",
-                "    }",
-                f"    step_old = {p}_abs(hi - lo);",
-                "    step = step_old;",
-                "    for (k = 0; k < 2200; ++k) {",
-                f"        const double wide = ({p}_abs(lo) > {p}_abs(hi)) ? {p}_abs(lo) : {p}_abs(hi);",
-                "        double fx, newton, l, u, next;",
-                f"        if ({p}_abs(hi - lo) <= 4.0 * {p}_ulp(wide)) {{",
-                "            *root = 0.5 * (lo + hi);",
-                "            return 0;",
-                "        }",
-                f"        fx = {p}_branch(right, x) - level;",
-                "        if (fx == 0.0) {",
-                "            *root = x;",
-                "            return 0;",
-                "        }",
-                "        if (fx < 0.0) {",
-                "            lo = x;",
-                "        } else {",
-                "            hi = x;",
-                "        }",
-                f"        newton = x - fx / {p}_branch_slope(right, x);",
-                "        l = (lo < hi) ? lo : hi;",
-                "        u = (lo < hi) ? hi : lo;",
-                f"        if ({p}_finite(newton) && newton > l && newton < u && {p}_abs(newton - x) <= 0.5 * step_old) {{",
-                "            next = newton;",
-                "        } else {",
-                "            next = 0.5 * (lo + hi);",
-                "        }",
-                "        step_old = step;",
-                f"        step = {p}_abs(next - x);",
-                "        x = next;",
-                f"        if (step <= {p}_ulp(x)) {{",
-                "            *root = x;",
-                "            return 0;",
-                "        }",
-                "    }",
-                "    *root = x;",
-                "    return 0;",
-            ],
-        )
+    function(
+        f"/* abs(v): the sign bit cleared (f64::abs) */\nstatic double {p}_abs(double v)",
+        ["    union {", "        double d;", "        uint64_t u;", "    } bits;", "    bits.d = v;",
+         "    bits.u &= ~((uint64_t)1 << 63);", "    return bits.d;"],
+    )  # fmt: skip
+    function(
+        f"/* one ulp of v: the gap to the next float away from zero */\nstatic double {p}_ulp(double v)",
+        ["    union {", "        double d;", "        uint64_t u;", "    } bits;", f"    const double a = {p}_abs(v);",
+         "    if (a == 0.0) {", "        return 0x1p-1022; /* f64::MIN_POSITIVE */", "    }", "    bits.d = a;", "    bits.u += 1;",
+         "    return bits.d - a;"],
+    )  # fmt: skip
+    function(f"/* dL/dx */\nstatic double {p}_left_slope(double x)", _slope_lines(backlash.m_left, backlash.c_left))
+    function(f"/* dR/dx */\nstatic double {p}_right_slope(double x)", _slope_lines(backlash.m_right, -backlash.c_right))
+    function(
+        f"static double {p}_branch(int right, double x)",
+        [f"    return right ? {p}_right(x) : {p}_left(x);"],
+    )
+    function(
+        f"static double {p}_branch_slope(int right, double x)",
+        [f"    return right ? {p}_right_slope(x) : {p}_left_slope(x);"],
+    )
+    # branch_root of inverse.rs for a branch of degree >= 2
+    function(
+        f"/* the x with branch(x) = level searched from start (inverse.rs: branch_root); 0 or 2 (unreachable) */\n"
+        f"static int {p}_root_search(int right, double shift, double level, double start, double *root)",
+        _root_search_body(p),
+    )
+    return functions
+
+
+def _branch_root_functions(backlash: GeneralBacklash, p: str) -> list[str]:
+    """``<p>_left_root`` / ``<p>_right_root``: the closed form of a straight branch, else the search."""
+    functions: list[str] = []
+
+    def function(signature: str, body: list[str]) -> None:
+        functions.append(_c_function(signature, body))
+
     for name, right, m, shift in (("left", 0, backlash.m_left, backlash.c_left), ("right", 1, backlash.m_right, -backlash.c_right)):
         if len(m) == 1:  # degree 1: the closed form
             body = [
@@ -183,6 +127,16 @@ int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double 
         else:
             body = [f"    return {p}_root_search({right}, {c_literal(shift)}, level, start, root);"]
         function(f"static int {p}_{name}_root(double level, double start, double *root)", body)
+    return functions
+
+
+def _inverse_functions(p: str) -> list[str]:
+    """``<p>_backlash_inverse_init`` and ``<p>_backlash_inverse_step``."""
+    functions: list[str] = []
+
+    def function(signature: str, body: list[str]) -> None:
+        functions.append(_c_function(signature, body))
+
     function(
         f"int {p}_backlash_inverse_init({p}_backlash_inverse *inverse, double y0, double x0, double threshold)",
         [
@@ -262,4 +216,87 @@ int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double 
             "    return 0;",
         ],
     )
-    return header, "\n".join(functions)
+    return functions
+
+
+def _root_search_body(p: str) -> list[str]:
+    """The lines of ``<p>_root_search``: inverse.rs's branch_root (a bracket widened from the start,
+    then Newton steps kept inside it, bisection where they leave it)."""
+    return [
+        f"    const double limit = 1e12 * (1.0 + {p}_abs(start));",
+        "    double a = start;",
+        f"    double fa = {p}_branch(right, start) - level;",
+        "    double d, h, b, fb, x, lo, hi, step_old, step;",
+        "    int k;",
+        f"    if (!{p}_finite(fa)) {{",
+        "        return 2;",
+        "    }",
+        "    if (fa == 0.0) {",
+        "        *root = start;",
+        "        return 0;",
+        "    }",
+        "    d = (fa < 0.0) ? 1.0 : -1.0;",
+        f"    h = 1e-3 * (1.0 + {p}_abs(start));",
+        "    for (;;) {",
+        "        b = a + d * h;",
+        f"        fb = {p}_branch(right, b) - level;",
+        f"        if (!{p}_finite(fb) || {p}_abs(b + shift) > limit) {{",
+        "            return 2;",
+        "        }",
+        "        if (fb == 0.0) {",
+        "            *root = b;",
+        "            return 0;",
+        "        }",
+        "        if ((fb < 0.0) != (fa < 0.0)) {",
+        "            break;",
+        "        }",
+        "        a = b;",
+        "        fa = fb;",
+        "        h *= 2.0;",
+        "    }",
+        f"    x = ({p}_abs(fb) < {p}_abs(fa)) ? b : a;",
+        "    if (fa < 0.0) {",
+        "        lo = a;",
+        "        hi = b;",
+        "    } else {",
+        "        lo = b;",
+        "        hi = a;",
+        "    }",
+        f"    step_old = {p}_abs(hi - lo);",
+        "    step = step_old;",
+        "    for (k = 0; k < 2200; ++k) {",
+        f"        const double wide = ({p}_abs(lo) > {p}_abs(hi)) ? {p}_abs(lo) : {p}_abs(hi);",
+        "        double fx, newton, l, u, next;",
+        f"        if ({p}_abs(hi - lo) <= 4.0 * {p}_ulp(wide)) {{",
+        "            *root = 0.5 * (lo + hi);",
+        "            return 0;",
+        "        }",
+        f"        fx = {p}_branch(right, x) - level;",
+        "        if (fx == 0.0) {",
+        "            *root = x;",
+        "            return 0;",
+        "        }",
+        "        if (fx < 0.0) {",
+        "            lo = x;",
+        "        } else {",
+        "            hi = x;",
+        "        }",
+        f"        newton = x - fx / {p}_branch_slope(right, x);",
+        "        l = (lo < hi) ? lo : hi;",
+        "        u = (lo < hi) ? hi : lo;",
+        f"        if ({p}_finite(newton) && newton > l && newton < u && {p}_abs(newton - x) <= 0.5 * step_old) {{",
+        "            next = newton;",
+        "        } else {",
+        "            next = 0.5 * (lo + hi);",
+        "        }",
+        "        step_old = step;",
+        f"        step = {p}_abs(next - x);",
+        "        x = next;",
+        f"        if (step <= {p}_ulp(x)) {{",
+        "            *root = x;",
+        "            return 0;",
+        "        }",
+        "    }",
+        "    *root = x;",
+        "    return 0;",
+    ]
