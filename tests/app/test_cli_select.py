@@ -60,3 +60,21 @@ def test_fit_model_auto_finds_the_input_backlash_of_a_mid_motion_drive_log(tmp_p
                            initial_state="estimate", warmup=20)
     assert payload["parameters"] == api.fit.parameters
     assert payload["structure_selection"]["kind"] == "hammerstein"
+
+
+def test_fit_valid_keeps_the_model_a_backlash_where_x_goes(tmp_path):
+    # the crossing degree-5 fit of a short noisy record (as tests/identify/test_warnings_and_wording):
+    # --valid gives fit_cascade(valid=True)'s model, a backlash on the visited range
+    data = bx.example_data(bx.example1(), 300, snr=3, seed=37)
+    path = tmp_path / "log.csv"
+    np.savetxt(path, np.column_stack([data.u, data.noisy]), delimiter=",", header="u,y", comments="", fmt="%.17g")
+    out = tmp_path / "model.json"
+    r = run("fit", path, "-i", "u", "-o", "y", "--degree", "5", "--valid", "--json", out)
+    assert r.exit_code == 0, r.output
+    model = bx.model_from_dict(json.loads(out.read_text())["model"])
+    x = model.simulate(data.u, internals=True).x
+    assert model.backlash.degree == 5 and model.backlash.check_branches(x.min(), x.max()).is_valid
+    plain = run("fit", path, "-i", "u", "-o", "y", "--degree", "5", "--json", out)
+    model = bx.model_from_dict(json.loads(out.read_text())["model"])
+    x = model.simulate(data.u, internals=True).x
+    assert plain.exit_code == 0 and not model.backlash.check_branches(x.min(), x.max()).is_valid

@@ -157,10 +157,10 @@ def _select(data: Path | None, input_: str, output: str, split: float | None, es
 
 def _fit_model(kind: str, u: Any, y: Any, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int,
                max_iter: int, feedthrough: bool, coarse: int | None = None, min_moving: float = 0.02,
-               initial_state: str = "rest") -> Any:
+               initial_state: str = "rest", valid: bool | None = None) -> Any:
     from ..identify import fit_cascade, fit_hammerstein_backlash, fit_sandwich, fit_wiener_hammerstein
 
-    common = dict(warmup=warmup, max_iter=max_iter, coarse=coarse, min_moving=min_moving, initial_state=initial_state)
+    common = dict(warmup=warmup, max_iter=max_iter, coarse=coarse, min_moving=min_moving, initial_state=initial_state, valid=bool(valid))
     if kind == "cascade":
         return fit_cascade(u, y, na=na, nb=nb, degree=degree, feedthrough=feedthrough, **common)
     if kind == "sandwich":
@@ -174,7 +174,7 @@ def _fit_model(kind: str, u: Any, y: Any, na: int, nb: int, nr: int, ns: int, de
 
 def _select_model(kind: str, u: np.ndarray, y: np.ndarray, warmup: int, max_iter: int, feedthrough: bool,
                   coarse: int | None = None, min_moving: float = 0.02, initial_state: str = "rest",
-                  orders: str = "auto", given: dict[str, int] | None = None) -> Any:
+                  orders: str = "auto", given: dict[str, int] | None = None, valid: bool | None = None) -> Any:
     """``fit --orders auto`` and ``fit --model auto``: select_structure, its table printed.
     ``--orders auto`` searches its default grid for one kind (cascade: na, nb 1..3, degree 1..4;
     sandwich: na, nb, nr, ns 1..2, degree 1..3; hammerstein: nr, ns 1..2, degree 1..3);
@@ -192,7 +192,9 @@ def _select_model(kind: str, u: np.ndarray, y: np.ndarray, warmup: int, max_iter
     else:
         kinds = kind
         grid = {} if kind == "cascade" else small
-    extra = {"output_feedthrough": feedthrough} if kind != "cascade" else {}  # (an input backlash ignores feedthrough)
+    extra: dict[str, Any] = {"output_feedthrough": feedthrough} if kind != "cascade" else {}  # (an input backlash ignores feedthrough)
+    if valid is not None:  # else select_structure's own default: valid backlashes
+        extra["valid"] = valid
     selection = select_structure(u, y, kind=kinds, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough, coarse=coarse,
                                  min_moving=min_moving, initial_state=initial_state, **extra, **grid)
     click.echo(selection.summary())
@@ -236,6 +238,10 @@ def _model_options(command: F) -> F:
         click.option("--min-moving", default=0.02, show_default=True, type=click.FloatRange(min=0.0, max=1.0),
                      help="Smallest fraction of samples on which the fitted backlash must move (cascade, sandwich); "
                           "lower it for records mostly at rest."),
+        click.option("--valid/--no-valid", "valid", default=None,
+                     help="--valid: keep the fit a backlash on the x range it visits (branches increasing, not crossing), "
+                          "refitting from the next lower degree where the best fit is none (valid=True) [default: off for a "
+                          "fit, on for --orders auto / --model auto]."),
     ]
     for option in reversed(options):
         command = option(command)
@@ -347,7 +353,8 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
         estimation_files: tuple[Path, ...], validation_files: tuple[Path, ...], decimate_by: int, scale: str,
         input_offset: float | None, input_scale: float | None, output_offset: float | None, output_scale: float | None,
         kind: str, initial_state: str, feedthrough: bool, na: int, nb: int, nr: int, ns: int, degree: int, warmup: int, max_iter: int,
-        coarse: int | None, min_moving: float, metrics_warmup: int | None, orders: str, json_path: Path | None, plots_dir: Path | None) -> None:
+        coarse: int | None, min_moving: float, valid: bool | None, metrics_warmup: int | None, orders: str, json_path: Path | None,
+        plots_dir: Path | None) -> None:
     """Identify a cascade, sandwich or input-backlash model from logged input/output data.
 
     \b
@@ -369,10 +376,11 @@ def fit(data: Path | None, input_: str, output: str, split: float | None, estima
             u_m, y_m = [scaling.input_to_model(p.u) for p in sel.estimation_parts], [scaling.output_to_model(p.y) for p in sel.estimation_parts]
         stage(fitting)
         selection = (_select_model(kind, u_m, y_m, warmup, max_iter, feedthrough, coarse, min_moving, initial_state, orders,
-                                   dict(na=na, nb=nb, nr=nr, ns=ns, degree=degree))
+                                   dict(na=na, nb=nb, nr=nr, ns=ns, degree=degree), valid)
                      if orders == "auto" or kind == "auto" else None)
         result = (selection.fit if selection is not None else
-                  _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse, min_moving, initial_state))
+                  _fit_model(kind, u_m, y_m, na, nb, nr, ns, degree, warmup, max_iter, feedthrough, coarse, min_moving, initial_state,
+                             valid))
         if kind == "wiener-hammerstein":  # the fit's output offset joins the scaling's (the sandwich has none)
             scaling = replace(scaling, output_offset=scaling.output_offset + scaling.output_scale * result.offset)
         stage("computing metrics")
