@@ -276,3 +276,17 @@ def test_no_import_cycle_crosses_a_subpackage() -> None:
 
     cycles = [c for layer in sorted(edges) if layer not in state and (c := visit(layer, [])) is not None]
     assert cycles == [], " -> ".join(cycles[0])
+
+
+def test_no_function_is_longer_than_a_reader_can_hold() -> None:
+    # at most 100 lines of code (the docstring not counted) per function of the package
+    long = []
+    for path in package_modules():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                body = node.body
+                documented = body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant)
+                start = body[0].end_lineno + 1 if documented and len(body) > 1 else node.lineno
+                if node.end_lineno - start + 1 > 100:
+                    long.append(f"{module_name(path)}.{node.name}: {node.end_lineno - start + 1} lines")
+    assert long == []

@@ -21,7 +21,7 @@ import re
 import zipfile
 import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -727,79 +727,16 @@ def select_records(
     """
     if split is not None and (estimation or validation):
         raise DataError("give either --split or --estimation/--validation ranges, not both")
-    hint = "choose --estimation / --validation ranges without it"
-    files = {str(f): _load_unchecked(f, input, output) for f in [*([data] if data is not None else []), *estimation_files, *validation_files]}
-    whole = decimate_by > 1 and all(np.all(np.isfinite(r.u)) and np.all(np.isfinite(r.y)) for r in files.values())
-    if whole:  # one anti-alias filter over each whole file, before any cut
-        files = {f: anti_alias(r, decimate_by) for f, r in files.items()}
-
-    def load(path: str | Path) -> Record:
-        """The file's record (the signals chosen above), filtered whole when decimated."""
-        return files[str(path)]
-
-    def reduced(rec: Record) -> Record:
-        """A piece at the decimated rate: every N-th sample of the filtered file's piece, or
-        the piece decimated (filter and all) where a file has missing samples."""
-        return keep_every(rec, decimate_by) if whole else decimate(rec, decimate_by)
-
-    def pick(rec: Record, text: str | None, label: str) -> Record:
-        """Range ``text`` of ``rec`` (all of it when None), checked finite only there."""
-        if not text:
-            return _finite_record(rec, input, output, hint)
-        part = parse_range(text, len(rec), label)
-        return _finite_record(rec.slice(part, label), input, output, hint, part.start, f"{label} {text}", rec.source)
-
-    val_parts: list[Record] = []
-
-    def joined(paths: Sequence[str | Path], text: str | None, label: str) -> Record:
-        records = [load(f) for f in paths]
-        if text:
-            return pick(concatenate(records), text, label)
-        checked = [_finite_record(r, input, output, hint) for r in records]
-        if len(checked) > 1:
-            val_parts.extend(checked)
-        return concatenate(checked)
-
-    val: Record | None = None
+    files = _Files.read([*([data] if data is not None else []), *estimation_files, *validation_files], input, output, decimate_by)
     parts: list[Record] = []
     if estimation_files:
-        if split is not None:
-            raise DataError("--split divides one file; with --estimation-file give --validation-file or a DATA file for validation")
-        for f in estimation_files:
-            parts.append(pick(load(f), estimation, "--estimation"))
-        est = concatenate(parts)
-        if validation_files:
-            val = joined(validation_files, validation, "--validation")
-        elif data is not None:
-            val = pick(load(data), validation, "--validation")
-        elif validation:
-            raise DataError("--validation is a range of the DATA file or the --validation-file records: give one")
-    else:
-        if data is None:
-            raise DataError("no data: give a DATA file or --estimation-file")
-        rec = load(data)
-        if split is not None:
-            if validation_files:
-                val = joined(validation_files, None, "--validation-file")
-            est_part, val_part = split_fraction(split, len(rec))
-            label = f"--split {split:g}"
-            est = _finite_record(rec.slice(est_part, "--split"), input, output, "choose another --split", 0, f"{label} (estimation)", rec.source)
-            val = _finite_record(rec.slice(val_part, "--split"), input, output, "choose another --split", val_part.start, f"{label} (validation)", rec.source)
-        else:
-            est = pick(rec, estimation, "--estimation")
-            if validation:
-                val = pick(rec, validation, "--validation")
-            elif validation_files:
-                val = joined(validation_files, None, "--validation-file")
-    if estimation_files:  # each file's piece at the decimated rate, then joined
-        parts = [reduced(p) for p in parts]
+        parts, val = _from_estimation_files(files, data, estimation_files, validation_files, split, estimation, validation)
+        parts = [files.reduced(p) for p in parts]  # each file's piece at the decimated rate, then joined
         est = concatenate(parts)
     else:
-        est = reduced(est)
-    val = reduced(val) if val is not None and not val_parts else val
-    if val_parts:
-        val_parts[:] = [reduced(p) for p in val_parts]
-        val = concatenate(val_parts)
+        est, val = _from_data_file(files, data, validation_files, split, estimation, validation)
+        est = files.reduced(est)
+    val = files.reduced_validation(val)
     description: dict[str, object] = {
         "input": input,
         "output": output,
@@ -809,4 +746,109 @@ def select_records(
         "validation_samples": len(val) if val is not None else 0,
         "decimate": decimate_by,
     }
-    return Selection(est, val, description, tuple(parts) if estimation_files else (), tuple(val_parts))
+    return Selection(est, val, description, tuple(parts), tuple(files.validation_parts))
+
+
+_RANGE_HINT = "choose --estimation / --validation ranges without it"
+
+
+@dataclass
+class _Files:
+    """The files :func:`select_records` reads, their records (the signals chosen, filtered
+    whole when decimated and none has missing samples), and how it cuts and decimates them."""
+
+    records: dict[str, Record]
+    input: str
+    output: str
+    decimate_by: int
+    whole: bool  # each file anti-alias filtered whole, before any cut
+    validation_parts: list[Record] = field(default_factory=list)  # several validation files, one by one
+
+    @classmethod
+    def read(cls, paths: Sequence[str | Path], input: str, output: str, decimate_by: int) -> _Files:
+        """The files' records, each filtered whole for the decimation where all are finite."""
+        records = {str(f): _load_unchecked(f, input, output) for f in paths}
+        whole = decimate_by > 1 and all(np.all(np.isfinite(r.u)) and np.all(np.isfinite(r.y)) for r in records.values())
+        if whole:  # one anti-alias filter over each whole file, before any cut
+            records = {f: anti_alias(r, decimate_by) for f, r in records.items()}
+        return cls(records, input, output, decimate_by, whole)
+
+    def load(self, path: str | Path) -> Record:
+        """The file's record."""
+        return self.records[str(path)]
+
+    def reduced(self, rec: Record) -> Record:
+        """A piece at the decimated rate: every N-th sample of the filtered file's piece, or
+        the piece decimated (filter and all) where a file has missing samples."""
+        return keep_every(rec, self.decimate_by) if self.whole else decimate(rec, self.decimate_by)
+
+    def pick(self, rec: Record, text: str | None, label: str) -> Record:
+        """Range ``text`` of ``rec`` (all of it when None), checked finite only there."""
+        if not text:
+            return _finite_record(rec, self.input, self.output, _RANGE_HINT)
+        part = parse_range(text, len(rec), label)
+        return _finite_record(rec.slice(part, label), self.input, self.output, _RANGE_HINT, part.start, f"{label} {text}", rec.source)
+
+    def joined(self, paths: Sequence[str | Path], text: str | None, label: str) -> Record:
+        """The files joined, then range ``text`` of them; without a range each file is checked
+        finite on its own and, when there are several, kept in ``validation_parts``."""
+        records = [self.load(f) for f in paths]
+        if text:
+            return self.pick(concatenate(records), text, label)
+        checked = [_finite_record(r, self.input, self.output, _RANGE_HINT) for r in records]
+        if len(checked) > 1:
+            self.validation_parts.extend(checked)
+        return concatenate(checked)
+
+    def reduced_validation(self, val: Record | None) -> Record | None:
+        """The validation record at the decimated rate; with ``validation_parts`` each part
+        reduced on its own, then joined (they replace ``val``)."""
+        if not self.validation_parts:
+            return self.reduced(val) if val is not None else None
+        self.validation_parts[:] = [self.reduced(p) for p in self.validation_parts]
+        return concatenate(self.validation_parts)
+
+
+def _from_estimation_files(
+    files: _Files, data: str | Path | None, estimation_files: Sequence[str | Path], validation_files: Sequence[str | Path],
+    split: float | None, estimation: str | None, validation: str | None,
+) -> tuple[list[Record], Record | None]:
+    """Range ``estimation`` of each estimation file, and the validation record: range
+    ``validation`` of the joined validation files, else of the DATA file, else none."""
+    if split is not None:
+        raise DataError("--split divides one file; with --estimation-file give --validation-file or a DATA file for validation")
+    parts = [files.pick(files.load(f), estimation, "--estimation") for f in estimation_files]
+    if validation_files:
+        return parts, files.joined(validation_files, validation, "--validation")
+    if data is not None:
+        return parts, files.pick(files.load(data), validation, "--validation")
+    if validation:
+        raise DataError("--validation is a range of the DATA file or the --validation-file records: give one")
+    return parts, None
+
+
+def _from_data_file(
+    files: _Files, data: str | Path | None, validation_files: Sequence[str | Path], split: float | None,
+    estimation: str | None, validation: str | None,
+) -> tuple[Record, Record | None]:
+    """The estimation and validation records of the DATA file: split by ``split``, or its
+    ranges, the validation files validating when no range of it does."""
+    if data is None:
+        raise DataError("no data: give a DATA file or --estimation-file")
+    rec = files.load(data)
+    if split is not None:
+        if validation_files:
+            # checked; several of them, kept in validation_parts, replace the split's tail in the end
+            files.joined(validation_files, None, "--validation-file")
+        est_part, val_part = split_fraction(split, len(rec))
+        label = f"--split {split:g}"
+        hint = "choose another --split"
+        est = _finite_record(rec.slice(est_part, "--split"), files.input, files.output, hint, 0, f"{label} (estimation)", rec.source)
+        val = _finite_record(rec.slice(val_part, "--split"), files.input, files.output, hint, val_part.start, f"{label} (validation)", rec.source)
+        return est, val
+    est = files.pick(rec, estimation, "--estimation")
+    if validation:
+        return est, files.pick(rec, validation, "--validation")
+    if validation_files:
+        return est, files.joined(validation_files, None, "--validation-file")
+    return est, None

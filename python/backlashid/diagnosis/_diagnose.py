@@ -14,7 +14,8 @@
    ``max_effects`` in all.
 4. The noise floor (``_noise``) and the noise and quantiser checks: colored_noise (a noise model,
    judged by one-step prediction, never as a free-run error) is named only when the residual is
-   noise, and quantization where the measured outputs lie on a lattice whose rounding matters.
+   noise, and quantization where the measured outputs lie on a lattice whose rounding matters
+   (``_verdict.name_effects``).
 """
 
 from __future__ import annotations
@@ -36,18 +37,26 @@ from ._records import Nominal, nominal_chain, records_of
 from ._report import Candidate, CompositionStep, DiagnosisDetails, DiagnosisReport
 from ._start import INITIAL_STATES, describe, estimated_start, held_state, nominal_start, refined_start
 from ._statistics import modulation_p, paired_p, position_p, signature_removed
-from ._verdict import ALPHA, Evidence, Score, decide, gap_share
-from .analyses import NominalSignals, frequency_analysis, model_error, regime_shares, residual_tests, time_analysis
+from ._verdict import ALPHA, LATTICE_MATERIAL, Evidence, Naming, Score, Verdict, decide, gap_share, name_effects
+from .analyses import (
+    ModelErrorModel,
+    NominalSignals,
+    ResidualTests,
+    frequency_analysis,
+    model_error,
+    regime_shares,
+    residual_tests,
+    time_analysis,
+)
 from .effects import EFFECTS, REGISTRY, AugmentedModel, Screening
 from .effects._base import CoreEffects, Problem, ScreenContext, Simulator, Start, simulate
 from .effects._colored_noise import fit_ar
 from .effects._dead_time import MAX_DELAY
-from .effects._quantization import lattice
+from .effects._quantization import Lattice, lattice
 from .effects._registry import score_tests
 
 __all__ = ["diagnose", "ALPHA", "default_warmup", "estimated_start", "held_state"]
 
-LATTICE_MATERIAL = 0.1  # a lattice's rounding variance q^2 / 12 over this share of the model's MSE is named
 MAX_EFFECTS = 3  # effects named at most by the composition
 RESCREENED = 4  # candidates refitted at each later step: the most significant of a new screening
 NOT_CONVERGED = "nominal fit did not converge; diagnosed from its best iterate"
@@ -358,6 +367,26 @@ def diagnose(
     nominal = nominal_chain(model)
     est = records_of(estimation, "estimation")
     val = records_of(validation, "validation")
+    names, max_effects = _checked_options(candidates, initial_state, noise_std, seed, nominal_converged, compose, max_effects)
+    w, n_init = _warmups(nominal, est, val, warmup, init_samples, initial_state)
+    d = _Diagnosis(nominal, [(nominal.advanced(u), y) for u, y in est], [(nominal.advanced(u), y) for u, y in val], w, n_init, initial_state)
+
+    # the nominal model's error, every candidate against it, the composition, the quantiser
+    nom = _nominal_error(d)
+    first = _first_step(d, names, nom, noise_std, seed)
+    steps, last = _composition(d, names, nom, first, compose, max_effects, seed)
+    grid, lattice_share = _lattice_check(d, names, steps, nom.mse)
+    naming = name_effects(first.verdict.best, tuple(s.effect for s in steps), lattice_share)
+    final, final_run = _named_model(d, last, naming, grid)
+    details = _details(d, nom, first, naming, grid, lattice_share, warmup is not None, nominal_converged)
+    return _report(d, nom, first, naming, steps, final, final_run, details, noise_std is None, started)
+
+
+def _checked_options(
+    candidates: Any, initial_state: Any, noise_std: Any, seed: Any, nominal_converged: Any, compose: Any, max_effects: Any
+) -> tuple[tuple[str, ...], int]:
+    """The options ``diagnose`` checks before it reads the records' lengths: the candidates and
+    the most effects named."""
     names = _check_candidates(candidates)
     if not isinstance(initial_state, str) or initial_state not in INITIAL_STATES:
         raise DataError(f"initial_state = {shown(initial_state)}: choose one of {', '.join(map(repr, INITIAL_STATES))}")
@@ -366,9 +395,15 @@ def diagnose(
     check_seed(seed)
     check_flag(nominal_converged, "nominal_converged")
     check_flag(compose, "compose")
-    max_effects = _whole(max_effects, "max_effects", 1, 10, "effects named at most")
+    return names, _whole(max_effects, "max_effects", 1, 10, "effects named at most")
+
+
+def _warmups(
+    nominal: Nominal, est: list[tuple[Array, Array]], val: list[tuple[Array, Array]], warmup: Any, init_samples: Any, initial_state: str
+) -> tuple[int, int]:
+    """The warm-up and the samples that estimate each record's start, checked against the
+    shortest record."""
     n_min = min(u.size for u, _ in (*est, *val))
-    warmup_given = warmup is not None
     w = default_warmup(nominal.model, n_min) if warmup is None else _whole(warmup, "warmup", 0, max(n_min - 200, 0), "samples that leave at least 200 of each record")
     n_init = w if init_samples is None else _whole(init_samples, "init_samples", 1, max(n_min - 200, 1), "samples that estimate each record's start")
     w = max(w, n_init) if initial_state == "estimate" else w
@@ -377,184 +412,269 @@ def diagnose(
             f"the shortest record has {n_min} samples, fewer than 200 after the warm-up of {w}: "
             "give longer estimation and validation records (thousands of samples)"
         )
-    est = [(nominal.advanced(u), y) for u, y in est]
-    val = [(nominal.advanced(u), y) for u, y in val]
-    d = _Diagnosis(nominal, est, val, w, n_init, initial_state)
+    return w, n_init
 
-    # the nominal model on validation, the noise floor and the black-box tests
+
+@dataclass
+class _NominalError:
+    """The nominal model's validation error and what the black-box tests find in it."""
+
+    residual: Array  # scored validation residual
+    mse: float
+    sig_e: list[Signals]
+    sig_v: list[Signals]
+    black_box: Array  # the black-box predictor's residual
+    phi: Array  # the residual's AR model on the estimation records
+    y_scored: Array  # the nominal's scored validation output
+    tests: ResidualTests  # of the validation residual
+    p_black_box: float
+    p_input: float
+    p_modulation: float
+    p_position: float
+
+
+def _nominal_error(d: _Diagnosis) -> _NominalError:
+    """The nominal model on validation and the black-box tests of its residual."""
+    w = d.warmup
     r0 = d.scored_val(d.ynom_val)
     mse0 = float(r0 @ r0) / d.n
     sig_e, sig_v = d.signals(d.ynom_est, d.ynom_val)
     r_in, r_bb = black_box_residuals(sig_e, sig_v)
     p_input, p_black_box = paired_p(r0, r_in), paired_p(r0, r_bb)
-    prob0 = d.problem(())
-    phi, _ = fit_ar(prob0, nominal.theta)
+    phi, _ = fit_ar(d.problem(()), d.nominal.theta)
     ynom_v_scored = np.concatenate(d.ynom_val)[d.keep_val]
     x_e_s = np.concatenate([x[w:] for x in d.x_est])
     ynom_e_s = np.concatenate([o[w:] for o in d.ynom_est])
-    r_e_s = np.concatenate([(y - o)[w:] for (_, y), o in zip(est, d.ynom_est)])
+    r_e_s = np.concatenate([(y - o)[w:] for (_, y), o in zip(d.est, d.ynom_est)])
     x_v_s = np.concatenate([x[w:] for x in d.x_val])
     p_modulation = modulation_p(r0, ynom_v_scored, phi)
     # the validation residual's own (prewhitened) cross-correlation with the input and with x:
     # a residual that depends on them is no noise, even where the black box fitted on an
     # estimation record of narrow excitation cannot follow it onto a richer validation record
-    u_all, x_all = np.concatenate([u for u, _ in val]), np.concatenate(d.x_val)
+    u_all, x_all = np.concatenate([u for u, _ in d.val]), np.concatenate(d.x_val)
     tests = residual_tests(r0, u_all[d.keep_val], x_all[d.keep_val])
     p_input = min(p_input, tests["ccf_u"].p_adjusted, tests["ccf_x"].p_adjusted)
     p_position = position_p(x_e_s, ynom_e_s, r_e_s, x_v_s, ynom_v_scored, r0)
+    return _NominalError(r0, mse0, sig_e, sig_v, r_bb, phi, ynom_v_scored, tests, p_black_box, p_input, p_modulation, p_position)
 
-    # step 0: every candidate against the nominal model
+
+@dataclass
+class _FirstStep:
+    """Every candidate against the nominal model: the noise floor, the gap and the verdict."""
+
+    screening: list[Screening]
+    scored: dict[str, _Scored]
+    floor: float
+    floor_how: str
+    gap: float
+    level: float
+    gap_closed: dict[str, float]
+    verdict: Verdict
+
+
+def _first_step(d: _Diagnosis, names: Sequence[str], nom: _NominalError, noise_std: float | None, seed: int) -> _FirstStep:
+    """Step 0: every candidate screened, refitted and scored against the nominal model."""
     screening = _screen(d, None, names)
-    order = [s.effect for s in screening]
-    scored = _refit_all(d, None, order, r0, seed)
+    scored = _refit_all(d, None, [s.effect for s in screening], nom.residual, seed)
     if noise_std is not None:
         floor, floor_how = float(noise_std) ** 2, "given noise_std"
     else:
-        floor = min(one_step_floor(sig_e, sig_v, mse0, with_signals=r_bb), _candidate_floor(d, scored))
+        floor = min(one_step_floor(nom.sig_e, nom.sig_v, nom.mse, with_signals=nom.black_box), _candidate_floor(d, scored))
         floor_how = (
             "estimated: the lowest validation MSE of one-step predictors of a residual (the residual's last 10 values, "
             "with and without input lags, the internal signal x and its velocity and powers of the output; fitted on "
             "the estimation records): the nominal model's residual and the best candidate's"
         )
-    gap = max(mse0 - floor, 0.0)
+    gap = max(nom.mse - floor, 0.0)
     level = ALPHA / (len(scored) + 1)
-    scores = [_as_score(s, mse0, gap, ynom_v_scored, phi, level, p_modulation) for s in scored.values()]
-    first = decide(scores, Evidence(level, gap, floor, p_black_box, p_input, p_modulation, p_position, True))
-    gap_closed = {s.effect: s.gap_closed for s in scores}
+    scores = [_as_score(s, nom.mse, gap, nom.y_scored, nom.phi, level, nom.p_modulation) for s in scored.values()]
+    verdict = decide(scores, Evidence(level, gap, floor, nom.p_black_box, nom.p_input, nom.p_modulation, nom.p_position, True))
+    return _FirstStep(screening, scored, floor, floor_how, gap, level, {s.effect: s.gap_closed for s in scores}, verdict)
 
-    steps: list[CompositionStep] = []
-    final: AugmentedModel | None = None
-    final_run: _Run | None = None
-    if first.best in scored:
-        chosen = scored[first.best]
-        final, final_run = chosen.model, chosen.run
-        steps.append(CompositionStep(first.best, gap_closed[first.best], math.sqrt(chosen.mse), float(chosen.p_value)))
-    # composition: continue from the augmented model
-    if compose and final is not None and first.best not in NOISE_MODELS:
-        step_scored = scored[first.best]
-        while len(steps) < max_effects:
-            left = [e for e in names if e not in final.effects and e not in NOT_COMPOSED]
-            if not left:
-                break
-            rescreen = [s.effect for s in _screen(d, final, left)][:RESCREENED]
-            r_step, mse_step = step_scored.residual, step_scored.mse
-            more = _refit_all(d, final, rescreen, r_step, seed)
-            if not more:
-                break
-            gap_step = max(mse_step - floor, 0.0)
-            lvl = ALPHA / (len(more) + 1)
-            sc = [_as_score(s, mse_step, gap_step, ynom_v_scored, phi, lvl, 1.0) for s in more.values()]
-            nxt = decide(sc, Evidence(lvl, gap_step, floor, 1.0, 1.0, 1.0, 1.0, False))
-            if nxt.best not in more:
-                break
-            step_scored = more[nxt.best]
-            final, final_run = step_scored.model, step_scored.run
-            steps.append(
-                CompositionStep(nxt.best, next(s.gap_closed for s in sc if s.effect == nxt.best), math.sqrt(step_scored.mse), float(step_scored.p_value))
-            )
 
-    # the quantiser after the noise: the measured values' lattice
-    best = first.best
-    grid = lattice(np.concatenate([y for _, y in (*est, *val)])) if "quantization" in names else None
+def _composition(
+    d: _Diagnosis, names: Sequence[str], nom: _NominalError, first: _FirstStep, compose: bool, max_effects: int, seed: int
+) -> tuple[list[CompositionStep], _Scored | None]:
+    """The effects named one after the other and the last model (None: nothing named)."""
+    best = first.verdict.best
+    if best not in first.scored:
+        return [], None
+    last = first.scored[best]
+    steps = [CompositionStep(best, first.gap_closed[best], math.sqrt(last.mse), float(last.p_value))]
+    if not compose or best in NOISE_MODELS:
+        return steps, last
+    # continue from the augmented model
+    while len(steps) < max_effects:
+        nxt = _next_step(d, names, nom, first.floor, last, seed)
+        if nxt is None:
+            break
+        last, step = nxt
+        steps.append(step)
+    return steps, last
+
+
+def _next_step(
+    d: _Diagnosis, names: Sequence[str], nom: _NominalError, floor: float, last: _Scored, seed: int
+) -> tuple[_Scored, CompositionStep] | None:
+    """The remaining candidates refitted on top of the last model, and the one the rule names
+    (None: no further one)."""
+    final = last.model
+    left = [e for e in names if e not in final.effects and e not in NOT_COMPOSED]
+    if not left:
+        return None
+    rescreen = [s.effect for s in _screen(d, final, left)][:RESCREENED]
+    more = _refit_all(d, final, rescreen, last.residual, seed)
+    if not more:
+        return None
+    gap_step = max(last.mse - floor, 0.0)
+    lvl = ALPHA / (len(more) + 1)
+    sc = [_as_score(s, last.mse, gap_step, nom.y_scored, nom.phi, lvl, 1.0) for s in more.values()]
+    nxt = decide(sc, Evidence(lvl, gap_step, floor, 1.0, 1.0, 1.0, 1.0, False))
+    if nxt.best not in more:
+        return None
+    chosen = more[nxt.best]
+    closed = next(s.gap_closed for s in sc if s.effect == nxt.best)
+    return chosen, CompositionStep(nxt.best, closed, math.sqrt(chosen.mse), float(chosen.p_value))
+
+
+def _lattice_check(d: _Diagnosis, names: Sequence[str], steps: list[CompositionStep], mse0: float) -> tuple[Lattice | None, float]:
+    """The quantiser after the noise: the measured values' lattice (None without one, or without
+    quantization among the candidates) and its rounding variance over the final model's
+    validation MSE."""
+    grid = lattice(np.concatenate([y for _, y in (*d.est, *d.val)])) if "quantization" in names else None
     model_mse = (steps[-1].validation_rmse ** 2) if steps else mse0
-    lattice_share = grid.q**2 / 12.0 / model_mse if grid is not None and model_mse > 0 else 0.0
-    lattice_named = grid is not None and lattice_share >= LATTICE_MATERIAL
-    effects = tuple(s.effect for s in steps)
-    if lattice_named and "quantization" not in effects:
-        if best in ("none", "colored_noise", "unexplained"):
-            best = "quantization"
-            final, final_run = None, None
-            effects = ()
-        q_core: CoreEffects = (("quantization", (float(grid.q),)),)  # type: ignore[union-attr]
-        base = final if final is not None else _nominal_model(nominal)
-        final = replace(
-            base, effect="quantization", params={"q": float(grid.q)}, core=(*q_core, *base.core),
-            effects=(*effects, "quantization"), n_extra=base.n_extra + 1,
-            base_params={**base.base_params, **({base.effect: dict(base.params)} if base.effect else {})},
-        )  # fmt: skip
-        final_run = d.run(final)
-        effects = final.effects
-    if best == "colored_noise":
-        final = scored["colored_noise"].model
-        effects = ("colored_noise",)
-    # a gap the catalogue leaves: how much any model of the nominal's own signals closes, and which
-    mem = None
-    if best == "unexplained":
-        mem = model_error(
-            [NominalSignals(s.u, s.x, s.y_nom, s.residual) for s in sig_e],
-            [NominalSignals(s.u, s.x, s.y_nom, s.residual) for s in sig_v],
-            warmup=w, noise_floor=floor,
-        )  # fmt: skip
-    report_model = final if final is not None else _nominal_model(nominal)
+    return grid, grid.q**2 / 12.0 / model_mse if grid is not None and model_mse > 0 else 0.0
 
-    ranking = []
-    ordered = sorted(scored.values(), key=lambda s: (s.effect != best, s.effect not in effects, s.criterion))
-    for s in ordered:
-        ranking.append(
-            Candidate(
-                effect=s.effect, gap_closed=float(gap_closed[s.effect]), p_value=float(s.p_value), model=s.model,
-                params=dict(s.model.params), n_extra=int(s.model.n_extra), estimation_rmse=s.est_rmse,
-                validation_rmse=float(math.sqrt(s.mse)), criterion=float(s.criterion),
-                signature_removed=signature_removed(s.residual, (np.concatenate(s.run.outputs) - np.concatenate(d.ynom_val))[d.keep_val]),
-                prediction_rmse=s.prediction_rmse, validation_output=np.concatenate(s.run.outputs),
-            )
-        )  # fmt: skip
 
-    noise = math.sqrt(floor)
+def _named_model(d: _Diagnosis, last: _Scored | None, naming: Naming, grid: Lattice | None) -> tuple[AugmentedModel | None, _Run | None]:
+    """The model with the effects named and its validation run (None: the nominal model)."""
+    if not (naming.lattice and grid is not None):
+        return (last.model, last.run) if last is not None else (None, None)
+    # the quantiser on the composed model, or alone on the nominal model
+    base = last.model if last is not None and naming.best != "quantization" else _nominal_model(d.nominal)
+    final = _with_quantiser(base, float(grid.q), naming.effects)
+    return final, d.run(final)
+
+
+def _with_quantiser(base: AugmentedModel, q: float, effects: tuple[str, ...]) -> AugmentedModel:
+    """``base`` with the measured output's lattice of step ``q`` on top."""
+    q_core: CoreEffects = (("quantization", (q,)),)
+    return replace(
+        base, effect="quantization", params={"q": q}, core=(*q_core, *base.core), effects=effects, n_extra=base.n_extra + 1,
+        base_params={**base.base_params, **({base.effect: dict(base.params)} if base.effect else {})},
+    )  # fmt: skip
+
+
+def _lattice_text(grid: Lattice, share: float) -> str:
+    """The lattice check in words."""
+    return (
+        f"the measured output lies on a lattice of step q = {grid.q:.6g} ({grid.occupied} of {grid.levels} levels "
+        f"occupied); its rounding variance q^2/12 is {100 * share:.3g} % of the model's validation MSE"
+        + ("" if share >= LATTICE_MATERIAL else " (not named: immaterial)")
+    )
+
+
+def _model_error(nom: _NominalError, warmup: int, floor: float) -> ModelErrorModel:
+    """A gap the catalogue leaves: how much any model of the nominal's own signals closes, and which."""
+    return model_error(
+        [NominalSignals(s.u, s.x, s.y_nom, s.residual) for s in nom.sig_e],
+        [NominalSignals(s.u, s.x, s.y_nom, s.residual) for s in nom.sig_v],
+        warmup=warmup, noise_floor=floor,
+    )  # fmt: skip
+
+
+def _ranking(d: _Diagnosis, first: _FirstStep, naming: Naming) -> list[Candidate]:
+    """The first step's candidates, the one reported first, then the others named, then by BIC."""
+    ordered = sorted(first.scored.values(), key=lambda s: (s.effect != naming.best, s.effect not in naming.effects, s.criterion))
+    return [
+        Candidate(
+            effect=s.effect, gap_closed=float(first.gap_closed[s.effect]), p_value=float(s.p_value), model=s.model,
+            params=dict(s.model.params), n_extra=int(s.model.n_extra), estimation_rmse=s.est_rmse,
+            validation_rmse=float(math.sqrt(s.mse)), criterion=float(s.criterion),
+            signature_removed=signature_removed(s.residual, (np.concatenate(s.run.outputs) - np.concatenate(d.ynom_val))[d.keep_val]),
+            prediction_rmse=s.prediction_rmse, validation_output=np.concatenate(s.run.outputs),
+        )
+        for s in ordered
+    ]  # fmt: skip
+
+
+def _details(
+    d: _Diagnosis,
+    nom: _NominalError,
+    first: _FirstStep,
+    naming: Naming,
+    grid: Lattice | None,
+    lattice_share: float,
+    warmup_given: bool,
+    nominal_converged: bool,
+) -> DiagnosisDetails:
+    """How the verdict was reached: the tests, the floor, the lattice, the model-error model."""
+    mem = _model_error(nom, d.warmup, first.floor) if naming.best == "unexplained" else None
+    return DiagnosisDetails(
+        screening=tuple(first.screening),
+        black_box_p_value=nom.p_black_box,
+        input_p_value=nom.p_input,
+        modulation_p_value=nom.p_modulation,
+        position_p_value=nom.p_position,
+        significance_level=first.level,
+        noise_floor=first.floor_how,
+        warmup_rule="given" if warmup_given else "slowest pole's transient to 1e-4 plus the blocks' memory and dead-time search",
+        screened_order=tuple(s.effect for s in first.screening),
+        initial_state=describe(d.how, d.init_samples),
+        colored_noise_ruled_out=first.verdict.ruled_out,
+        closing_not_named=first.verdict.not_named,
+        lattice="" if grid is None else _lattice_text(grid, lattice_share),
+        nominal_fit="converged" if nominal_converged else NOT_CONVERGED,
+        records=(len(d.est), len(d.val)),
+        floor_exceeded=tuple(s.effect for s in first.scored.values() if first.gap > 0 and s.mse < first.floor),
+        model_error=mem,
+    )
+
+
+def _report(
+    d: _Diagnosis,
+    nom: _NominalError,
+    first: _FirstStep,
+    naming: Naming,
+    steps: list[CompositionStep],
+    final: AugmentedModel | None,
+    final_run: _Run | None,
+    details: DiagnosisDetails,
+    noise_estimated: bool,
+    started: float,
+) -> DiagnosisReport:
+    """The report: the verdict, the ranking and where the nominal model's error lies."""
+    ranking = _ranking(d, first, naming)
+    noise = math.sqrt(first.floor)
     y_nominal = np.concatenate(d.ynom_val)
     y_best = np.concatenate(final_run.outputs) if final_run is not None else y_nominal
     residual_full = d.y_val - y_nominal
-    u_val_all = np.concatenate([u for u, _ in val])
-    details = DiagnosisDetails(
-        screening=tuple(screening),
-        black_box_p_value=p_black_box,
-        input_p_value=p_input,
-        modulation_p_value=p_modulation,
-        position_p_value=p_position,
-        significance_level=level,
-        noise_floor=floor_how,
-        warmup_rule="given" if warmup_given else "slowest pole's transient to 1e-4 plus the blocks' memory and dead-time search",
-        screened_order=tuple(order),
-        initial_state=describe(initial_state, n_init),
-        colored_noise_ruled_out=first.ruled_out,
-        closing_not_named=first.not_named,
-        lattice=(
-            ""
-            if grid is None
-            else f"the measured output lies on a lattice of step q = {grid.q:.6g} ({grid.occupied} of {grid.levels} levels "
-            f"occupied); its rounding variance q^2/12 is {100 * lattice_share:.3g} % of the model's validation MSE"
-            + ("" if lattice_named else " (not named: immaterial)")
-        ),
-        nominal_fit="converged" if nominal_converged else NOT_CONVERGED,
-        records=(len(est), len(val)),
-        floor_exceeded=tuple(s.effect for s in scored.values() if gap > 0 and s.mse < floor),
-        model_error=mem,
-    )
-    first_val = val[0]
-    state0 = _state(nominal, d.starts_val[0])
-    regimes = regime_shares(nominal.model, first_val[0], first_val[1] - d.ynom_val[0], warmup=w, initial_state=state0)
+    u_val_all = np.concatenate([u for u, _ in d.val])
+    first_val = d.val[0]
+    state0 = _state(d.nominal, d.starts_val[0])
+    regimes = regime_shares(d.nominal.model, first_val[0], first_val[1] - d.ynom_val[0], warmup=d.warmup, initial_state=state0)
     spectrum = frequency_analysis(residual_full[d.keep_val], u_val_all[d.keep_val], noise_std=noise)
     drift = time_analysis(residual_full[d.keep_val])
     return DiagnosisReport(
-        best_effect=best,
+        best_effect=naming.best,
         ranking=ranking,
         regimes=regimes,
-        tests=tests,
+        tests=nom.tests,
         spectrum=spectrum,
         drift=drift,
         noise_std=noise,
-        noise_std_estimated=noise_std is None,
-        nominal_validation_rmse=math.sqrt(mse0),
-        gap=gap,
-        warmup=w,
+        noise_std_estimated=noise_estimated,
+        nominal_validation_rmse=math.sqrt(nom.mse),
+        gap=first.gap,
+        warmup=d.warmup,
         u_val=u_val_all,
         y_val=d.y_val,
         y_nominal=y_nominal,
         y_best=y_best,
         elapsed=time.perf_counter() - started,
         details=details,
-        effects=effects if best not in ("none", "unexplained") else (),
-        model=report_model,
+        effects=naming.effects,
+        model=final if final is not None else _nominal_model(d.nominal),
         steps=tuple(steps),
     )
 

@@ -20,6 +20,12 @@ remaining gap (the step's MSE above the noise floor) it closes. The family-wise 
   ahead, and the residual is neither explained by the input (a cross-validated black box of input
   features, or its prewhitened cross-correlation with the input or x), nor modulated by the model's output, nor a function of the drive's position;
 - else "unexplained".
+
+:func:`name_effects`, once the composition has named its effects: quantization is added where the
+measured outputs lie on a lattice whose rounding variance q^2 / 12 is at least ``LATTICE_MATERIAL``
+of the final model's validation MSE (and the composition did not name it); it is the effect
+reported, alone on the nominal model, where the first step found "none", colored_noise or
+"unexplained".
 """
 
 from __future__ import annotations
@@ -27,12 +33,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["ALPHA", "CLOSE_ENOUGH", "MATERIAL", "MATERIAL_GAP", "Evidence", "Score", "Verdict", "decide", "gap_share"]
+__all__ = [
+    "ALPHA", "CLOSE_ENOUGH", "LATTICE_MATERIAL", "MATERIAL", "MATERIAL_GAP", "Evidence", "Naming", "Score", "Verdict", "decide",
+    "gap_share", "name_effects",
+]  # fmt: skip
 
 ALPHA = 0.01  # family-wise significance level of "the validation error improved"
 CLOSE_ENOUGH = 0.5  # a candidate must close at least this fraction of the gap
 MATERIAL = 0.25  # a significant deterministic candidate closing this much rules out colored noise
 MATERIAL_GAP = 0.01  # a gap under this fraction of the noise variance is "none", however significant
+LATTICE_MATERIAL = 0.1  # a lattice's rounding variance q^2 / 12 over this share of the model's MSE is named
 SHARE_RANGE = (-10.0, 1.0)  # a gap share is reported within this range
 
 
@@ -117,6 +127,27 @@ class Verdict:
     ruled_out: tuple[str, ...] = ()
 
 
+@dataclass(frozen=True)
+class Naming:
+    """The diagnosis's answer once the composition is done.
+
+    Attributes
+    ----------
+    best : str
+        The effect reported: an effect's name, "none" or "unexplained".
+    effects : tuple of str
+        The effects of the report's model, in the order named (empty for "none" and
+        "unexplained").
+    lattice : bool
+        Whether the quantiser is added after the composition (on the composed model, or on the
+        nominal model when ``best`` is "quantization").
+    """
+
+    best: str
+    effects: tuple[str, ...]
+    lattice: bool = False
+
+
 def gap_share(mse_step: float, mse: float, gap: float) -> float:
     """The share of the gap a model of validation MSE ``mse`` closes, clipped to
     ``SHARE_RANGE`` (0 where there is no gap).
@@ -167,15 +198,7 @@ def decide(scores: list[Score], ev: Evidence) -> Verdict:
     not_named: dict[str, str] = {}
     closing = [s for s in deterministic if s.gap_closed >= CLOSE_ENOUGH]
     if closing and ev.modulation_p < level:
-        # the residual is a slowly modulated copy of the output: the effect named must leave no
-        # such modulation behind (a drifting gain is no width drift)
-        kept = []
-        for s in closing:
-            if math.isnan(s.modulation_left_p) or s.modulation_left_p >= level:
-                kept.append(s)
-            else:
-                not_named[s.effect] = f"its residual is still modulated by the output (p {s.modulation_left_p:.2g})"
-        closing = kept
+        closing = _leaving_no_modulation(closing, level, not_named)
     if closing and closing[0] is deterministic[0]:
         return Verdict(closing[0].effect, not_named)
     if closing:
@@ -186,19 +209,76 @@ def decide(scores: list[Score], ev: Evidence) -> Verdict:
     noise = [s for s in scores if not s.deterministic]
     ruled_out: list[str] = []
     if ev.first_step and noise:
-        material = [s.effect for s in deterministic if s.gap_closed >= MATERIAL]
-        if noise[0].effect not in significant:
-            ruled_out.append("its noise model does not predict significantly better")
-        if ev.input_p < level:
-            ruled_out.append(f"the residual depends on the input (p {ev.input_p:.2g})")
-        if ev.modulation_p < level:
-            ruled_out.append(f"the residual is modulated by the output (p {ev.modulation_p:.2g})")
-        if ev.position_p < level:
-            ruled_out.append(f"the residual depends on the drive's position (p {ev.position_p:.2g})")
-        if material:
-            ruled_out.append(f"{material[0]} closes over a quarter of the gap")
+        ruled_out = _noise_ruled_out(noise[0], deterministic, significant, ev)
         if not ruled_out and not closing:
             # no "closes half" here: a noise model predicts only the predictable part of colored
             # noise, its innovations are as unpredictable as white noise
             return Verdict(noise[0].effect, not_named)
     return Verdict("unexplained", not_named, tuple(ruled_out))
+
+
+def _leaving_no_modulation(closing: list[Score], level: float, not_named: dict[str, str]) -> list[Score]:
+    """The closing candidates that leave no output modulation in their residual (the step's
+    residual is a slowly modulated copy of the output: a drifting gain is no width drift); the
+    others go into ``not_named``."""
+    kept = []
+    for s in closing:
+        if math.isnan(s.modulation_left_p) or s.modulation_left_p >= level:
+            kept.append(s)
+        else:
+            not_named[s.effect] = f"its residual is still modulated by the output (p {s.modulation_left_p:.2g})"
+    return kept
+
+
+def _noise_ruled_out(noise: Score, deterministic: list[Score], significant: set[str], ev: Evidence) -> list[str]:
+    """Why colored_noise is not named at the first step (empty: nothing rules it out)."""
+    level = ev.level
+    material = [s.effect for s in deterministic if s.gap_closed >= MATERIAL]
+    ruled_out: list[str] = []
+    if noise.effect not in significant:
+        ruled_out.append("its noise model does not predict significantly better")
+    if ev.input_p < level:
+        ruled_out.append(f"the residual depends on the input (p {ev.input_p:.2g})")
+    if ev.modulation_p < level:
+        ruled_out.append(f"the residual is modulated by the output (p {ev.modulation_p:.2g})")
+    if ev.position_p < level:
+        ruled_out.append(f"the residual depends on the drive's position (p {ev.position_p:.2g})")
+    if material:
+        ruled_out.append(f"{material[0]} closes over a quarter of the gap")
+    return ruled_out
+
+
+def name_effects(first: str, composed: tuple[str, ...], lattice_share: float) -> Naming:
+    """The diagnosis's answer once the composition is done (see the module doc).
+
+    Parameters
+    ----------
+    first : str
+        The first step's verdict (:func:`decide`): an effect, "none" or "unexplained".
+    composed : tuple of str
+        The effects the composition named, in order (empty for "none" and "unexplained").
+    lattice_share : float
+        The measured outputs' lattice rounding variance q^2 / 12 over the final model's
+        validation MSE (0 without a lattice or without quantization among the candidates).
+
+    Returns
+    -------
+    Naming
+        The effect reported, the effects of the report's model, and whether the quantiser is
+        added after the composition.
+
+    Examples
+    --------
+    >>> from backlashid.diagnosis._verdict import name_effects
+    >>> name_effects("dead_time", ("dead_time", "friction"), 0.01).effects
+    ('dead_time', 'friction')
+    >>> name_effects("dead_time", ("dead_time",), 0.3).effects
+    ('dead_time', 'quantization')
+    >>> name_effects("none", (), 0.3).best
+    'quantization'
+    """
+    if lattice_share >= LATTICE_MATERIAL and "quantization" not in composed:
+        if first in ("none", "colored_noise", "unexplained"):  # the quantiser alone, on the nominal model
+            return Naming("quantization", ("quantization",), lattice=True)
+        return Naming(first, (*composed, "quantization"), lattice=True)
+    return Naming(first, composed if first not in ("none", "unexplained") else ())

@@ -680,26 +680,62 @@ def _search(
     # 2-4x a fit.
     converged = any(r.reason in CONVERGED for r in usable)
     extra = refine and not paper and not (converged and _lag1(u_arr) < WHITE_LAG1)
-    scaled: list[NDArray[np.float64]] = []
-    if extra:
-        linear = linear_start(structure, prob, u_arr, y_arr, iterations["warmup"])
-        scaled = [th for th in (scale_starts(structure, prob, linear) if linear else []) if _regressor_ok(prob, th, iterations["switching"])]
+    scaled = _scaled_starts(structure, prob, u_arr, y_arr, iterations["warmup"], iterations["switching"]) if extra else []
     if not usable:
         if not scaled:
             raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
         usable = [_Run(history=[runs[0].history[0]], rmse=runs[0].rmse[:1], reason="diverged", last_ls=None, moving=0.0, error=runs[0].error)]
+    run, k = _chosen_iterate(usable, paper)
+    if not refine:
+        return run, k, None
+    refined = _cheapest_valid(structure, prob, usable, scaled)
+    if refined is None:
+        if run.last_ls is None:  # no iteration and no search could be computed
+            raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
+        return run, k, None
+    refined = _restarted(
+        structure, prob, u_arr, refined, extra=extra, restarts=restarts, perturbation=perturbation, seed=seed, warmup=iterations["warmup"]
+    )
+    return run, k, refined
+
+
+def _scaled_starts(
+    structure: Structure, prob: _core.Problem, u_arr: NDArray[np.float64], y_arr: NDArray[np.float64], warmup: int, switching: Switching
+) -> list[NDArray[np.float64]]:
+    """The dead bands of the data's x-scale on a linear output-error fit (``_starts.py``) whose
+    first iteration can be computed; none when the linear fit fails."""
+    linear = linear_start(structure, prob, u_arr, y_arr, warmup)
+    return [th for th in (scale_starts(structure, prob, linear) if linear else []) if _regressor_ok(prob, th, switching)]
+
+
+def _chosen_iterate(usable: list[_Run], paper: bool) -> tuple[_Run, int]:
+    """The run and the index of its iterate that the fit keeps: the paper's last iterate (the
+    better of a 2-cycle's two), else the iterate of lowest simulation error over all runs."""
     if paper:
         run = usable[0]
         k = len(run.history) - 1
         if run.reason == "2-cycle" and run.rmse[k - 1] < run.rmse[k]:
             k -= 1
-    else:
-        run = min(usable, key=lambda r: r.rmse[r.best()])
-        k = run.best()
-    if not refine:
-        return run, k, None
+        return run, k
+    run = min(usable, key=lambda r: r.rmse[r.best()])
+    return run, run.best()
+
+
+def _rank(structure: Structure, prob: _core.Problem, fit: OutputErrorFit) -> tuple[bool, float]:
+    """The order of the search's candidates: valid models (increasing branches, stable blocks)
+    first, then the cheapest."""
+    return (not _is_valid(structure, prob, fit.theta), fit.cost)
+
+
+def _cheapest_valid(
+    structure: Structure, prob: _core.Problem, usable: list[_Run], scaled: list[NDArray[np.float64]]
+) -> OutputErrorFit | None:
+    """LM from the best iterate and the ARX start of every run and from the scale starts, and
+    the cheapest result that is a valid model (an invalid one only when no candidate is valid:
+    it is then reported as such); None when no search could be computed."""
     starts_lm = [th for r in usable for th in {id(x): x for x in (r.history[r.best()], r.history[0])}.values()]
-    candidates, truncated = [], set()
+    candidates: list[OutputErrorFit] = []
+    truncated: set[int] = set()
     for th in starts_lm + scaled:
         if candidates and out_of_time():
             break
@@ -712,45 +748,64 @@ def _search(
         if short and not candidates[-1].converged:
             truncated.add(id(candidates[-1]))
     if not candidates:
-        if run.last_ls is None:  # no iteration and no search could be computed
-            raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
-        return run, k, None
-
-    def rank(c: OutputErrorFit) -> tuple[bool, float]:
-        return (not _is_valid(structure, prob, c.theta), c.cost)
-
-    # The cheapest candidate that is a valid model (increasing branches, stable blocks); an
-    # invalid one only when no candidate is valid (it is then reported as such).
-    refined = min(candidates, key=rank)
+        return None
+    refined = min(candidates, key=functools.partial(_rank, structure, prob))
     if id(refined) in truncated:
         try:
             refined = levenberg_marquardt(prob, refined.theta)
         except BacklashIdError:
             pass
+    return refined
+
+
+def _restarted(
+    structure: Structure,
+    prob: _core.Problem,
+    u_arr: NDArray[np.float64],
+    refined: OutputErrorFit,
+    *,
+    extra: bool,
+    restarts: int,
+    perturbation: float,
+    seed: int,
+    warmup: int,
+) -> OutputErrorFit:
+    """``refined`` after the pole restarts (``extra`` only) and the seeded restarts, each kept
+    only if it ranks better."""
+    rank = functools.partial(_rank, structure, prob)
     # Smooth inputs leave local minima in the linear block's poles (a zero cancelling a pole):
     # the input block from fixed pole sets, the rest held, then whole; kept only if cheaper.
     # They run again from wherever the seeded restarts moved the estimate (at most POLE_ROUNDS).
     for _round in range(POLE_ROUNDS):
-        for trial in pole_restarts(structure, prob, u_arr, refined.theta, iterations["warmup"]) if extra else []:
+        for trial in pole_restarts(structure, prob, u_arr, refined.theta, warmup) if extra else []:
             if rank(trial) < rank(refined):
                 refined = trial
-        # The simulation error is piecewise smooth: LM can stop at a kink or in a shallow local
-        # minimum. Restarts from seeded perturbations keep a result only if cheaper.
-        rng = np.random.default_rng(seed)
         moved = refined
-        for _ in range(restarts):
-            if out_of_time():
-                break
-            start = refined.theta + perturbation * rng.standard_normal(structure.size)
-            try:
-                trial = levenberg_marquardt(prob, start)
-            except BacklashIdError:
-                continue
-            if rank(trial) < rank(refined):
-                refined = trial
+        refined = _seeded_restarts(structure, prob, refined, restarts, perturbation, seed)
         if refined is moved or not extra:  # the restarts kept the pole restarts' result (or none ran): done
             break
-    return run, k, refined
+    return refined
+
+
+def _seeded_restarts(
+    structure: Structure, prob: _core.Problem, refined: OutputErrorFit, restarts: int, perturbation: float, seed: int
+) -> OutputErrorFit:
+    """The simulation error is piecewise smooth: LM can stop at a kink or in a shallow local
+    minimum. Restarts from seeded perturbations of ``refined`` keep a result only if it ranks
+    better."""
+    rank = functools.partial(_rank, structure, prob)
+    rng = np.random.default_rng(seed)
+    for _ in range(restarts):
+        if out_of_time():
+            break
+        start = refined.theta + perturbation * rng.standard_normal(structure.size)
+        try:
+            trial = levenberg_marquardt(prob, start)
+        except BacklashIdError:
+            continue
+        if rank(trial) < rank(refined):
+            refined = trial
+    return refined
 
 
 def _start(value: Any, name: str) -> None:
@@ -788,6 +843,291 @@ def _check_options(arguments: dict[str, Any]) -> None:
             _start(start, f"starts[{k}]")
 
 
+def _check_settings(arguments: dict[str, Any]) -> None:
+    """The settings' values and combinations beyond their types and ranges (_check_options)."""
+    a = arguments
+    if a["initial_state"] not in ("rest", "estimate"):
+        raise DataError(f"initial_state = {a['initial_state']!r}: use 'rest' or 'estimate'")
+    if a["initial_state"] == "estimate" and (a["paper"] or not a["refine"]):
+        raise DataError(
+            "initial_state = 'estimate' is estimated by the output-error refinement: "
+            "use it with refine=True and paper=False"
+        )
+    if a["switching"] not in ("measured", "simulated"):
+        raise DataError(f"switching = {a['switching']!r}: use 'measured' or 'simulated'")
+    if not 0.0 < a["step"] <= 1.0:
+        raise DataError(f"step = {a['step']}: give a step factor in (0, 1]")
+    if a["max_iter"] < 2:
+        raise DataError(
+            f"max_iter = {a['max_iter']}: give at least 2 (iterate 1 is the linear ARX start; the backlash "
+            "is first estimated by iterate 2)"
+        )
+
+
+# -- the fit's stages ----------------------------------------------------------------------------
+
+
+def _validated(structure: Structure, u: ArrayLike, y: ArrayLike, y_name: str, warmup: int) -> tuple[Any, Any, bool]:
+    """The record(s) as arrays, checked, and whether the call gave several records (one record
+    in a list is the plain fit, bit for bit)."""
+    several = _records.is_records(u) or _records.is_records(y)
+    if several:  # several records of one system, one model (_records.py)
+        u_arr, y_arr = _records.validate(u, y, y_name=y_name, warmup=warmup, parameters=structure.size)
+        if len(u_arr) == 1:  # one record in a list: the plain fit (bit for bit)
+            (u_arr,), (y_arr,) = u_arr, y_arr
+    else:
+        u_arr, y_arr = identification_record(
+            u, y, y_name=y_name, warmup=warmup, parameters=structure.size, constant_input=NotIdentifiableError
+        )
+    if not several and np.ptp(y_arr[warmup:]) == 0.0:
+        raise NotIdentifiableError(
+            f"{y_name} never changes: 0 % of samples move the output off the backlash dead band; "
+            "excite the system with a larger input amplitude"
+        )
+    return u_arr, y_arr, several
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What the stages of a fit read: the record as the core sees it (``y`` delayed by a
+    feedthrough's ``shift``, ``warmup`` lengthened by it; ``user_warmup`` the caller's), the
+    whole record's compiled problem, the search's settings (the paper's under ``paper``) and
+    the caller's options."""
+
+    structure: Structure
+    u: NDArray[np.float64] | list[NDArray[np.float64]]
+    y: NDArray[np.float64] | list[NDArray[np.float64]]
+    several: bool
+    warmup: int
+    user_warmup: int
+    shift: int
+    whole: _core.Problem
+    starts: list[Start]
+    paper: bool
+    refine: bool
+    switching: Switching
+    step: float
+    reflect: bool
+    restarts: int
+    perturbation: float
+    seed: int
+    max_iter: int
+    tol: float
+    coarse: int | None
+    min_moving: float
+    valid: bool
+    initial_state: str
+    time_budget: float | None
+
+    @property
+    def guard(self) -> tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool]:
+        """(u, warm-up, min_moving, branches): the search kept among valid models that move (_valid.py)."""
+        return self.u, self.user_warmup, self.min_moving, self.valid
+
+
+def _search_first(setup: _Setup, end: int) -> tuple[_Run, int, OutputErrorFit | None]:
+    """:func:`_search` on the first ``end`` samples of the record (the whole record's problem
+    when that is all of it)."""
+    s = setup
+    u_end, y_end = s.u[:end], s.y[:end]
+    prob = s.whole if end == len(s.u) else s.structure.problem(u_end, y_end, s.warmup)
+    return _search(
+        s.structure, prob, u_end, y_end, s.starts, paper=s.paper, refine=s.refine, restarts=s.restarts,
+        perturbation=s.perturbation, seed=s.seed, max_iter=s.max_iter, tol=s.tol, switching=s.switching, step=s.step,
+        reflect=s.reflect, warmup=s.warmup,
+    )
+
+
+def _coarse_to_fine(setup: _Setup) -> tuple[_Run, int, OutputErrorFit | None, int]:
+    """The search, coarse to fine on a long record: the iterations and the choice of LM start
+    on the first ``segment`` samples after the warm-up, then LM on the whole record from the
+    segment's optimum; on the whole record throughout where there is no segment or it fails.
+    Returns the run, its chosen iterate, the refinement and the segment (0: whole record)."""
+    s = setup
+    segment = _coarse_samples(s.structure, _records.rows(s.u, s.warmup), s.coarse) * s.refine * (not isinstance(s.u, list))
+    if segment:
+        end = s.warmup + segment
+        try:
+            run, k, refined = _search_first(s, end)
+            # a segment that hardly moves the backlash says nothing about its branches
+            if refined is not None and _moving(s.structure, refined.theta, s.u[:end], s.user_warmup) >= s.min_moving:
+                refined = refine_whole(s.structure, s.whole, refined.theta, s.u, s.y, s.warmup, segment)
+                # a segment's optimum far from the whole record's (LM does not converge from it) is no start
+                if refined.converged:
+                    return run, k, refined, segment
+        except BacklashIdError:  # the segment is not enough: search the whole record
+            pass
+    run, k, refined = _search_first(s, len(s.u))
+    return run, k, refined, 0
+
+
+def _acceptable_or_lower_degree(
+    setup: _Setup, refined: OutputErrorFit | None, arguments: dict[str, Any]
+) -> tuple[OutputErrorFit | None, str | None, tuple[Any, int, float, bool] | None, tuple[NDArray[np.float64], float | None] | None]:
+    """An optimum that is no valid backlash or hardly moves it: continued from the fit of the
+    next lower degree, the search kept among valid models that move (_valid.py). Returns the
+    refinement, why the optimum was replaced (None: it was not), the guard the search was kept
+    by, and the optimum checked with its moving fraction."""
+    s = setup
+    why = guard = None
+    checked: tuple[NDArray[np.float64], float | None] | None = None  # the optimum and its moving fraction
+    if refined is not None and s.structure.degree > 1:
+        why, moved = acceptable_motion(s.structure, s.whole, refined.theta, s.u, s.user_warmup, s.min_moving, s.valid)
+        checked = refined.theta, moved
+        lower = _lower_degree_fallback(s.structure, s.whole, s.u, s.user_warmup, s.min_moving, arguments) if why else None
+        if lower is None:
+            why = None
+        else:
+            refined, guard = lower, s.guard
+    return refined, why, guard, checked
+
+
+def _with_initial_state(
+    setup: _Setup, refined: OutputErrorFit | None, guard: tuple[Any, int, float, bool] | None
+) -> tuple[OutputErrorFit | _StateFit | None, dict[str, float] | list[dict[str, float]] | None]:
+    """With ``initial_state="estimate"``, the refinement again with the record's initial state
+    (kept among the valid models where the model alone stayed there and the state's refinement
+    leaves them), and the state (one dict per record for several records); else unchanged."""
+    s = setup
+    if s.initial_state != "estimate" or refined is None:
+        return refined, None
+    # the shifted record's first `shift` samples are zeros, right only from rest
+    with_state = functools.partial(
+        _refine_with_state, s.structure, s.u, s.y, max(s.warmup, s.shift), restarts=s.restarts, perturbation=s.perturbation, seed=s.seed
+    )
+    kept = refined
+    refined, state = with_state(kept, guard=guard)  # type: ignore[assignment]
+    if guard is None and why_not_acceptable(s.structure, s.whole, refined.theta, s.u, s.user_warmup, s.min_moving, s.valid) is not None:
+        if why_not_acceptable(s.structure, s.whole, kept.theta, s.u, s.user_warmup, s.min_moving, s.valid) is None:
+            # the state's refinement left the valid models: again, kept among them
+            refined, state = with_state(kept, guard=s.guard)  # type: ignore[assignment]
+    state = [state] if s.several and isinstance(state, dict) else state  # one dict per record
+    return refined, state
+
+
+def _failure(
+    structure: Structure, theta: NDArray[np.float64], rmse: float, invalid: ModelError | None, paper: bool, time_budget: float | None
+) -> tuple[str, str | None]:
+    """Why the final estimate failed: its reason and the message ("", None when it did not)."""
+    est = structure.unpack(theta)
+    for den, name in ((est.b, "input"), (est.s, "output")):
+        radius = spectral_radius(np.asarray(den))
+        if not radius < 1.0:
+            return "unstable", (
+                f"the estimated {name} linear block is unstable (spectral radius {radius:.3f}); "
+                + ("use the default algorithm (it reflects unstable poles) or other initial values" if paper else
+                   "try other initial values or starts, other orders, or a warm-up if the record does not start at rest")
+            )
+    if not np.isfinite(rmse):
+        return "not finite", "the identification diverged: the estimate simulates to no finite output"
+    if invalid is not None:
+        return "invalid model", f"the final estimate is not a valid model ({invalid}); try a lower branch degree, other orders or other starts"
+    if budget_hit():
+        return "time budget", (
+            f"the fit ran out of its time budget (time_budget = {time_budget:g} s) before it converged: its best "
+            "estimate so far is in best and best_stable; give a larger time_budget, or a shorter record or coarse segment"
+            if time_budget is not None else
+            "the fit ran out of the time budget of its caller before it converged: its best estimate so far is in best and best_stable"
+        )
+    return "", None
+
+
+def _final_motion(
+    setup: _Setup, theta: NDArray[np.float64], model: Model | None, checked: tuple[NDArray[np.float64], float | None] | None
+) -> tuple[float, tuple[float, float] | None]:
+    """The moving fraction and x's range (for the branch check) at the end: the check of the
+    optimum found them at this very theta, or the whole record's problem has them from its last
+    gradient pass there (or simulates once for both)."""
+    s = setup
+    found = record_motion(s.structure, s.whole, theta, s.u, s.user_warmup) if model is not None else None
+    x_range = found[1] if found is not None else None
+    if model is None:
+        moving = 0.0
+    elif checked is not None and checked[0] is theta and checked[1] is not None:
+        moving = checked[1]  # found by the check of the optimum at this very theta (a long record's simulation spared)
+    elif found is not None:
+        moving = found[0]
+    else:
+        moving = _moving(s.structure, theta, s.u, s.user_warmup, model)
+    return moving, x_range
+
+
+def _noise_and_covariance(
+    structure: Structure, run: _Run, refined: OutputErrorFit | _StateFit | None, failure: str | None, moving: float, min_moving: float
+) -> tuple[float, NDArray[np.float64]]:
+    """The noise variance and the covariance of the estimate (NaN where a failed estimate has
+    none); a backlash that moves on fewer than ``min_moving`` of the samples is not identified."""
+    if failure is not None:
+        try:
+            return _covariance(structure, run, refined)
+        except BacklashIdError:  # the failed estimate has no usable covariance
+            return np.nan, np.full((structure.size, structure.size), np.nan)
+    if moving < min_moving:
+        raise NotIdentifiableError(
+            f"only {100 * moving:.1f} % of samples move the backlash output off its dead band "
+            f"(need {100 * min_moving:g} %, min_moving = {min_moving:g}): excite the system with a larger input amplitude, "
+            f"or, if the record is mostly at rest, lower min_moving (e.g. min_moving={max(moving * 0.9, 0.001):.2g}; "
+            "--min-moving on the command line)"
+        )
+    return _covariance(structure, run, refined)
+
+
+def _outcome(
+    setup: _Setup,
+    run: _Run,
+    k: int,
+    refined: OutputErrorFit | _StateFit | None,
+    checked: tuple[NDArray[np.float64], float | None] | None,
+    segment: int,
+    state: dict[str, float] | list[dict[str, float]] | None,
+) -> tuple[FitResult, tuple[float, float] | None]:
+    """The fit's result and x's range, from the refinement or else the chosen iterate. Raises
+    NotConvergedError (its best, and its best stable iterate) when the final estimate is
+    unstable, not finite, no valid model or out of time, and NotIdentifiableError when it
+    hardly moves the backlash."""
+    structure = setup.structure
+    theta_iter = run.history[k]
+    theta, steps = (refined.theta, refined.iterations) if refined is not None else (theta_iter, 0)
+    # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
+    # stage always ends in a whole-record refinement, so the iterate is the whole record's)
+    rmse = float(np.sqrt(refined.cost / refined.n_residuals)) if refined is not None else run.rmse[k]
+    try:
+        model, invalid = structure.model(theta), None
+    except ModelError as exc:
+        model, invalid = None, exc
+    failed, failure = _failure(structure, theta, rmse, invalid, setup.paper, setup.time_budget)
+    moving, x_range = _final_motion(setup, theta, model, checked)
+    noise_var, covariance = _noise_and_covariance(structure, run, refined, failure, moving, setup.min_moving)
+    converged = failure is None and (run.reason in CONVERGED or (refined is not None and refined.converged))
+    reason = failed or (run.reason if run.reason in CONVERGED or not converged else "refined")
+    result = FitResult(
+        model=_with_covariance(model, structure, covariance),
+        structure=structure,
+        theta=np.asarray(theta, dtype=np.float64),
+        covariance=covariance,
+        history=np.array(run.history),
+        history_rmse=np.array(run.rmse),
+        iterations=len(run.history),
+        converged=converged,
+        reason=reason,
+        simulation_rmse=rmse,
+        noise_std=float(np.sqrt(noise_var)),
+        moving_fraction=moving,
+        method="paper" if setup.paper else "default",
+        warmup=setup.user_warmup,
+        iterative_theta=np.asarray(theta_iter, dtype=np.float64),
+        refinement_steps=steps,
+        coarse_samples=segment,
+        initial_state=state,
+        refinement_converged=refined.converged if refined is not None else None,
+        iterations_reason=run.reason,
+    )
+    if failure is not None:
+        stable = _best_stable(structure, setup.whole, result, [theta, theta_iter, *run.history])
+        raise NotConvergedError(failure, result, stable)
+    return result, x_range
+
+
 def _fit(
     structure: Structure,
     u: ArrayLike,
@@ -812,38 +1152,13 @@ def _fit(
     time_budget: float | None = None,
     valid: bool = False,
 ) -> FitResult:
+    """fit_cascade and fit_sandwich: the checked record and settings, the search (coarse to
+    fine), the fallback to the lower degree, the initial state and the result, in stages; the
+    warnings are issued here, two frames below the caller's line."""
     arguments = dict(locals())  # the call, for a fit of lower degree (_lower_degree_fallback)
     _check_options(arguments)
-    if initial_state not in ("rest", "estimate"):
-        raise DataError(f"initial_state = {initial_state!r}: use 'rest' or 'estimate'")
-    if initial_state == "estimate" and (paper or not refine):
-        raise DataError(
-            "initial_state = 'estimate' is estimated by the output-error refinement: "
-            "use it with refine=True and paper=False"
-        )
-    if switching not in ("measured", "simulated"):
-        raise DataError(f"switching = {switching!r}: use 'measured' or 'simulated'")
-    if not 0.0 < step <= 1.0:
-        raise DataError(f"step = {step}: give a step factor in (0, 1]")
-    if max_iter < 2:
-        raise DataError(
-            f"max_iter = {max_iter}: give at least 2 (iterate 1 is the linear ARX start; the backlash "
-            "is first estimated by iterate 2)"
-        )
-    several = _records.is_records(u) or _records.is_records(y)
-    if several:  # several records of one system, one model (_records.py)
-        u_arr, y_arr = _records.validate(u, y, y_name=y_name, warmup=warmup, parameters=structure.size)
-        if len(u_arr) == 1:  # one record in a list: the plain fit (bit for bit)
-            (u_arr,), (y_arr,) = u_arr, y_arr
-    else:
-        u_arr, y_arr = identification_record(
-            u, y, y_name=y_name, warmup=warmup, parameters=structure.size, constant_input=NotIdentifiableError
-        )
-    if not several and np.ptp(y_arr[warmup:]) == 0.0:
-        raise NotIdentifiableError(
-            f"{y_name} never changes: 0 % of samples move the output off the backlash dead band; "
-            "excite the system with a larger input amplitude"
-        )
+    _check_settings(arguments)
+    u_arr, y_arr, several = _validated(structure, u, y, y_name, warmup)
     # A feedthrough block is fitted as the same block one sample later (structure.py): the
     # core's model output at t + shift is the measured output at t. The shifted record starts
     # with `shift` zeros, exact from rest and otherwise inside the (then lengthened) warm-up.
@@ -858,156 +1173,18 @@ def _fit(
         reflect = True
     if restarts is None:  # kinks and shallow minima matter on short records only
         restarts = RESTARTS if _records.rows(u_arr, warmup) <= RESTARTS_UP_TO else 0
-
-    # one compiled problem per record: the whole record, and the coarse stage's segment
-    whole = structure.problem(u_arr, y_arr, warmup)
-
-    def search(end: int) -> tuple[_Run, int, OutputErrorFit | None]:
-        u_end, y_end = u_arr[:end], y_arr[:end]
-        prob = whole if end == len(u_arr) else structure.problem(u_end, y_end, warmup)
-        return _search(
-            structure, prob, u_end, y_end, starts, paper=paper, refine=refine, restarts=restarts,
-            perturbation=perturbation, seed=seed, max_iter=max_iter, tol=tol, switching=switching, step=step,
-            reflect=reflect, warmup=warmup,
-        )
-
-    segment = _coarse_samples(structure, _records.rows(u_arr, warmup), coarse) * refine * (not isinstance(u_arr, list))
-    found = None
-    if segment:
-        # coarse to fine: the iterations and the choice of LM start on the first `segment`
-        # samples after the warm-up, then LM on the whole record from the segment's optimum
-        end = warmup + segment
-        try:
-            run, k, refined = search(end)
-            # a segment that hardly moves the backlash says nothing about its branches
-            if refined is not None and _moving(structure, refined.theta, u_arr[:end], user_warmup) >= min_moving:
-                refined = refine_whole(structure, whole, refined.theta, u_arr, y_arr, warmup, segment)
-                # a segment's optimum far from the whole record's (LM does not converge from it) is no start
-                if refined.converged:
-                    found = run, k, refined
-        except BacklashIdError:  # the segment is not enough: search the whole record
-            pass
-    if found is None:
-        segment = 0
-        found = search(len(u_arr))
-    run, k, refined = found
-    theta_iter = run.history[k]
-    # an optimum that is no valid backlash or hardly moves it: continue from the fit of the
-    # next lower degree, the search kept among valid models that move (_valid.py)
-    why = guard = None
-    checked: tuple[NDArray[np.float64], float | None] | None = None  # a theta and its moving fraction
-    if refined is not None and structure.degree > 1:
-        why, moved = acceptable_motion(structure, whole, refined.theta, u_arr, user_warmup, min_moving, valid)
-        checked = refined.theta, moved
-        lower = _lower_degree_fallback(structure, whole, u_arr, user_warmup, min_moving, arguments) if why else None
-        if lower is None:
-            why = None
-        else:
-            refined, guard = lower, (u_arr, user_warmup, min_moving, valid)
-    state: dict[str, float] | list[dict[str, float]] | None = None
-    if initial_state == "estimate" and refined is not None:
-        # the shifted record's first `shift` samples are zeros, right only from rest
-        def with_state(fit: OutputErrorFit, guard: Any) -> tuple[_StateFit, dict[str, float] | list[dict[str, float]]]:
-            return _refine_with_state(
-                structure, u_arr, y_arr, max(warmup, shift), fit, restarts=restarts, perturbation=perturbation, seed=seed,
-                guard=guard,
-            )
-
-        kept = refined
-        refined, state = with_state(kept, guard)  # type: ignore[assignment]
-        if guard is None and why_not_acceptable(structure, whole, refined.theta, u_arr, user_warmup, min_moving, valid) is not None:
-            if why_not_acceptable(structure, whole, kept.theta, u_arr, user_warmup, min_moving, valid) is None:
-                # the state's refinement left the valid models: again, kept among them
-                refined, state = with_state(kept, (u_arr, user_warmup, min_moving, valid))  # type: ignore[assignment]
-        state = [state] if several and isinstance(state, dict) else state  # one dict per record
-    theta, steps = (refined.theta, refined.iterations) if refined is not None else (theta_iter, 0)
-    # the simulation RMSE is known: the refinement's cost, or the iterate's own (a coarse
-    # stage always ends in a whole-record refinement, so the iterate is the whole record's)
-    rmse = float(np.sqrt(refined.cost / refined.n_residuals)) if refined is not None else run.rmse[k]
-    try:
-        model, invalid = structure.model(theta), None
-    except ModelError as exc:
-        model, invalid = None, exc
-    failure, failed = None, ""  # why the final estimate failed, and its reason
-    est = structure.unpack(theta)
-    for den, name in ((est.b, "input"), (est.s, "output")):
-        radius = spectral_radius(np.asarray(den))
-        if not radius < 1.0:
-            failed = "unstable"
-            failure = (
-                f"the estimated {name} linear block is unstable (spectral radius {radius:.3f}); "
-                + ("use the default algorithm (it reflects unstable poles) or other initial values" if paper else
-                   "try other initial values or starts, other orders, or a warm-up if the record does not start at rest")
-            )
-            break
-    if failure is None and not np.isfinite(rmse):
-        failed, failure = "not finite", "the identification diverged: the estimate simulates to no finite output"
-    if failure is None and invalid is not None:
-        failed = "invalid model"
-        failure = f"the final estimate is not a valid model ({invalid}); try a lower branch degree, other orders or other starts"
-    if failure is None and budget_hit():
-        failed = "time budget"
-        failure = (
-            f"the fit ran out of its time budget (time_budget = {time_budget:g} s) before it converged: its best "
-            "estimate so far is in best and best_stable; give a larger time_budget, or a shorter record or coarse segment"
-            if time_budget is not None else
-            "the fit ran out of the time budget of its caller before it converged: its best estimate so far is in best and best_stable"
-        )
-    # the moving fraction and x's range (for the branch check) at the end: the check above
-    # found them at this very theta, or the whole record's problem has them from its last
-    # gradient pass there (or simulates once for both)
-    found = record_motion(structure, whole, theta, u_arr, user_warmup) if model is not None else None
-    x_range = found[1] if found is not None else None
-    if model is None:
-        moving = 0.0
-    elif checked is not None and checked[0] is theta and checked[1] is not None:
-        moving = checked[1]  # found by the check above at this very theta (a long record's simulation spared)
-    elif found is not None:
-        moving = found[0]
-    else:
-        moving = _moving(structure, theta, u_arr, user_warmup, model)
-    if failure is not None:
-        try:
-            noise_var, covariance = _covariance(structure, run, refined)
-        except BacklashIdError:  # the failed estimate has no usable covariance
-            noise_var, covariance = np.nan, np.full((structure.size, structure.size), np.nan)
-    elif moving < min_moving:
-        raise NotIdentifiableError(
-            f"only {100 * moving:.1f} % of samples move the backlash output off its dead band "
-            f"(need {100 * min_moving:g} %, min_moving = {min_moving:g}): excite the system with a larger input amplitude, "
-            f"or, if the record is mostly at rest, lower min_moving (e.g. min_moving={max(moving * 0.9, 0.001):.2g}; "
-            "--min-moving on the command line)"
-        )
-    else:
-        noise_var, covariance = _covariance(structure, run, refined)
-    converged = failure is None and (run.reason in CONVERGED or (refined is not None and refined.converged))
-    reason = failed or (run.reason if run.reason in CONVERGED or not converged else "refined")
-    result = FitResult(
-        model=_with_covariance(model, structure, covariance),
-        structure=structure,
-        theta=np.asarray(theta, dtype=np.float64),
-        covariance=covariance,
-        history=np.array(run.history),
-        history_rmse=np.array(run.rmse),
-        iterations=len(run.history),
-        converged=converged,
-        reason=reason,
-        simulation_rmse=rmse,
-        noise_std=float(np.sqrt(noise_var)),
-        moving_fraction=moving,
-        method="paper" if paper else "default",
-        warmup=user_warmup,
-        iterative_theta=np.asarray(theta_iter, dtype=np.float64),
-        refinement_steps=steps,
-        coarse_samples=segment,
-        initial_state=state,
-        refinement_converged=refined.converged if refined is not None else None,
-        iterations_reason=run.reason,
+    setup = _Setup(
+        structure=structure, u=u_arr, y=y_arr, several=several, warmup=warmup, user_warmup=user_warmup, shift=shift,
+        whole=structure.problem(u_arr, y_arr, warmup),  # the whole record's problem; a coarse stage compiles its segment's
+        starts=starts, paper=paper, refine=refine, switching=switching, step=step, reflect=reflect, restarts=restarts,
+        perturbation=perturbation, seed=seed, max_iter=max_iter, tol=tol, coarse=coarse, min_moving=min_moving, valid=valid,
+        initial_state=initial_state, time_budget=time_budget,
     )
-    if failure is not None:
-        stable = _best_stable(structure, whole, result, [theta, theta_iter, *run.history])
-        raise NotConvergedError(failure, result, stable)
-    if why is not None:
+    run, k, refined, segment = _coarse_to_fine(setup)
+    refined, why, guard, checked = _acceptable_or_lower_degree(setup, refined, arguments)
+    refined, state = _with_initial_state(setup, refined, guard)  # type: ignore[assignment]
+    result, x_range = _outcome(setup, run, k, refined, checked, segment, state)
+    if why is not None:  # here, not in a stage: stacklevel 4 is the caller's line
         warnings.warn(
             f"{'fit_sandwich' if structure.is_sandwich else 'fit_cascade'}: the best fit of degree {structure.degree} {why}; "
             f"the result is the best valid model found from the degree-{structure.degree - 1} fit, the search kept among "

@@ -363,20 +363,86 @@ def select_structure(
     ((2, 2, 3), True)
     """
     start = time.perf_counter()
+    kinds = _kinds(kind)
+    grid_a, grid_b, grid_n = _grid(na, "na", 1), _grid(nb, "nb", 0), _grid(degree, "degree", 1)
+    with_output = "sandwich" in kinds or "hammerstein" in kinds
+    grid_r, grid_s = (_grid(nr, "nr", 1), _grid(ns, "ns", 0)) if with_output else ([0], [0])
+    _check_settings(validation, tolerance, refit)
+    record = _split_record(u, y, validation, warmup, options)
+    feedthrough = bool(options.get("feedthrough", False))
+    options = {"valid": True, **options}  # every candidate a backlash where it is used
+
+    rows: list[dict[str, Any]] = []
+    fits: list[FitResult | None] = []
+    errors: list[BacklashIdError | None] = []
+    for candidate in _candidates(kinds, grid_a, grid_b, grid_n, grid_r, grid_s):
+        row, result, error = _judged(candidate, record, feedthrough, options)
+        rows.append(row)
+        fits.append(result)
+        errors.append(error)
+
+    ok = [i for i, r in enumerate(rows) if not r["raised"]]
+    if not ok:
+        raise _all_raised(rows, [e for e in errors if e is not None])
+    chosen, fit, refit_error, note = _choose(rows, fits, ok, record, tolerance, refit, options)
+    return StructureSelection(
+        structure=fit.structure, kind=rows[chosen]["kind"], fit=fit, rows=rows, chosen=chosen, rule=RULE,
+        tolerance=float(tolerance), estimation_samples=record.n_est, validation_samples=record.n_val,
+        seconds=time.perf_counter() - start, refitted=refit and refit_error is None, refit_error=refit_error, note=note,
+    )
+
+
+@dataclass(frozen=True)
+class _Split:
+    """The record as the selection uses it: every candidate fitted on its head (``n_est``
+    samples) and judged on the tail."""
+
+    u: NDArray[np.float64]
+    y: NDArray[np.float64]
+    n_est: int
+    warmup: int
+    init: int  # samples that set an estimated start; 0: every model simulated from rest
+
+    @property
+    def n_val(self) -> int:
+        return len(self.u) - self.n_est
+
+    @property
+    def n_fit(self) -> int:
+        """The estimation samples after the warm-up (BIC's n)."""
+        return self.n_est - self.warmup
+
+    @property
+    def u_est(self) -> NDArray[np.float64]:
+        return self.u[: self.n_est]
+
+    @property
+    def y_est(self) -> NDArray[np.float64]:
+        return self.y[: self.n_est]
+
+
+def _kinds(kind: str | Sequence[str]) -> list[str]:
+    """The kinds to try, as a checked list."""
     kinds = [kind] if isinstance(kind, str) else list(kind) if isinstance(kind, Sequence) else [kind]
     if not kinds:
         raise DataError(f"kind = {kind!r}: the list is empty; give 'cascade', 'sandwich', 'hammerstein' or several of them")
     for k in kinds:
         if k not in KINDS:
             raise DataError(f"kind = {k!r}: use 'cascade', 'sandwich' or 'hammerstein' (or a list of them)")
-    grid_a, grid_b, grid_n = _grid(na, "na", 1), _grid(nb, "nb", 0), _grid(degree, "degree", 1)
-    with_output = "sandwich" in kinds or "hammerstein" in kinds
-    grid_r, grid_s = (_grid(nr, "nr", 1), _grid(ns, "ns", 0)) if with_output else ([0], [0])
+    return kinds
+
+
+def _check_settings(validation: float, tolerance: float, refit: bool) -> None:
+    """DataError for a held-out fraction, band width or refit flag out of range."""
     if isinstance(validation, bool) or not isinstance(validation, (int, float)) or not 0.0 < validation < 1.0:
         raise DataError(f"validation = {validation!r}: give the held-out fraction of the record, in (0, 1)")
     if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not 0.0 <= tolerance < 1e300:
         raise DataError(f"tolerance = {shown(tolerance)}: give a relative band width >= 0 (e.g. 0.02)")
     check_flag(refit, "refit")
+
+
+def _split_record(u: ArrayLike, y: ArrayLike, validation: float, warmup: int, options: dict[str, Any]) -> _Split:
+    """The checked record, divided into its estimation head and the held-out tail."""
     u_arr, y_arr = one_record(u, y, ("u", "y"))
     check_finite(u_arr, "u")
     check_finite(y_arr, "y")
@@ -386,70 +452,89 @@ def select_structure(
     if n_val < 1 or n_est < 2:
         raise DataError(f"validation = {validation}: leaves {n_est} estimation and {n_val} validation samples of {n_total}")
     warmup = check_warmup(warmup, n_est)
-    n_fit = n_est - warmup
-    feedthrough = bool(options.get("feedthrough", False))
-    options = {"valid": True, **options}  # every candidate a backlash where it is used
-    u_est, y_est = u_arr[:n_est], y_arr[:n_est]
+    init = max(warmup, INIT_SAMPLES) if options.get("initial_state") == "estimate" else 0
+    return _Split(u_arr, y_arr, n_est, warmup, init)
 
+
+def _candidates(
+    kinds: list[str], grid_a: list[int], grid_b: list[int], grid_n: list[int], grid_r: list[int], grid_s: list[int]
+) -> list[tuple[str, int, int, int, int, int]]:
+    """The grid as (kind, na, nb, nr, ns, degree), in the order tried (nr = ns = 0 for a cascade)."""
     candidates: list[tuple[str, int, int, int, int, int]] = []
     for k in kinds:
         outer = itertools.product(grid_r, grid_s) if k != "cascade" else [(0, 0)]
         inner = itertools.product([1], [0], grid_n) if k == "hammerstein" else itertools.product(grid_a, grid_b, grid_n)  # x(t) = a_1 u(t-1)
         for (r, s), (a, b, n) in itertools.product(list(outer), list(inner)):
             candidates.append((k, a, b, r, s, n))
-    init = max(warmup, INIT_SAMPLES) if options.get("initial_state") == "estimate" else 0
+    return candidates
 
-    rows: list[dict[str, Any]] = []
-    fits: list[FitResult | None] = []
-    errors: list[BacklashIdError | None] = []
-    for k, a, b, r, s, n in candidates:
-        if k == "hammerstein":
-            structure = Structure(a, b, n, r, s, output_feedthrough=bool(options.get("output_feedthrough", False)))
-        elif k == "sandwich":
-            structure = Structure(a, b, n, r, s, feedthrough=feedthrough, output_feedthrough=bool(options.get("output_feedthrough", False)))
-        else:
-            structure = Structure(a, b, n, feedthrough=feedthrough)
-        p = structure.size
-        row: dict[str, Any] = dict(
-            kind=k, na=a, nb=b, nr=r, ns=s, degree=n, parameters=p, estimation_rmse=math.nan,
-            validation_rmse=math.nan, bic=math.nan, raised=False, error=None, warnings=[], seconds=0.0,
-            in_band=False, chosen=False, refit_error=None, valid=False,
-        )
-        t0 = time.perf_counter()
-        result: FitResult | None = None
-        error: BacklashIdError | None = None
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                result = _fit_one(k, u_est, y_est, structure, warmup, options)
-                if result.model is None:
-                    raise NotConvergedError("the fit ended with no valid model", result)
-                simulated = _simulated(result.model, u_arr, y_arr, init)
-                val = float(np.sqrt(np.mean((y_arr[n_est:] - simulated[n_est:]) ** 2)))
-                if not math.isfinite(val):
-                    raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
-            except BacklashIdError as exc:
-                error, result = exc, None
-        row["warnings"] = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
-        for w in caught:  # anything else is shown as Python would have
-            if not issubclass(w.category, FitWarning):
-                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
-        row["seconds"] = time.perf_counter() - t0
-        if error is not None:
-            row["raised"], row["error"] = True, _error_text(error)
-        else:
-            assert result is not None
-            est = float(result.simulation_rmse)
-            row["estimation_rmse"], row["validation_rmse"] = est, val
-            row["bic"] = n_fit * math.log(max(est, 1e-300) ** 2) + p * math.log(n_fit)
-            row["valid"] = _is_backlash(result.model, u_est, warmup)
-        rows.append(row)
-        fits.append(result)
-        errors.append(error)
 
-    ok = [i for i, r in enumerate(rows) if not r["raised"]]
-    if not ok:
-        raise _all_raised(rows, [e for e in errors if e is not None])
+def _structure(kind: str, a: int, b: int, r: int, s: int, n: int, feedthrough: bool, options: dict[str, Any]) -> Structure:
+    """A candidate's orders and degree as a Structure."""
+    if kind == "hammerstein":
+        return Structure(a, b, n, r, s, output_feedthrough=bool(options.get("output_feedthrough", False)))
+    if kind == "sandwich":
+        return Structure(a, b, n, r, s, feedthrough=feedthrough, output_feedthrough=bool(options.get("output_feedthrough", False)))
+    return Structure(a, b, n, feedthrough=feedthrough)
+
+
+def _judged(
+    candidate: tuple[str, int, int, int, int, int], record: _Split, feedthrough: bool, options: dict[str, Any]
+) -> tuple[dict[str, Any], FitResult | None, BacklashIdError | None]:
+    """One candidate fitted on the head and judged on the tail: its row of the table, its fit
+    (None if it raised) and its error (None if it did not)."""
+    k, a, b, r, s, n = candidate
+    structure = _structure(k, a, b, r, s, n, feedthrough, options)
+    p = structure.size
+    row: dict[str, Any] = dict(
+        kind=k, na=a, nb=b, nr=r, ns=s, degree=n, parameters=p, estimation_rmse=math.nan,
+        validation_rmse=math.nan, bic=math.nan, raised=False, error=None, warnings=[], seconds=0.0,
+        in_band=False, chosen=False, refit_error=None, valid=False,
+    )
+    t0 = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result, val, error = _fit_and_validate(k, structure, record, options)
+    row["warnings"] = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
+    for w in caught:  # anything else is shown as Python would have
+        if not issubclass(w.category, FitWarning):
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    row["seconds"] = time.perf_counter() - t0
+    if error is not None:
+        row["raised"], row["error"] = True, _error_text(error)
+    else:
+        assert result is not None
+        est = float(result.simulation_rmse)
+        row["estimation_rmse"], row["validation_rmse"] = est, val
+        row["bic"] = record.n_fit * math.log(max(est, 1e-300) ** 2) + p * math.log(record.n_fit)
+        row["valid"] = _is_backlash(result.model, record.u_est, record.warmup)
+    return row, result, error
+
+
+def _fit_and_validate(
+    kind: str, structure: Structure, record: _Split, options: dict[str, Any]
+) -> tuple[FitResult | None, float, BacklashIdError | None]:
+    """The candidate's fit on the head and its validation RMSE on the tail (simulated from the
+    record's start), or (None, NaN, the error) if either fails."""
+    try:
+        result = _fit_one(kind, record.u_est, record.y_est, structure, record.warmup, options)
+        if result.model is None:
+            raise NotConvergedError("the fit ended with no valid model", result)
+        simulated = _simulated(result.model, record.u, record.y, record.init)
+        val = float(np.sqrt(np.mean((record.y[record.n_est :] - simulated[record.n_est :]) ** 2)))
+        if not math.isfinite(val):
+            raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
+    except BacklashIdError as exc:
+        return None, math.nan, exc
+    return result, val, None
+
+
+def _choose(
+    rows: list[dict[str, Any]], fits: list[FitResult | None], ok: list[int], record: _Split, tolerance: float, refit: bool,
+    options: dict[str, Any],
+) -> tuple[int, FitResult, str | None, str]:
+    """The chosen row, its fit, why no refit held (or None) and the validity note; marks the
+    rows in the band and the chosen one."""
     best_val = min(rows[i]["validation_rmse"] for i in ok)
     band = [i for i in ok if rows[i]["validation_rmse"] <= (1.0 + tolerance) * best_val]
     for i in band:
@@ -461,23 +546,27 @@ def select_structure(
     order = sorted(preferred, key=lambda i: (rows[i]["bic"], rows[i]["parameters"]))
     chosen, fit, refit_error = order[0], fits[order[0]], None
     if refit:
-        for i in order:
-            head = fits[i]
-            assert head is not None
-            whole, why = _refit_whole(rows[i]["kind"], head, u_arr, y_arr, warmup, init, tolerance, options)
-            rows[i]["refit_error"] = why
-            if why is None:
-                chosen, fit = i, whole
-                break
-        else:  # no refit held: the first candidate's estimation fit, with its refit's failure
-            chosen, fit, refit_error = order[0], fits[order[0]], rows[order[0]]["refit_error"]
+        chosen, fit, refit_error = _first_refit_that_holds(order, rows, fits, record, tolerance, options)
     rows[chosen]["chosen"] = True
     assert fit is not None
-    return StructureSelection(
-        structure=fit.structure, kind=rows[chosen]["kind"], fit=fit, rows=rows, chosen=chosen, rule=RULE,
-        tolerance=float(tolerance), estimation_samples=n_est, validation_samples=n_val,
-        seconds=time.perf_counter() - start, refitted=refit and refit_error is None, refit_error=refit_error, note=note,
-    )
+    return chosen, fit, refit_error, note
+
+
+def _first_refit_that_holds(
+    order: list[int], rows: list[dict[str, Any]], fits: list[FitResult | None], record: _Split, tolerance: float,
+    options: dict[str, Any],
+) -> tuple[int, FitResult | None, str | None]:
+    """The first candidate of ``order`` whose refit on the whole record holds, with that refit
+    and None; if none holds, the first candidate, its estimation fit and why its refit failed.
+    Every row tried gets its ``refit_error``."""
+    for i in order:
+        head = fits[i]
+        assert head is not None
+        whole, why = _refit_whole(rows[i]["kind"], head, record.u, record.y, record.warmup, record.init, tolerance, options)
+        rows[i]["refit_error"] = why
+        if why is None:
+            return i, whole, None
+    return order[0], fits[order[0]], rows[order[0]]["refit_error"]
 
 
 def preferred_candidates(rows: Sequence[dict[str, Any]], ok: Sequence[int], tolerance: float) -> tuple[list[int], str]:

@@ -767,6 +767,7 @@ def fit_wiener_hammerstein(
     started = time.perf_counter()
     short_degree = min(split_degree, degree)
     n_short = min(len(u_arr), max(split_samples, warmup + 10 * (2 * (nb + ns) + short_degree)))
+    # 1. the best linear approximation, the baseline
     num, den, offset = _best_linear(u_arr, y_arr, nb + ns, feedthrough, output_feedthrough, warmup)
     linear = LinearBlock(num, den[1:], feedthrough=True) if feedthrough and output_feedthrough else LinearBlock(num[1:], den[1:])
     baseline = LinearBaseline(linear, offset)
@@ -774,15 +775,37 @@ def fit_wiener_hammerstein(
     lead = np.trim_zeros(num, "f")
     poles, zeros = np.roots(den), np.roots(lead)
 
+    # 2. its poles and zeros split between G1 and G2, each split refined briefly
     short = _Param(nb, ns, short_degree, feedthrough, output_feedthrough)
-    u_s, y_s = u_arr[:n_short], y_arr[:n_short]
+    ranked = _ranked_splits(short, u_arr, y_arr, n_short, warmup, poles, zeros, lead, offset, split_iter)
+    if not ranked:
+        raise _no_stable_split(poles)
+    ranked.sort(key=lambda item: item[0])
+    _, theta_short, split, _ = ranked[0]
+
+    # 3. the full model from the best split
+    full = _Param(nb, ns, degree, feedthrough, output_feedthrough)
+    start = _full_start(short, full, theta_short, u_arr)
+    result = _Result(full, u_arr, y_arr, warmup, baseline, baseline_rmse, started, tuple(item[0] for item in ranked), split)
+    return result.refined(start, max_iter, short.degree)
+
+
+def _ranked_splits(
+    short: _Param, u: NDArray[np.float64], y: NDArray[np.float64], n_short: int, warmup: int, poles: NDArray[np.complex128],
+    zeros: NDArray[np.complex128], lead: NDArray[np.float64], offset: float, split_iter: int,
+) -> list[tuple[float, NDArray[np.float64], tuple[list[complex], ...], bool]]:
+    """(RMSE, theta, split, converged) of every split of the best linear approximation's poles
+    and zeros (numerator ``lead``) that gives a stable start, refined at the low degree on the
+    first ``n_short`` samples: ``_SPLIT_FIRST_ITER`` iterations each, the rest of
+    ``split_iter`` only for the splits still in the race. In the order the splits come."""
+    u_s, y_s = u[:n_short], y[:n_short]
     short_problem = short.problem(u_s, y_s, warmup)
     ranked = []
-    room = (nb - short.delay, ns - short.output_delay)
+    room = (short.nb - short.delay, short.ns - short.output_delay)
     first_iter = min(split_iter, _SPLIT_FIRST_ITER)
-    for split in _splits(poles, zeros, nb, ns, room):
+    for split in _splits(poles, zeros, short.nb, short.ns, room):
         try:
-            theta = _theta_from_split(short, u_arr, split, float(lead[0]), offset)
+            theta = _theta_from_split(short, u, split, float(lead[0]), offset)
             if not short_problem.feasible(theta):
                 continue
             theta, res = short.fit(u_s, y_s, warmup, theta, first_iter)
@@ -803,83 +826,113 @@ def fit_wiener_hammerstein(
         rmse_more = float(np.sqrt(res.cost / res.n_residuals))
         if short_problem.feasible(theta_more) and rmse_more < rmse:
             ranked[j] = (rmse_more, theta_more, split, res.converged)
-    if not ranked:
-        radius = float(np.max(np.abs(poles))) if poles.size else 0.0
-        raise NotConvergedError(
-            "no split of the best linear approximation's poles and zeros gives a stable start (its largest pole "
-            f"radius is {radius:.4f}"
-            + ("; a pole on or beyond the unit circle is an integrating plant, e.g. a position output, which no "
-               "Wiener-Hammerstein model with stable blocks holds: fit a cascade or sandwich with "
-               "initial_state='estimate', or model the velocity" if radius >= 0.999 else "")
-            + "); no iterate exists to return: try other orders nb, ns or a longer record"
-        )
-    ranked.sort(key=lambda item: item[0])
-    _, theta_short, split, _ = ranked[0]
+    return ranked
 
+
+def _no_stable_split(poles: NDArray[np.complex128]) -> NotConvergedError:
+    """The error when no split gives a stable start; it names an integrating plant."""
+    radius = float(np.max(np.abs(poles))) if poles.size else 0.0
+    return NotConvergedError(
+        "no split of the best linear approximation's poles and zeros gives a stable start (its largest pole "
+        f"radius is {radius:.4f}"
+        + ("; a pole on or beyond the unit circle is an integrating plant, e.g. a position output, which no "
+           "Wiener-Hammerstein model with stable blocks holds: fit a cascade or sandwich with "
+           "initial_state='estimate', or model the velocity" if radius >= 0.999 else "")
+        + "); no iterate exists to return: try other orders nb, ns or a longer record"
+    )
+
+
+def _full_start(short: _Param, full: _Param, theta_short: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The full model's start: the best split's refined low-degree fit, on the full degree's basis."""
     a, b, c_short, r, s, o = short.split(theta_short)
     # the refinement moves G1's poles, and with them the range of x (to about 2.4 on the SYSID
     # 2009 record, where T_25 is about 1e16): G1 rescaled so that max abs(x) = k again, f(x)
     # rewritten for the scaled x (T_i grows like (2 abs(z))^i beyond [-1, 1])
-    full = _Param(nb, ns, degree, feedthrough, output_feedthrough)
-    x_range = float(np.max(np.abs(LinearBlock(a, b, feedthrough=feedthrough).simulate(u_arr)))) / full.k
+    x_range = float(np.max(np.abs(LinearBlock(a, b, feedthrough=full.feedthrough).simulate(u)))) / full.k
     a = a / x_range
-    c = np.zeros(degree)
+    c = np.zeros(full.degree)
     c[: short.degree] = _rebased(c_short, short.k / x_range, full.k)
-    theta = np.r_[a, b, c, r, s, o]
+    return np.r_[a, b, c, r, s, o]
 
-    def fitted(theta: NDArray[np.float64], iterations: int, converged: bool) -> WienerHammersteinFit:
+
+def _final_run(
+    full: _Param, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, theta: NDArray[np.float64], max_iter: int
+) -> tuple[NDArray[np.float64], OutputErrorFit]:
+    """The full model's Levenberg-Marquardt from ``theta``: most iterations on a segment, then
+    ``max_iter`` on the whole record (a record no longer than the segment: one run)."""
+    n_seg = _SEGMENT_SAMPLES
+    if len(u) > n_seg:
+        theta, _ = full.fit(u[:n_seg], y[:n_seg], warmup, theta, _SEGMENT_ITER)
+        return full.fit(u, y, warmup, theta, max_iter)
+    return full.fit(u, y, warmup, theta, _SHORT_ITER + max_iter)
+
+
+@dataclass(frozen=True)
+class _Result:
+    """What the result holds besides the final theta (the record, the baseline, the split
+    search); runs the final search (``refined``) and builds the result at a theta (``at``)."""
+
+    full: _Param
+    u: NDArray[np.float64]
+    y: NDArray[np.float64]
+    warmup: int
+    baseline: LinearBaseline
+    baseline_rmse: float
+    started: float  # perf_counter() when the fit began
+    split_rmse: tuple[float, ...]
+    split: tuple[list[complex], ...]
+
+    def refined(self, start: NDArray[np.float64], max_iter: int, start_degree: int) -> WienerHammersteinFit:
+        """The result of the final run from ``start`` (:func:`_final_run`); NotConvergedError,
+        with the start's result as best, if that run fails."""
+        try:
+            theta, res = _final_run(self.full, self.u, self.y, self.warmup, start, max_iter)
+        except BacklashIdError as exc:
+            # the final run's start, the stable lower-degree fit on the full degree's basis, is the
+            # best iterate there is: returned with the error, never a bare error
+            try:
+                best: WienerHammersteinFit | None = self.at(start, 0, False)
+            except BacklashIdError:
+                best = None
+            raise NotConvergedError(
+                f"the final Levenberg-Marquardt run found no usable model: {exc}; its start (the stable degree-{start_degree} "
+                "fit) is in best", best, best,
+            ) from None
+        return self.at(theta, int(res.iterations), bool(res.converged))
+
+    def at(self, theta: NDArray[np.float64], iterations: int, converged: bool) -> WienerHammersteinFit:
         """The result at ``theta`` (f'(0) > 0 by the sign of x); NotConvergedError if f is
         not usable as tied branches."""
+        full = self.full
         a, b, c, r, s, o = full.split(theta)
         m = full.monomials(c)
         if m[0] < 0:  # f'(0) < 0: use -x as the internal signal, so that m_1 > 0
-            a, m = -a, m * (-1.0) ** np.arange(1, degree + 1)
+            a, m = -a, m * (-1.0) ** np.arange(1, full.degree + 1)
         try:
             model = SandwichModel(
-                LinearBlock(a, b, feedthrough=feedthrough),
+                LinearBlock(a, b, feedthrough=full.feedthrough),
                 GeneralBacklash(0.0, 0.0, [float(v) for v in m], [float(v) for v in m]),
-                LinearBlock(r, s, feedthrough=output_feedthrough),
+                LinearBlock(r, s, feedthrough=full.output_feedthrough),
             )
         except ModelError as exc:
             raise NotConvergedError(f"the fitted static block is not usable as tied branches: {exc}") from None
-        rmse = float(np.sqrt(np.mean((model.simulate(u_arr) + float(o[0]) - y_arr)[warmup:] ** 2)))
-        x_fit = model.input_linear.simulate(u_arr)  # f is known where the estimation data put x
+        rmse = float(np.sqrt(np.mean((model.simulate(self.u) + float(o[0]) - self.y)[self.warmup :] ** 2)))
+        x_fit = model.input_linear.simulate(self.u)  # f is known where the estimation data put x
         return WienerHammersteinFit(
             model=model,
-            baseline=baseline,
-            degree=degree,
-            nb=nb,
-            ns=ns,
-            warmup=warmup,
+            baseline=self.baseline,
+            degree=full.degree,
+            nb=full.nb,
+            ns=full.ns,
+            warmup=self.warmup,
             simulation_rmse=rmse,
-            baseline_rmse=baseline_rmse,
-            fit_time=time.perf_counter() - started,
+            baseline_rmse=self.baseline_rmse,
+            fit_time=time.perf_counter() - self.started,
             iterations=iterations,
             converged=converged,
-            split_rmse=tuple(item[0] for item in ranked),
-            g1_poles=np.asarray(split[0]),
-            g1_zeros=np.asarray(split[2]),
+            split_rmse=self.split_rmse,
+            g1_poles=np.asarray(self.split[0]),
+            g1_zeros=np.asarray(self.split[2]),
             offset=float(o[0]),
             x_range=(float(x_fit.min()), float(x_fit.max())),
         )
-
-    start = theta
-    try:
-        n_seg = _SEGMENT_SAMPLES
-        if len(u_arr) > n_seg:  # most iterations on a segment, then the whole record
-            theta, _ = full.fit(u_arr[:n_seg], y_arr[:n_seg], warmup, theta, _SEGMENT_ITER)
-            theta, res = full.fit(u_arr, y_arr, warmup, theta, max_iter)
-        else:
-            theta, res = full.fit(u_arr, y_arr, warmup, theta, _SHORT_ITER + max_iter)
-    except BacklashIdError as exc:
-        # the final run's start, the stable lower-degree fit on the full degree's basis, is the
-        # best iterate there is: returned with the error, never a bare error
-        try:
-            best: WienerHammersteinFit | None = fitted(start, 0, False)
-        except BacklashIdError:
-            best = None
-        raise NotConvergedError(
-            f"the final Levenberg-Marquardt run found no usable model: {exc}; its start (the stable degree-{short.degree} "
-            "fit) is in best", best, best,
-        ) from None
-    return fitted(theta, int(res.iterations), bool(res.converged))

@@ -279,6 +279,58 @@ def _effective_segments(n: int, nseg: int) -> float:
     return float(k / (1.0 + 2.0 * corr))
 
 
+def _check_noise_std(noise_std: Any) -> None:
+    """A given noise standard deviation must be a finite number >= 0."""
+    try:
+        s = float(noise_std)
+    except (TypeError, ValueError):
+        raise DataError(f"noise_std = {noise_std!r}: give a positive number or None to estimate it") from None
+    if not (np.isfinite(s) and s >= 0.0):
+        raise DataError(f"noise_std = {noise_std!r}: give a non-negative finite number, or None to estimate it")
+
+
+def _noise_floor(
+    spectrum: NDArray[np.float64], freqs: NDArray[np.float64], interior: NDArray[np.bool_], noise_std: float | None
+) -> tuple[float, int | None]:
+    """The floor's density and, when it is estimated, the bins' worth of information it is
+    estimated from (None: given)."""
+    if noise_std is not None:
+        return 2.0 * float(noise_std) ** 2, None
+    upper = spectrum[interior & (freqs >= FLOOR_FROM)]
+    m_floor = max(1, int(0.5 * upper.size))  # the median uses about half the information
+    return float(np.median(upper) / np.log(2.0)), m_floor
+
+
+def _above_floor(power: float, m: int, floor: float, m_floor: int | None) -> tuple[float, float]:
+    """A band's power over the floor and the p-value that it lies above it (chi-square with 2m
+    degrees of freedom; F against the floor's 2 ``m_floor`` when the floor is estimated)."""
+    from scipy import stats
+
+    if floor > 0.0:
+        ratio = power / floor
+    else:  # noise-free: any power is above the floor
+        ratio = float("inf") if power > 0.0 else 1.0
+    if m == 0:
+        p = float("nan")
+    elif floor == 0.0:
+        p = 0.0 if power > 0.0 else 1.0
+    elif m_floor is not None:
+        p = float(stats.f.sf(ratio, 2 * m, 2 * m_floor))
+    else:
+        p = float(stats.chi2.sf(2 * m * ratio, 2 * m))
+    return ratio, p
+
+
+def _band_coherence(coh: NDArray[np.float64], k_eff: float) -> tuple[float, float]:
+    """The largest coherence over a band's Welch bins and the p-value that the band holds
+    coherence (Bonferroni over its bins); NaN without bins or with an undefined coherence."""
+    if not (coh.size and np.isfinite(coh).all()):
+        return float("nan"), float("nan")
+    c_max = float(coh.max())
+    p_bin = (1.0 - min(c_max, 1.0)) ** max(k_eff - 1.0, 1.0)
+    return c_max, float(min(1.0, p_bin * coh.size))
+
+
 def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | None = None) -> FrequencyAnalysis:
     """The residual's spectrum by band against the noise floor, and its coherence with the input.
 
@@ -316,28 +368,18 @@ def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | 
     check_same_length(("residual", e), ("u", u_arr))
     n = e.size
     if noise_std is not None:
-        try:
-            s = float(noise_std)
-        except (TypeError, ValueError):
-            raise DataError(f"noise_std = {noise_std!r}: give a positive number or None to estimate it") from None
-        if not (np.isfinite(s) and s >= 0.0):
-            raise DataError(f"noise_std = {noise_std!r}: give a non-negative finite number, or None to estimate it")
+        _check_noise_std(noise_std)
 
     spectrum = np.abs(np.fft.rfft(e)) ** 2 * (2.0 / n)  # one-sided periodogram density
     freqs = np.arange(spectrum.size) / n
     interior = (freqs > 0.0) & (freqs < 0.5)  # DC removed, Nyquist not doubled
-    m_floor = 0
-    if noise_std is not None:
-        floor, estimated = 2.0 * float(noise_std) ** 2, False
-    else:
-        upper = spectrum[interior & (freqs >= FLOOR_FROM)]
-        floor, estimated = float(np.median(upper) / np.log(2.0)), True
-        m_floor = max(1, int(0.5 * upper.size))  # the median uses about half the information
+    floor, m_floor = _noise_floor(spectrum, freqs, interior, noise_std)
+    estimated = m_floor is not None
     total = float(spectrum[interior].sum())
 
     nseg = int(min(MAX_SEGMENT, 2 ** int(np.floor(np.log2(n / 8)))))
     nseg = max(nseg, 16)
-    from scipy import signal, stats
+    from scipy import signal
 
     f_w, psd = signal.welch(e, nperseg=nseg)
     with np.errstate(invalid="ignore", divide="ignore"):  # a zero residual has no coherence (NaN)
@@ -354,26 +396,9 @@ def frequency_analysis(residual: ArrayLike, u: ArrayLike, *, noise_std: float | 
         in_band = interior & (freqs >= lo) & (freqs < hi)
         m = int(in_band.sum())
         power = float(spectrum[in_band].mean()) if m else float("nan")
-        if floor > 0.0:
-            ratio = power / floor
-        else:  # noise-free: any power is above the floor
-            ratio = float("inf") if power > 0.0 else 1.0
-        if m == 0:
-            p = float("nan")
-        elif floor == 0.0:
-            p = 0.0 if power > 0.0 else 1.0
-        elif estimated:
-            p = float(stats.f.sf(ratio, 2 * m, 2 * m_floor))
-        else:
-            p = float(stats.chi2.sf(2 * m * ratio, 2 * m))
+        ratio, p = _above_floor(power, m, floor, m_floor)
         share = float(spectrum[in_band].sum() / total) if total > 0 else 0.0
-        c_band = coh_bins & (f_w >= lo) & (f_w < hi)
-        if c_band.any() and np.isfinite(coh[c_band]).all():
-            c_max = float(coh[c_band].max())
-            p_bin = (1.0 - min(c_max, 1.0)) ** max(k_eff - 1.0, 1.0)
-            c_p = float(min(1.0, p_bin * int(c_band.sum())))
-        else:
-            c_max, c_p = float("nan"), float("nan")
+        c_max, c_p = _band_coherence(coh[coh_bins & (f_w >= lo) & (f_w < hi)], k_eff)
         raw.append((float(lo), float(hi), m, power, ratio, share, p, c_max, c_p))
     p_adj = holm([r[6] for r in raw])
     c_adj = holm([r[8] for r in raw])
