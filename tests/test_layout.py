@@ -290,3 +290,12 @@ def test_no_function_is_longer_than_a_reader_can_hold() -> None:
                 if node.end_lineno - start + 1 > 100:
                     long.append(f"{module_name(path)}.{node.name}: {node.end_lineno - start + 1} lines")
     assert long == []
+
+
+def test_the_namespace_docstring_names_every_top_level_name_by_category() -> None:
+    # scipy.signal's pattern: the package's docstring lists its names under what they are for
+    import re
+
+    named = set(re.findall(r":(?:class|func|data):`(\w+)`", backlashid.__doc__ or ""))
+    assert [n for n in backlashid.__all__ if not n.startswith("__") and n not in named] == []
+    assert "**Models**" in backlashid.__doc__ and "**Diagnosis**" in backlashid.__doc__

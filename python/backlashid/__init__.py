@@ -4,19 +4,41 @@ Models of Vörös, "Modeling and identification of nonlinear cascade and sandwic
 general backlash": :class:`GeneralBacklash` (eq 1-15), :class:`LinearBlock` (eq 16 / 29),
 :class:`CascadeModel` (Fig. 2) and :class:`SandwichModel` (Fig. 3), simulated in Rust.
 
-The layers, each a subpackage whose ``__init__`` is its public contract:
+The top-level names, by what they are for (``import backlashid as bid``):
 
-- :mod:`backlashid.models`: the models and their dict / JSON form;
-- :mod:`backlashid.identify`: fits, refinement, metrics, scaling;
-- :mod:`backlashid.compensation`: feedforward compensation of the backlash, closed-loop simulation;
-- :mod:`backlashid.diagnosis`: the sim-to-real gap diagnosis, its analyses and effect catalogue;
-- :mod:`backlashid.benchmarks`: the paper's examples and the withheld-effect cases;
-- :mod:`backlashid.export`: the model as a python-control system and as C99;
-- :mod:`backlashid.tracking`: online identification, sample by sample, and wear detection;
-- :mod:`backlashid.app`: record files, figures, fleets on Dask and the command line.
+**Models** (:mod:`backlashid.models`): :class:`GeneralBacklash`, :class:`LinearBlock`,
+:class:`CascadeModel`, :class:`SandwichModel`; their states and simulations
+(:class:`BacklashState`, :class:`CascadeState`, :class:`SandwichState`, :class:`CascadeSimulation`,
+:class:`SandwichSimulation`, :class:`SwitchingSignals`, :class:`BranchCheck`);
+:func:`model_from_dict`, :func:`model_from_json`.
 
-The main names of every layer are re-exported here (``import backlashid as bid``); the numerics
-run in the compiled Rust core, ``backlashid._core``.
+**Identification** (:mod:`backlashid.identify`): :func:`fit_cascade`, :func:`fit_sandwich`,
+:func:`fit_hammerstein_backlash`, :func:`fit_wiener_hammerstein` (with
+:func:`wiener_hammerstein_model`), :func:`select_structure`, :func:`fit_many`; their results
+:class:`FitResult`, :class:`StructureSelection`, :class:`WienerHammersteinFit`,
+:class:`LinearBaseline`.
+
+**Evaluation and the state a record starts in**: :func:`evaluate` (:class:`Metrics`),
+:func:`estimate_state`, :func:`simulate_from_samples`.
+
+**Diagnosis** (:mod:`backlashid.diagnosis`): :func:`diagnose`, :func:`diagnose_many`,
+:class:`DiagnosisReport`, the effect catalogue :data:`EFFECTS` and :func:`fit_effect`.
+
+**Using a model**: :func:`compensate`, :class:`Compensator`, :func:`closed_loop`
+(:class:`ClosedLoopResult`) from :mod:`backlashid.compensation`; :mod:`backlashid.export` for
+python-control and C99; :class:`Tracker`, :func:`track`, :func:`track_many` (:class:`TrackResult`)
+from :mod:`backlashid.tracking`.
+
+**Examples and data**: :func:`example1`, :func:`example2`, :func:`example_data`
+(:class:`ExampleData`), :func:`shared_data_folder` (:mod:`backlashid.benchmarks`).
+
+**Errors** (:mod:`backlashid.errors`): :class:`BacklashIdError` and its :class:`DataError`,
+:class:`ModelError`, :class:`NotIdentifiableError`, :class:`NotConvergedError`; the warning
+:class:`FitWarning`.
+
+Below them: :mod:`backlashid.plotting` (the figures the results draw) and :mod:`backlashid.app`
+(record files, Dask fleets, the command line). The numerics run in the compiled Rust core,
+``backlashid._core``.
 
 Examples
 --------
