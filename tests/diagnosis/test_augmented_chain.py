@@ -14,7 +14,7 @@ import pytest
 import backlashid as bid
 from backlashid import _core
 from backlashid.diagnosis.effects import EFFECTS, REGISTRY
-from backlashid.diagnosis.effects._base import Problem, simulate
+from backlashid.diagnosis.effects._base import RefitRecords, simulate
 from backlashid.errors import DataError
 from backlashid.identify import Structure
 from backlashid.models import GeneralBacklash, LinearBlock, SandwichModel
@@ -85,7 +85,7 @@ def test_the_new_effects_at_zero_size_are_the_nominal_model(structure: Structure
     nominal = model.simulate(u)
     zero = ((effect, REGISTRY[effect].zero),)
     np.testing.assert_array_equal(simulate(structure, theta, zero, u, 0.0), nominal)
-    prob = Problem(structure, u, nominal, 10, 0.0)
+    prob = RefitRecords(structure, u, nominal, 10, 0.0)
     compiled = prob.compiled(zero, [])
     np.testing.assert_array_equal(compiled.simulate(theta), nominal)
     # and a clip inside the range changes it

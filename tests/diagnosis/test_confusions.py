@@ -170,7 +170,7 @@ def test_dead_time_is_named_over_a_higher_order_on_the_same_footing() -> None:
     y = truth.simulate(np.r_[0.0, 0.0, u[:-2]]) + 0.02 * rng.standard_normal(2 * N)
     model = bx.fit_cascade(u[:N], y[:N], 1, 1, 3, warmup=50).model
     s = Structure(1, 1, 3)
-    prob = _base.Problem(s, u[:N], y[:N], 50, 0.0)
+    prob = _base.RefitRecords(s, u[:N], y[:N], 50, 0.0)
     theta, params, cost = REGISTRY["dead_time"].refit(prob, s.pack(model))
     _, _, from_truth = REGISTRY["dead_time"]._refit(prob, s.pack(truth), np.zeros(0), np.zeros(0), np.zeros(0), {"d": 2})
     assert params == {"d": 2} and cost <= from_truth * (1 + 1e-6)

@@ -184,7 +184,7 @@ def test_the_quantiser_search_quantises_like_the_core(nominal, u) -> None:
 
     s = Structure(nominal.linear.na, nominal.linear.nb, nominal.backlash.degree)
     theta = s.pack(nominal)
-    prob = _base.Problem(s, u, _plant(nominal, u, "quantization", {"q": 0.05}), 20, 0.0)
+    prob = _base.RefitRecords(s, u, _plant(nominal, u, "quantization", {"q": 0.05}), 20, 0.0)
     y_sim = prob.simulate(theta)
     halves = np.array([-2.5, -0.5, 0.5, 1.5, 2.5, 0.49999999999999994]) * 0.1
     for q in (0.013, 0.05, 0.1, 0.3777):

@@ -78,10 +78,10 @@ class Case:
         cascade = bx.CascadeModel(bx.LinearBlock(self.a, self.b), bx.GeneralBacklash(self.c_left, self.c_right, self.m_left, self.m_right))
         return fx.AugmentedModel("case", s, s.pack(cascade), {}, tuple(self.core), ar=self.ar)
 
-    def problem(self) -> _base.Problem:
+    def problem(self) -> _base.RefitRecords:
         """The record as a refit sees it (bounds that depend on the record)."""
         y = ref.augmented_cascade(self.a, self.b, self.c_left, self.c_right, self.m_left, self.m_right, self.u)
-        return _base.Problem(self.structure(), self.u, y, 0, self.t0)
+        return _base.RefitRecords(self.structure(), self.u, y, 0, self.t0)
 
     def at_rest(self) -> Case:
         """The same case started from rest."""
@@ -124,7 +124,7 @@ def _within(rng: np.random.Generator, lower: np.ndarray, upper: np.ndarray) -> n
     return lower + rng.uniform(0.0, 1.0, lower.size) * (upper - lower)
 
 
-def _simulated(name: str, sample: Callable[[Case, _base.Problem], list[float]]) -> Callable[[Case], None]:
+def _simulated(name: str, sample: Callable[[Case, _base.RefitRecords], list[float]]) -> Callable[[Case], None]:
     """Put a simulated effect with sampled parameters (in the catalogue's order) on a case."""
 
     def put(case: Case) -> None:
@@ -137,17 +137,17 @@ def _simulated(name: str, sample: Callable[[Case, _base.Problem], list[float]]) 
     return put
 
 
-def _saturation(case: Case, prob: _base.Problem) -> list[float]:
+def _saturation(case: Case, prob: _base.RefitRecords) -> list[float]:
     lower, upper = fx.REGISTRY["saturation"].bounds(prob)
     lo, hi = _within(case.rng, lower, upper)
     return [lo, hi] if lo < hi else [lo - 0.1, hi + 0.1]  # a record of one value: bounds around it
 
 
-def _clip(name: str) -> Callable[[Case, _base.Problem], list[float]]:
+def _clip(name: str) -> Callable[[Case, _base.RefitRecords], list[float]]:
     """(lo, hi) of a clipping effect inside its bounds on the record (around a record of one
     value; a level of exactly 0, an output resting in the dead band, moved off it)."""
 
-    def sample(case: Case, prob: _base.Problem) -> list[float]:
+    def sample(case: Case, prob: _base.RefitRecords) -> list[float]:
         lower, upper = fx.REGISTRY[name].bounds(prob)
         lo, hi = _within(case.rng, lower, upper)
         lo, hi = (lo, hi) if lo < hi else (lo - 0.1, hi + 0.1)
@@ -156,30 +156,30 @@ def _clip(name: str) -> Callable[[Case, _base.Problem], list[float]]:
     return sample
 
 
-def _friction(case: Case, prob: _base.Problem) -> list[float]:
+def _friction(case: Case, prob: _base.RefitRecords) -> list[float]:
     lower, upper = fx.REGISTRY["friction"].bounds(prob)
     f_c, f_v = _within(case.rng, lower, upper)
     return [f_c if f_c > 0 else 0.05, f_v]
 
 
-def _compliance(case: Case, prob: _base.Problem) -> list[float]:
+def _compliance(case: Case, prob: _base.RefitRecords) -> list[float]:
     lower, upper = fx.REGISTRY["compliance"].bounds(prob)
     return list(_within(case.rng, np.maximum(lower, 1e-3), upper))  # k > 0
 
 
-def _hysteresis(case: Case, prob: _base.Problem) -> list[float]:
+def _hysteresis(case: Case, prob: _base.RefitRecords) -> list[float]:
     sx = float(np.std(ref.difference_equation([0.0, *case.a], case.b, case.u))) + 0.05
     r = case.rng.uniform(0.01, 5.0, 2) * sx  # inside [0, 5 std(x)]
     w = case.rng.standard_normal(2)
     return [r[0], w[0], r[1], w[1]]
 
 
-def _dynamic_friction(case: Case, prob: _base.Problem) -> list[float]:
+def _dynamic_friction(case: Case, prob: _base.RefitRecords) -> list[float]:
     k_f, z_s, lam = _within(case.rng, *fx.REGISTRY["dynamic_friction"].bounds(prob))
     return [k_f, z_s, lam or 0.01, float(case.rng.integers(3))]  # driven by x, u or f
 
 
-def _feedback_hysteresis(case: Case, prob: _base.Problem) -> list[float]:
+def _feedback_hysteresis(case: Case, prob: _base.RefitRecords) -> list[float]:
     """A restoring force up to half the drive's scale, saturating within about one std(x);
     some cases run away (the core's refusal is then checked)."""
     alpha, beta = case.rng.uniform(0.01, 0.5), case.rng.uniform(0.0, 2.0)
@@ -187,11 +187,11 @@ def _feedback_hysteresis(case: Case, prob: _base.Problem) -> list[float]:
     return [alpha, beta or 0.5, gamma or 0.1, k_3 or 0.01]
 
 
-def _creep(case: Case, prob: _base.Problem) -> list[float]:
+def _creep(case: Case, prob: _base.RefitRecords) -> list[float]:
     return list(_within(case.rng, *fx.REGISTRY["creep"].bounds(prob)))
 
 
-def _quantization(case: Case, prob: _base.Problem) -> list[float]:
+def _quantization(case: Case, prob: _base.RefitRecords) -> list[float]:
     spread = float(np.std(prob.y)) + 0.05
     return [spread * float(np.exp(case.rng.uniform(np.log(0.005), 0.0)))]
 

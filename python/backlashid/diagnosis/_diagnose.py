@@ -49,7 +49,7 @@ from .analyses import (
     time_analysis,
 )
 from .effects import EFFECTS, REGISTRY, AugmentedModel, Screening
-from .effects._base import CoreEffects, Problem, ScreenContext, Simulator, Start, simulate
+from .effects._base import CoreEffects, RefitRecords, ScreenContext, Simulator, Start, simulate
 from .effects._colored_noise import fit_ar
 from .effects._dead_time import MAX_DELAY
 from .effects._quantization import Lattice, lattice
@@ -157,16 +157,16 @@ class _Diagnosis:
         self.n = int(self.keep_val.sum())
 
     # -- problems and runs
-    def problem(self, base: CoreEffects, base_params: dict[str, dict[str, float]] | None = None) -> Problem:
+    def problem(self, base: CoreEffects, base_params: dict[str, dict[str, float]] | None = None) -> RefitRecords:
         """The refit on the estimation records, ``base`` effects held."""
-        return Problem(
+        return RefitRecords(
             self.nominal.structure, [u for u, _ in self.est], [y for _, y in self.est], self.warmup, self.t0_est,
             self.starts_est, base, base_params,
         )  # fmt: skip
 
-    def val_problem(self) -> Problem:
+    def val_problem(self) -> RefitRecords:
         """The validation records as a problem (for their linear outputs)."""
-        return Problem(self.nominal.structure, [u for u, _ in self.val], [y for _, y in self.val], self.warmup, self.t0_val, self.starts_val)
+        return RefitRecords(self.nominal.structure, [u for u, _ in self.val], [y for _, y in self.val], self.warmup, self.t0_val, self.starts_val)
 
     def run(self, model: AugmentedModel) -> _Run:
         """The model's free run on every validation record from its own refitted start."""
@@ -253,7 +253,7 @@ def _refit_all(
     else:
         base_params = dict(base_model.base_params)
         base_params[base_model.effect] = dict(base_model.params)
-        prob = Problem(
+        prob = RefitRecords(
             base_model.structure, [u for u, _ in d.est], [y for _, y in d.est], d.warmup, d.t0_est, d.starts_est,
             base_model.core, base_params,
         )  # fmt: skip

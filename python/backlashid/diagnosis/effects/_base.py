@@ -607,7 +607,7 @@ class Screening:
 # -- the refits ----------------------------------------------------------------------------------
 
 
-class Problem:
+class RefitRecords:
     """The estimation records an effect is refitted on (output-error least squares).
 
     One record (u, y arrays) or several (lists of arrays: separate records of one system, each
@@ -847,12 +847,12 @@ class Effect:
             return ()
         return ((self.name, tuple(float(params[n]) for n in self.parameters)),)
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """Lower and upper bounds of the continuous parameters on this record.
 
         Parameters
         ----------
-        prob : Problem
+        prob : RefitRecords
             The record the bounds may depend on (e.g. the input's range).
 
         Returns
@@ -863,12 +863,12 @@ class Effect:
         n = len(self.parameters)
         return np.full(n, -np.inf), np.full(n, np.inf)
 
-    def starts(self, prob: Problem, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
+    def starts(self, prob: RefitRecords, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
         """Starts of the refit (default: the zero size).
 
         Parameters
         ----------
-        prob : Problem
+        prob : RefitRecords
             The estimation record, nominal structure and warm-up.
         theta0 : ndarray
             Nominal parameters to start from.
@@ -880,7 +880,7 @@ class Effect:
         """
         return [(np.array(self.zero, dtype=np.float64), {})]
 
-    def refit(self, prob: Problem, theta0: Array) -> Fitted:
+    def refit(self, prob: RefitRecords, theta0: Array) -> Fitted:
         """Output-error refit of the nominal and the effect's parameters from :meth:`starts`.
 
         One start is refitted to convergence; from several, a short refit from each, then the
@@ -889,7 +889,7 @@ class Effect:
 
         Parameters
         ----------
-        prob : Problem
+        prob : RefitRecords
             Record, structure and warm-up of the output-error criterion.
         theta0 : ndarray
             The nominal fit, where every start begins.
@@ -910,12 +910,12 @@ class Effect:
             return self._refit(prob, theta0, e0, lb, ub, fixed)
         return self._multi_start(prob, theta0, starts, lb, ub)
 
-    def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
+    def fit(self, prob: RefitRecords, theta0: Array) -> AugmentedModel:
         """The refitted augmented model.
 
         Parameters
         ----------
-        prob : Problem
+        prob : RefitRecords
             What the refit runs on.
         theta0 : ndarray
             Nominal parameters (the structure's physical vector).
@@ -949,7 +949,7 @@ class Effect:
     # -- shared refit machinery for subclasses
     def _refit(
         self,
-        prob: Problem,
+        prob: RefitRecords,
         theta0: Array,
         e0: Array,
         lb: Array,
@@ -982,7 +982,7 @@ class Effect:
         p = fit.theta
         return p[:n], params(p), float(fit.cost)
 
-    def _multi_start(self, prob: Problem, theta0: Array, starts: list[tuple[Array, dict[str, float]]], lb: Array, ub: Array) -> Fitted:
+    def _multi_start(self, prob: RefitRecords, theta0: Array, starts: list[tuple[Array, dict[str, float]]], lb: Array, ub: Array) -> Fitted:
         """A short refit from each start (effect values, fixed parameters), then the best one
         refitted to convergence."""
         short = [(self._refit(prob, theta0, e0, lb, ub, fixed, max_iter=5), fixed) for e0, fixed in starts]
@@ -1027,7 +1027,7 @@ class StructureEffect(Effect):
         """(a, b, m_L, m_R) of the nominal estimate ``est`` with one new term at ``h``, per direction."""
         raise NotImplementedError
 
-    def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
+    def fit(self, prob: RefitRecords, theta0: Array) -> AugmentedModel:
         """Refit in the bigger structure, the new terms from 0: the core's compiled refit of
         that structure (with the base effects held, on every record from its start) searched
         by the package's Levenberg-Marquardt (exact sensitivities)."""

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..._numerics import lstsq
-from ._base import Array, Augmentation, AugmentedModel, Effect, Problem, ScreenContext, ar_predict
+from ._base import Array, Augmentation, AugmentedModel, Effect, RefitRecords, ScreenContext, ar_predict
 
 MAX_AR = 4  # highest order of the AR model
 
 
-def fit_ar(prob: Problem, theta0: Array) -> tuple[Array, float]:
+def fit_ar(prob: RefitRecords, theta0: Array) -> tuple[Array, float]:
     """AR(p) model of the nominal output error, p <= MAX_AR chosen by BIC (least squares)."""
     r = prob.scored(prob.y - prob.simulate(theta0))
     n = r.size
@@ -35,7 +35,7 @@ AUGMENTATION = Augmentation(
 class ColoredNoise(Effect, rank=10, augmentation=AUGMENTATION, simulated=False):
     """An AR noise model on the output error."""
 
-    def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
+    def fit(self, prob: RefitRecords, theta0: Array) -> AugmentedModel:
         """The AR model of the nominal output error; the nominal parameters are kept."""
         phi, _ = fit_ar(prob, theta0)
         params = {f"phi_{k}": float(phi[k - 1]) if k <= phi.size else 0.0 for k in range(1, MAX_AR + 1)}

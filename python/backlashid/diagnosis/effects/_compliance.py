@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import Array, Augmentation, Effect, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, RefitRecords, ScreenContext
 
 AUGMENTATION = Augmentation("compliance", ("k", "omega", "zeta"), (0.0, 0.5, 0.1), "y = (1 - k) f + k H f, H a unit-DC resonance")
 
@@ -12,11 +12,11 @@ AUGMENTATION = Augmentation("compliance", ("k", "omega", "zeta"), (0.0, 0.5, 0.1
 class Compliance(Effect, rank=7, augmentation=AUGMENTATION):
     """A resonant path of share k after the backlash."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """0 <= k <= 1.5, 0.02 <= omega <= 3, 0.005 <= zeta <= 0.9."""
         return np.array([0.0, 0.02, 0.005]), np.array([1.5, 3.0, 0.9])
 
-    def starts(self, prob: Problem, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
+    def starts(self, prob: RefitRecords, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
         """k = 0 leaves omega and zeta without a gradient. At fixed (omega, zeta) the output is
         linear in k (y = y_nom + k (H f - f)): fit k to the nominal residual on a grid, then
         start from the best three grid points."""

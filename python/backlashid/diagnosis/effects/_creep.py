@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from ..._numerics import lstsq, r_factor
-from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, Fitted, RefitRecords, ScreenContext
 
 N_MODES = 2  # creep modes
 T_MIN, T_MAX = 10.0, 1e5  # time constants' range in samples (the core's domain)
@@ -28,11 +28,11 @@ AUGMENTATION = Augmentation(
 class Creep(Effect, rank=13, augmentation=AUGMENTATION):
     """Slow first-order modes on the output: it creeps after the input stops changing."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """-0.5 <= g_k <= 0.9; ln 10 <= l_k <= ln 1e5."""
         return np.array([-0.5, math.log(T_MIN)] * N_MODES), np.array([0.9, math.log(T_MAX)] * N_MODES)
 
-    def refit(self, prob: Problem, theta0: Array) -> Fitted:
+    def refit(self, prob: RefitRecords, theta0: Array) -> Fitted:
         """The shares enter linearly at fixed time constants: pick the pairs of time constants
         (a grid from 10 samples to ten records) whose modes explain most of the nominal
         residual, then refit everything from the best three."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import MAX_ITER, Array, Augmentation, Effect, Fitted, Problem, ScreenContext
+from ._base import MAX_ITER, Array, Augmentation, Effect, Fitted, RefitRecords, ScreenContext
 
 MAX_DELAY = 6  # dead times searched: 1..MAX_DELAY extra samples
 
@@ -15,7 +15,7 @@ AUGMENTATION = Augmentation("dead_time", ("d",), (0,), "extra input delay of d s
 class DeadTime(Effect, rank=0, augmentation=AUGMENTATION):
     """Extra input delay of d samples (rest before the record)."""
 
-    def refit(self, prob: Problem, theta0: Array) -> Fitted:
+    def refit(self, prob: RefitRecords, theta0: Array) -> Fitted:
         """d is discrete: a short refit of the nominal parameters at each d, then the best
         one to convergence with the iteration limit of the linear-order refit it competes with
         (the same Levenberg-Marquardt, exact sensitivities)."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...identify import Structure
-from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext, linear_x, load_f
+from ._base import Array, Augmentation, Effect, Fitted, RefitRecords, ScreenContext, linear_x, load_f
 
 AUGMENTATION = Augmentation(
     "dynamic_friction",
@@ -32,7 +32,7 @@ RELAXATION = (0.0, 0.003, 0.03)  # lambda of the start grid, per sample
 class DynamicFriction(Effect, rank=11, augmentation=AUGMENTATION):
     """A relaxing friction force on the load, driven by the motion of x, of u or of f."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """Of (k_f, z_s, lambda), the source held: |k_f| <= 2 std(y) + 0.1; s = std(u) +
         std(y) (the record's scale, x unknown without a nominal model): 1e-4 s <= z_s <= 10 s;
         0 <= lambda <= 0.5."""
@@ -40,7 +40,7 @@ class DynamicFriction(Effect, rank=11, augmentation=AUGMENTATION):
         s = float(np.std(prob.u) + np.std(prob.y)) + 1e-9
         return np.array([-2.0 * sy, 1e-4 * s, 0.0]), np.array([2.0 * sy, 10.0 * s, 0.5])
 
-    def refit(self, prob: Problem, theta0: Array) -> Fitted:
+    def refit(self, prob: RefitRecords, theta0: Array) -> Fitted:
         """At k_f = 0 the error has no gradient in z_s, lambda; at fixed (z_s, lambda, source)
         the output is linear in k_f (y = y_nom + k_f w): k_f fitted to the nominal residual on
         a grid of (source, z_s in std(q) of its motion, lambda), then everything but the source

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import ModelError
-from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext, linear_x
+from ._base import Array, Augmentation, Effect, Fitted, RefitRecords, ScreenContext, linear_x
 
 AUGMENTATION = Augmentation(
     "feedback_hysteresis",
@@ -20,7 +20,7 @@ AUGMENTATION = Augmentation(
 )
 
 
-def _scales(prob: Problem, theta0: Array) -> tuple[float, float, float]:
+def _scales(prob: RefitRecords, theta0: Array) -> tuple[float, float, float]:
     """(k, s_x, v_max): the stiffness that cancels the nominal loop's static gain (1 / |G|, or
     std(u) / std(x) without one), std(x) and max |v| of the nominal linear block's x."""
     x = linear_x(prob.structure, theta0, prob.u)
@@ -34,14 +34,14 @@ def _scales(prob: Problem, theta0: Array) -> tuple[float, float, float]:
 class FeedbackHysteresis(Effect, rank=12, augmentation=AUGMENTATION):
     """A Bouc-Wen restoring force and a cubic stiffness in the drive's force balance."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """The record's scale s = std(u) + std(y) (x unknown without a nominal model): 0 <=
         alpha <= 1e3, 0 <= beta <= 1e3 / s, |gamma| <= 1e3 / s, |k_3| <= 1e3 / s^2; the refit
         narrows them to the nominal loop's scales (:meth:`refit`)."""
         s = float(np.std(prob.u) + np.std(prob.y)) + 1e-9
         return np.array([0.0, 0.0, -1e3 / s, -1e3 / s**2]), np.array([1e3, 1e3 / s, 1e3 / s, 1e3 / s**2])
 
-    def box(self, prob: Problem, theta0: Array) -> tuple[Array, Array]:
+    def box(self, prob: RefitRecords, theta0: Array) -> tuple[Array, Array]:
         """The refit's box on the nominal loop's scales (k, s_x, v_max of :func:`_scales`): 0 <=
         alpha <= 2 k (a stiffness up to twice the loop's), beta, |gamma| <= 0.9 / v_max (the
         bound an explicit Euler step of z needed to stay bounded; the exact step does not, but
@@ -54,7 +54,7 @@ class FeedbackHysteresis(Effect, rank=12, augmentation=AUGMENTATION):
         hi = np.array([2.0 * k, 0.9 / vmax, 0.9 / vmax, 2.0 * k / sx**2])
         return np.maximum(lo, lb), np.minimum(hi, ub)
 
-    def refit(self, prob: Problem, theta0: Array) -> Fitted:
+    def refit(self, prob: RefitRecords, theta0: Array) -> Fitted:
         """The error has no gradient in beta, gamma at alpha = 0 and is not convex: short refits
         from a few starts (a hysteretic stiffness of 5 % and 30 % of the loop's, saturating after
         0.3 or 1 std(x) of travel; a cubic stiffness alone), the best one refitted to
@@ -69,7 +69,7 @@ class FeedbackHysteresis(Effect, rank=12, augmentation=AUGMENTATION):
         """Finite-size changes (1 % of the loop's stiffness): a hysteretic force saturating after
         0.3 std(x) of travel (beta at most 0.9 / max |v|, inside :meth:`box`), and a cubic
         stiffness."""
-        prob = Problem(screen.structure, screen.u, screen.y, 0, screen.t0)
+        prob = RefitRecords(screen.structure, screen.u, screen.y, 0, screen.t0)
         k, sx, vmax = _scales(prob, screen.theta)
         h = 0.01
         beta = min(1.0 / (0.3 * sx), 0.9 / vmax)

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from ...errors import BacklashIdError
-from ._base import MAX_ITER, Array, Augmentation, AugmentedModel, CoreEffects, Effect, Fitted, Problem, ScreenContext
+from ._base import MAX_ITER, Array, Augmentation, AugmentedModel, CoreEffects, Effect, Fitted, RefitRecords, ScreenContext
 
 STEP = 1e-4  # relative finite-difference step of the screening
 SHORT_ITER = 5  # iterations of the short refits from each start
@@ -43,17 +43,17 @@ class Friction(Effect, rank=2, augmentation=AUGMENTATION):
     """Friction in the drive's force balance: Coulomb and viscous, or stick-slip with a
     Stribeck dip, whichever has the lower BIC on the estimation record."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """0 <= F_c <= 2 std(u), 0 <= F_v <= 2."""
         s = float(np.std(prob.u))
         return np.zeros(2), np.array([2.0 * s + 1e-12, 2.0])
 
-    def starts(self, prob: Problem, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
+    def starts(self, prob: RefitRecords, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
         """The error is not convex in (F_c, F_v): short refits from a few corners first."""
         s = float(np.std(prob.u))
         return [(np.array([fc * s, fv]), {}) for fc, fv in ((0.02, 0.0), (0.15, 0.0), (0.05, 0.3), (0.3, 0.6))]
 
-    def fit(self, prob: Problem, theta0: Array) -> AugmentedModel:
+    def fit(self, prob: RefitRecords, theta0: Array) -> AugmentedModel:
         """Three forms refitted, the one of lowest BIC (n ln(SSE / n) + k ln n) kept:
         Coulomb and viscous friction on the last step's velocity (k = 2); stick-slip with
         Coulomb and viscous sliding friction (k = 2); stick-slip with a Stribeck dip from that
@@ -61,7 +61,7 @@ class Friction(Effect, rank=2, augmentation=AUGMENTATION):
 
         Parameters
         ----------
-        prob : Problem
+        prob : RefitRecords
             What the refits run on.
         theta0 : ndarray
             Nominal parameters.
@@ -88,7 +88,7 @@ class Friction(Effect, rank=2, augmentation=AUGMENTATION):
                 params = {n_: v for n_, v in params.items() if n_ not in ("F_s", "v_s")}
         return prob.model(self.name, prob.structure, theta, params, core, k)
 
-    def _stick_slip(self, prob: Problem, theta0: Array) -> list[tuple[Fitted, int]]:
+    def _stick_slip(self, prob: RefitRecords, theta0: Array) -> list[tuple[Fitted, int]]:
         """The stick-slip refits: Coulomb and viscous (F_s = 0 held), then a Stribeck dip."""
         s = float(np.std(prob.u)) + 1e-12
         v_scale = float(np.std(np.diff(prob.linear_output(theta0)))) + 1e-12

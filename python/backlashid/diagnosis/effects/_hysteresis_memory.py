@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._numerics import lstsq, r_factor
-from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, Fitted, RefitRecords, ScreenContext
 
 N_PLAYS = 2  # extra plays
 
@@ -22,11 +22,11 @@ class HysteresisMemory(Effect, rank=9, augmentation=AUGMENTATION):
     """Weighted play operators on the internal signal x added to the output."""
 
     @staticmethod
-    def _x(prob: Problem, theta0: Array) -> Array:
+    def _x(prob: RefitRecords, theta0: Array) -> Array:
         """x of the nominal linear block on every record from its start."""
         return prob.linear_output(theta0)
 
-    def refit(self, prob: Problem, theta0: Array) -> Fitted:
+    def refit(self, prob: RefitRecords, theta0: Array) -> Fitted:
         """The weights enter linearly at fixed half-widths: pick the pairs of half-widths whose
         plays explain most of the nominal residual, then refit everything from the best three."""
         x = self._x(prob, theta0)

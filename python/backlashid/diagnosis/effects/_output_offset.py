@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import TIME_SCALE, Array, Augmentation, Effect, Problem, ScreenContext
+from ._base import TIME_SCALE, Array, Augmentation, Effect, RefitRecords, ScreenContext
 
 AUGMENTATION = Augmentation("output_offset", ("o_0", "o_1"), (0.0, 0.0), f"y + o_0 + o_1 t / {TIME_SCALE:g}")
 
@@ -12,7 +12,7 @@ AUGMENTATION = Augmentation("output_offset", ("o_0", "o_1"), (0.0, 0.0), f"y + o
 class OutputOffset(Effect, rank=4, augmentation=AUGMENTATION, intercept=False):
     """Output offset o_0 and its drift o_1 per time unit."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """Within +-1000 (std(y) + 1)."""
         b = np.full(2, 1e3 * (float(np.std(prob.y)) + 1.0))
         return -b, b

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._base import Array, Augmentation, Effect, Fitted, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, Fitted, RefitRecords, ScreenContext
 
 AUGMENTATION = Augmentation("quantization", ("q",), (0.0,), "y quantised to steps of q")
 
@@ -101,7 +101,7 @@ def cos_scores(y: Array, steps: Array) -> Array:
 class Quantization(Effect, rank=8, augmentation=AUGMENTATION):
     """Output quantised to steps of q."""
 
-    def refit(self, prob: Problem, theta0: Array) -> Fitted:
+    def refit(self, prob: RefitRecords, theta0: Array) -> Fitted:
         """The step of the measured values' lattice, else a search of q at the nominal parameters.
 
         A quantiser after the noise (an A/D converter) leaves every measured value on a

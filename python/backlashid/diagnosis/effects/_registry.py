@@ -26,7 +26,7 @@ from ..._validation import check_int, check_real, check_seed, check_signals, sho
 from ...errors import BacklashIdError, DataError, ModelError
 from ...identify import Structure
 from ...models import CascadeModel, SandwichModel
-from ._base import Array, Augmentation, AugmentedModel, Effect, Problem, ScreenContext, Screening, simulate
+from ._base import Array, Augmentation, AugmentedModel, Effect, RefitRecords, ScreenContext, Screening, simulate
 
 __all__ = ["AUGMENTATIONS", "EFFECTS", "REGISTRY", "fit_effect", "score_tests", "screen"]
 
@@ -129,7 +129,7 @@ def fit_effect(
     structure, theta0, u, y = _chain(model, u_est, y_est, warmup)
     t0 = check_real(t0, "t0")
     check_seed(seed)
-    prob = Problem(structure, u, y, int(warmup), float(t0))
+    prob = RefitRecords(structure, u, y, int(warmup), float(t0))
     return REGISTRY[effect].fit(prob, theta0)
 
 

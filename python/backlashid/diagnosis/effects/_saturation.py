@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import Array, Augmentation, Effect, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, RefitRecords, ScreenContext
 
 AUGMENTATION = Augmentation("saturation", ("lo", "hi"), (-np.inf, np.inf), "drive input clipped to [lo, hi]")
 
@@ -12,12 +12,12 @@ AUGMENTATION = Augmentation("saturation", ("lo", "hi"), (-np.inf, np.inf), "driv
 class Saturation(Effect, rank=1, augmentation=AUGMENTATION):
     """Drive input clipped to [lo, hi]."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """lo below the median input, hi above it."""
         u = prob.u
         return np.array([u.min(), np.median(u)]), np.array([np.median(u), u.max()])
 
-    def starts(self, prob: Problem, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
+    def starts(self, prob: RefitRecords, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
         """The gradient vanishes at the record's range: the three best of a few clipping levels."""
         u = prob.u
         levels = [(qlo, qhi) for qlo in (0.0, 0.05, 0.15) for qhi in (0.0, 0.05, 0.15) if qlo or qhi]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import Array, Augmentation, Effect, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, RefitRecords, ScreenContext
 
 AUGMENTATION = Augmentation("sensor_saturation", ("lo", "hi"), (-np.inf, np.inf), "measured output clipped to [lo, hi]")
 
@@ -12,12 +12,12 @@ AUGMENTATION = Augmentation("sensor_saturation", ("lo", "hi"), (-np.inf, np.inf)
 class SensorSaturation(Effect, rank=21, augmentation=AUGMENTATION):
     """The measured output clipped to [lo, hi]."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """lo below the output's median, hi above it, within its range."""
         y = prob.y
         return np.array([y.min(), np.median(y)]), np.array([np.median(y), y.max()])
 
-    def starts(self, prob: Problem, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
+    def starts(self, prob: RefitRecords, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
         """The gradient vanishes beyond the simulated range: the three best of a few clipping
         levels at quantiles of the nominal simulation."""
         y_nom = prob.simulate(theta0)

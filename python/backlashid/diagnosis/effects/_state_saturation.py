@@ -11,7 +11,7 @@ import numpy as np
 
 from ...identify import Structure
 from ...models import LinearBlock
-from ._base import Array, Augmentation, Effect, Problem, ScreenContext
+from ._base import Array, Augmentation, Effect, RefitRecords, ScreenContext
 
 AUGMENTATION = Augmentation("state_saturation", ("lo", "hi"), (-np.inf, np.inf), "x clipped to [lo, hi] inside the recursion")
 
@@ -25,7 +25,7 @@ def nominal_x(structure: Structure, theta: Array, u: Array) -> Array:
 class StateSaturation(Effect, rank=20, augmentation=AUGMENTATION):
     """The linear block's output x held within [lo, hi] (a stop of the state itself)."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """lo below the output's median, hi above it, within its range widened by the range
         (x is the backlash's input: its range is the output's plus the dead band)."""
         y = prob.y
@@ -33,7 +33,7 @@ class StateSaturation(Effect, rank=20, augmentation=AUGMENTATION):
         spread = hi - lo
         return np.array([lo - spread, mid]), np.array([mid, hi + spread])
 
-    def starts(self, prob: Problem, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
+    def starts(self, prob: RefitRecords, theta0: Array) -> list[tuple[Array, dict[str, float]]]:
         """The gradient vanishes beyond x's range: the three best of a few clipping levels at
         quantiles of the nominal x."""
         x = nominal_x(prob.structure, theta0, prob.u)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import TIME_SCALE, Array, Augmentation, Effect, Problem, ScreenContext
+from ._base import TIME_SCALE, Array, Augmentation, Effect, RefitRecords, ScreenContext
 
 BOUND = 50.0  # largest drift rate per time unit
 STEP = 1e-4  # finite-difference step of the screening
@@ -16,7 +16,7 @@ AUGMENTATION = Augmentation("width_drift", ("dc_L", "dc_R"), (0.0, 0.0), f"c_L, 
 class WidthDrift(Effect, rank=3, augmentation=AUGMENTATION):
     """Dead-band widths drifting linearly in time."""
 
-    def bounds(self, prob: Problem) -> tuple[Array, Array]:
+    def bounds(self, prob: RefitRecords) -> tuple[Array, Array]:
         """Rates within +-BOUND."""
         b = np.full(2, BOUND)
         return -b, b
