@@ -116,6 +116,11 @@ class Problem:
         na: int, nb: int, degree: int, nr: int, ns: int, feedthrough: bool = False, output_feedthrough: bool = False,
         least_squares: bool = False, initial_state: bool = False,
     ) -> list[str]: ...  # the names of theta (or of the least-squares vector) of a structure, no record needed
+    @staticmethod
+    def blocks(
+        na: int, nb: int, degree: int, nr: int, ns: int, feedthrough: bool = False, output_feedthrough: bool = False,
+        initial_state: bool = False,
+    ) -> list[tuple[str, tuple[int, int]]]: ...  # each block of theta: (name, (start, stop)), in theta's order
     @property
     def names(self) -> list[str]: ...
     @property

@@ -25,7 +25,6 @@ blocks (:meth:`Structure.unpack`, :meth:`Structure.model`) ignore them; zeros ar
 from __future__ import annotations
 
 import functools
-import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -204,20 +203,13 @@ class Structure:
 
     @functools.cached_property
     def _slices(self) -> dict[str, Any]:
-        """Where each block sits in the physical vector, read off the core's names (once: every
-        unpack on the fits' and the diagnosis's refit paths reads it)."""
-        names = self.names
-
-        def block(pattern: str) -> slice:
-            at = [i for i, k in enumerate(names) if re.fullmatch(pattern, k)]
-            return slice(at[0], at[-1] + 1) if at else slice(len(names), len(names))
-
-        return {
-            "a": block(r"a\d+"), "b": block(r"b\d+"), "c_L": names.index("c_L"), "m_L": block(r"m_L\d+"),
-            "m_R1": names.index("m_R1"), "c_R": names.index("c_R"), "m_R": block(r"m_R([2-9]|\d\d+)"),
-            "r": block(r"r\d+"), "s": block(r"s\d+"),
-            "x0": block(r"x0_\d+"), "y_prev": block(r"y_prev"), "w0": block(r"w0_\d+"),
-        }
+        """Where each block sits in the physical vector, as the core lays it out (once: every
+        unpack on the fits' and the diagnosis's refit paths reads it): a slice per block, the
+        index of the single ones (c_L, m_R1, c_R)."""
+        blocks = _core.Problem.blocks(
+            self.na, self.nb, self.degree, self.nr, self.ns, self.feedthrough, self.output_feedthrough, self.initial_state
+        )
+        return {name: start if name in ("c_L", "m_R1", "c_R") else slice(start, stop) for name, (start, stop) in blocks}
 
     @fill(theta=_THETA_DOC)
     def unpack(self, theta: NDArray[np.float64]) -> Estimate:

@@ -355,3 +355,33 @@ fn the_factor_walked_in_two_halves_equals_the_one_pass_walk() {
     let two = cascade_oe_factor_threads(&lin, &bl, &u, &y, 50, 2).unwrap();
     assert_eq!(two, one);
 }
+
+/// The blocks' positions and the names agree for every kind of structure: each name sits in
+/// the block its prefix says, the blocks tile theta in order.
+#[test]
+fn the_blocks_are_where_the_names_are() {
+    for (na, nb, degree, nr, ns, ft, oft) in [
+        (2, 2, 3, 0, 0, false, false),
+        (1, 0, 1, 0, 0, true, false),
+        (2, 2, 3, 2, 2, false, false),
+        (1, 3, 2, 3, 1, true, true),
+        (3, 1, 4, 1, 2, false, true),
+    ] {
+        for initial in [false, true] {
+            let s = Structure::new(na, nb, degree, nr, ns, ft, oft)
+                .unwrap()
+                .with_initial_state(initial);
+            let names = s.names();
+            let blocks = s.blocks();
+            assert_eq!(blocks.last().unwrap().1.end, names.len());
+            let mut at = 0;
+            for (block, range) in &blocks {
+                assert_eq!(range.start, at, "{block} follows the block before it");
+                at = range.end;
+                for name in &names[range.clone()] {
+                    assert!(name.starts_with(block), "{name} in block {block}");
+                }
+            }
+        }
+    }
+}

@@ -184,6 +184,30 @@ impl PyProblem {
         })
     }
 
+    /// Where each block of parameters sits in theta: name -> (start, stop), in theta's order
+    /// (a, b, c_L, m_L, m_R1, c_R, m_R, r, s, x0, y_prev, w0; a block the structure lacks is
+    /// empty), so that the Python layer reads the layout instead of rebuilding it.
+    #[staticmethod]
+    #[pyo3(signature = (na, nb, degree, nr, ns, feedthrough=false, output_feedthrough=false, initial_state=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn blocks(
+        na: &Bound<'_, PyAny>,
+        nb: &Bound<'_, PyAny>,
+        degree: &Bound<'_, PyAny>,
+        nr: &Bound<'_, PyAny>,
+        ns: &Bound<'_, PyAny>,
+        feedthrough: bool,
+        output_feedthrough: bool,
+        initial_state: bool,
+    ) -> PyResult<Vec<(&'static str, (usize, usize))>> {
+        let s = structure(na, nb, degree, nr, ns, feedthrough, output_feedthrough)?
+            .with_initial_state(initial_state);
+        Ok(s.blocks()
+            .into_iter()
+            .map(|(name, r)| (name, (r.start, r.end)))
+            .collect())
+    }
+
     /// The parameter names, in the order of theta.
     #[getter]
     fn names(&self) -> Vec<String> {

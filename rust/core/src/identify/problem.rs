@@ -243,6 +243,38 @@ impl Structure {
         names
     }
 
+    /// Where each block of parameters sits in theta, in theta's order: a, b, c_L, m_L (m_L2..),
+    /// m_R1, c_R, m_R (m_R2..), r (the free ones), s, x0, y_prev, w0; a block the structure
+    /// lacks is empty. The one layout `names` spells out.
+    pub fn blocks(&self) -> Vec<(&'static str, std::ops::Range<usize>)> {
+        let n = self.degree;
+        let r_free = self.n_r().saturating_sub(1);
+        let s = if self.is_sandwich() { self.ns } else { 0 };
+        let y_prev = usize::from(self.initial_state);
+        let sizes = [
+            ("a", self.n_a()),
+            ("b", self.nb),
+            ("c_L", 1),
+            ("m_L", n - 1),
+            ("m_R1", 1),
+            ("c_R", 1),
+            ("m_R", n - 1),
+            ("r", r_free),
+            ("s", s),
+            ("x0", self.n_x0()),
+            ("y_prev", y_prev),
+            ("w0", self.n_w0()),
+        ];
+        let mut at = 0;
+        sizes
+            .into_iter()
+            .map(|(name, len)| {
+                at += len;
+                (name, at - len..at)
+            })
+            .collect()
+    }
+
     /// The names of the model's parameters (no initial state).
     pub(crate) fn model_names(&self) -> Vec<String> {
         let first = usize::from(!self.feedthrough);
