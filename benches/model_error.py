@@ -50,7 +50,7 @@ def piezo() -> None:
 
     from backlashid.identify import Scaling
 
-    data = np.load(bid.shared_data_folder(Path(__file__).parent) / "piezo_actuator_hysteresis" / "piezo.npz")
+    data = np.load(bid.benchmarks.shared_data_folder(Path(__file__).parent) / "piezo_actuator_hysteresis" / "piezo.npz")
     scaling = Scaling.auto(data["model_u_V"], data["model_y"])
     u_id, y_id = scaling.input_to_model(data["model_u_V"]), scaling.output_to_model(data["model_y"])
     u_t, y_t = scaling.input_to_model(data["test_u_V"]), scaling.output_to_model(data["test_y"])

@@ -30,7 +30,7 @@ def _shared_data() -> Path:
     """The measured benchmark records (read in place); a missing folder makes the tests that
     read them skip."""
     try:
-        return bx.shared_data_folder(Path(__file__).parent)
+        return bx.benchmarks.shared_data_folder(Path(__file__).parent)
     except bx.DataError:
         return Path(__file__).parent / "no-shared-data"
 

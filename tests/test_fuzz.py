@@ -622,7 +622,7 @@ def test_other_entry_points_refuse_junk(function, args):
         "fit_wiener_hammerstein": lambda: bid.fit_wiener_hammerstein(args[0], u, nb=1, ns=1, degree=2, warmup=10, max_iter=2),
         "fit_effect": lambda: bid.fit_effect(args[0], bid.example1(), u, u),
         "wiener_hammerstein_model": lambda: bid.wiener_hammerstein_model(*(args + [[1.0]] * 5)[:5]),
-        "shared_data_folder": lambda: bid.shared_data_folder(args[0]),
+        "shared_data_folder": lambda: bid.benchmarks.shared_data_folder(args[0]),
         "select_structure options": lambda: bid.select_structure(
             u, u, na=1, nb=1, degree=1, **dict(zip(("validation", "tolerance", "refit", "warmup"), args))
         ),
@@ -687,7 +687,7 @@ def test_diagnose(seed, estimation, validation, candidates, noise_std, warmup):
         (lambda: bid.example_data("model", 300), bid.DataError, "model must be a CascadeModel or SandwichModel"),
         (lambda: bid.estimate_state(bid.example1(), np.ones(50), np.ones(50), noise_std=1e-218), bid.DataError, "noise_std = "),
         (lambda: bid.wiener_hammerstein_model([1.0], [0.1], [1.0, "a"], [1.0], []), bid.ModelError, "m must be a list of real numbers"),
-        (lambda: bid.shared_data_folder(3), bid.DataError, "start = 3"),
+        (lambda: bid.benchmarks.shared_data_folder(3), bid.DataError, "start = 3"),
         (lambda: bid.example1().simulate(np.zeros(5), internals=np.ones(3)), bid.DataError, "internals must be True or False"),
     ],
 )

@@ -73,7 +73,6 @@ TOP_LEVEL_ALL = [
     "model_from_dict",
     "model_from_json",
     "select_structure",
-    "shared_data_folder",
     "simulate_from_samples",
     "track",
     "track_many",

@@ -76,7 +76,7 @@ def sweep_error(model: bid.Model, scaling: Scaling, u: np.ndarray, y: np.ndarray
 
 def main() -> None:
     start_all = time.perf_counter()
-    folder = bid.shared_data_folder(Path(__file__).parent) / "bouc_wen"
+    folder = bid.benchmarks.shared_data_folder(Path(__file__).parent) / "bouc_wen"
     train = np.load(folder / "bw_train_forgione_noisefree.npz")
     test = np.load(folder / "bw_test.npz")
     assert float(train["fs"]) == FS and float(test["fs"]) == FS

@@ -85,7 +85,7 @@ def simulate(model: Any, u: np.ndarray, y: np.ndarray, init: int) -> np.ndarray:
 
 def main() -> None:
     start_all = time.perf_counter()
-    folder = bid.shared_data_folder(Path(__file__).parent) / "friction_damper_backlash"
+    folder = bid.benchmarks.shared_data_folder(Path(__file__).parent) / "friction_damper_backlash"
     out = Path(__file__).resolve().parents[1] / "figures"
     tests = tests_36lb(folder)
     fit_names = [n for n in tests if n.split("36lb")[0] in FIT_FREQS]

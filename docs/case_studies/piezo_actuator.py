@@ -76,7 +76,7 @@ def rmse(e: np.ndarray) -> float:
 
 def main() -> None:
     start_all = time.perf_counter()
-    data = np.load(bid.shared_data_folder(Path(__file__).parent) / "piezo_actuator_hysteresis" / "piezo.npz")
+    data = np.load(bid.benchmarks.shared_data_folder(Path(__file__).parent) / "piezo_actuator_hysteresis" / "piezo.npz")
     out = Path(__file__).resolve().parents[1] / "figures"
     u_id, y_id = data["model_u_V"], data["model_y"]
     u_t, y_t, desired = data["test_u_V"], data["test_y"], data["test_col9"]

@@ -61,7 +61,7 @@ def rmse_centred(a: np.ndarray, b: np.ndarray) -> float:
 
 def main() -> None:
     t0 = time.perf_counter()
-    data = np.load(bid.shared_data_folder(Path(__file__).parent) / "piezo_actuator_hysteresis" / "piezo.npz")
+    data = np.load(bid.benchmarks.shared_data_folder(Path(__file__).parent) / "piezo_actuator_hysteresis" / "piezo.npz")
     u_id, y_id = data["model_u_V"], data["model_y"]
     u_t, y_t, desired = data["test_u_V"], data["test_y"], data["test_col9"]
     scaling = Scaling.auto(u_id, y_id)

@@ -30,7 +30,8 @@ python-control and C99; :class:`Tracker`, :func:`track`, :func:`track_many` (:cl
 from :mod:`backlashid.tracking`.
 
 **Examples and data**: :func:`example1`, :func:`example2`, :func:`example_data`
-(:class:`ExampleData`), :func:`shared_data_folder` (:mod:`backlashid.benchmarks`).
+(:class:`ExampleData`) from :mod:`backlashid.benchmarks`, which also finds the shared benchmark
+records (``$BACKLASHID_DATA``, else ``shared/data`` beside a checkout).
 
 **Errors** (:mod:`backlashid.errors`): :class:`BacklashIdError` and its :class:`DataError`,
 :class:`ModelError`, :class:`NotIdentifiableError`, :class:`NotConvergedError`; the warning
@@ -93,7 +94,7 @@ from .tracking import Tracker, TrackResult, track
 
 if TYPE_CHECKING:  # imported on first use (``__getattr__`` below); named here for type checkers
     from .app import diagnose_many, fit_many, track_many
-    from .benchmarks import ExampleData, example1, example2, example_data, shared_data_folder
+    from .benchmarks import ExampleData, example1, example2, example_data
     from .diagnosis import EFFECTS, DiagnosisReport, diagnose, fit_effect
 
     __version__: str
@@ -109,7 +110,6 @@ _LAZY = {
     "example1": "benchmarks",
     "example2": "benchmarks",
     "example_data": "benchmarks",
-    "shared_data_folder": "benchmarks",
     "EFFECTS": "diagnosis",
     "DiagnosisReport": "diagnosis",
     "diagnose": "diagnosis",
@@ -183,7 +183,6 @@ __all__ = [
     "model_from_json",
     "fit_wiener_hammerstein",
     "wiener_hammerstein_model",
-    "shared_data_folder",
     "closed_loop",
     "compensate",
     "TrackResult",

@@ -95,16 +95,16 @@ def test_shared_data_folder_is_found_beside_or_named(tmp_path, monkeypatch):
     (tmp_path / "shared" / "data").mkdir(parents=True)
     deep = tmp_path / "repo" / "examples"
     deep.mkdir(parents=True)
-    assert bid.shared_data_folder(deep) == (tmp_path / "shared" / "data").resolve()
+    assert bid.benchmarks.shared_data_folder(deep) == (tmp_path / "shared" / "data").resolve()
     monkeypatch.setenv("BACKLASHID_DATA", str(tmp_path / "repo"))
-    assert bid.shared_data_folder(deep) == tmp_path / "repo"
+    assert bid.benchmarks.shared_data_folder(deep) == tmp_path / "repo"
     monkeypatch.setenv("BACKLASHID_DATA", str(tmp_path / "missing"))
     with pytest.raises(bid.DataError, match="BACKLASHID_DATA=.*not a folder"):
-        bid.shared_data_folder(deep)
+        bid.benchmarks.shared_data_folder(deep)
     # no machine's path as a fallback: nothing beside the start and no variable is an error
     monkeypatch.delenv("BACKLASHID_DATA")
     (tmp_path / "shared" / "data").rmdir()
     (tmp_path / "shared").rmdir()
     if not any((p / "shared" / "data").is_dir() for p in [tmp_path, *tmp_path.parents]):
         with pytest.raises(bid.DataError, match="set BACKLASHID_DATA"):
-            bid.shared_data_folder(deep)
+            bid.benchmarks.shared_data_folder(deep)

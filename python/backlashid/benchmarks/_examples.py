@@ -53,7 +53,7 @@ def shared_data_folder(start: str | Path | None = None) -> Path:
     >>> import os, pathlib, tempfile
     >>> saved = os.environ.get("BACKLASHID_DATA")
     >>> os.environ["BACKLASHID_DATA"] = records = tempfile.mkdtemp()
-    >>> bid.shared_data_folder() == pathlib.Path(records)
+    >>> bid.benchmarks.shared_data_folder() == pathlib.Path(records)
     True
     >>> _ = os.environ.pop("BACKLASHID_DATA") if saved is None else os.environ.update(BACKLASHID_DATA=saved)
     """
