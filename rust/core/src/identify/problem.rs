@@ -29,8 +29,7 @@ use crate::identify::initial::{self, InitialState, Start};
 use crate::identify::regressor::solve_factor;
 use crate::identify::samples::Samples;
 use crate::identify::sensitivity::{
-    cascade_oe_factor_from, cascade_oe_factor_motion_from, oe_threads, sandwich_oe_factor_from,
-    XChunks,
+    cascade_oe_factor_motion_from, oe_threads, sandwich_oe_factor_from, XChunks,
 };
 use crate::identify::{finite_cost, output_error_cost};
 use crate::identify::{CascadeRegression, SandwichRegression};
@@ -799,28 +798,17 @@ impl Problem {
         let all = self.unpack_all(theta)?;
         let p0 = self.structure.model_size();
         if let ([(b, _)], [rec]) = (&all[..], &self.records[..]) {
-            if b.output.is_none() {
+            let (factor, cost, motion) = self.record_factor(b, rec, p0)?;
+            if let Some(motion) = motion {
                 // the cascade's walk has the motion too: kept for `motion` at this theta
-                let (u, y, threads) = (&rec.u[..], &rec.y[..], oe_threads(rec.u.len()));
-                let start = Self::start(b, p0);
-                let (factor, cost, motion) = cascade_oe_factor_motion_from(
-                    &b.linear,
-                    &b.backlash,
-                    start.as_ref(),
-                    u,
-                    y,
-                    rec.warmup,
-                    threads,
-                )?;
                 *self.motion.lock() = Some((theta.to_vec(), motion));
-                return Ok((factor, cost));
             }
-            return self.record_factor(b, rec, p0);
+            return Ok((factor, cost));
         }
         let mut parts = Vec::with_capacity(all.len());
         let (mut cost, mut rows) = (0.0, 0);
         for ((blocks, cols), rec) in all.iter().zip(&self.records) {
-            let (factor, c) = self.record_factor(blocks, rec, p0)?;
+            let (factor, c, _) = self.record_factor(blocks, rec, p0)?;
             cost += c;
             rows += factor.rows();
             parts.push((factor, cols));
@@ -833,20 +821,29 @@ impl Problem {
         ))
     }
 
-    /// One record's output-error factor over the model's columns and its initial state's.
+    /// One record's output-error factor over the model's columns and its initial state's, with
+    /// the motion where the walk has it (the cascade's).
     fn record_factor(
         &self,
         b: &Blocks,
         rec: &Record,
         p0: usize,
-    ) -> Result<(TriangularFactor, f64)> {
+    ) -> Result<(TriangularFactor, f64, Option<Motion>)> {
         let (u, y, threads) = (&rec.u[..], &rec.y[..], oe_threads(rec.u.len()));
         let start = Self::start(b, p0);
         let (lin, bl, w) = (&b.linear, &b.backlash, rec.warmup);
-        match &b.output {
-            None => cascade_oe_factor_from(lin, bl, start.as_ref(), u, y, w, threads),
-            Some(out) => sandwich_oe_factor_from(lin, bl, out, start.as_ref(), u, y, w, threads),
-        }
+        Ok(match &b.output {
+            None => {
+                let (f, c, m) =
+                    cascade_oe_factor_motion_from(lin, bl, start.as_ref(), u, y, w, threads)?;
+                (f, c, Some(m))
+            }
+            Some(out) => {
+                let (f, c) =
+                    sandwich_oe_factor_from(lin, bl, out, start.as_ref(), u, y, w, threads)?;
+                (f, c, None)
+            }
+        })
     }
 
     /// The initial state's values and columns (after the model's `p0` parameters).

@@ -574,15 +574,10 @@ pub(crate) fn cascade_oe_factor_motion_from(
     let split = nl + backlash.left().coefficients().len();
     let left: Vec<usize> = (0..split).chain(model..cols).collect();
     let right: Vec<usize> = (0..nl).chain(split..cols).collect();
-    // the rows of sample t into their branch's part (`on_right` the branch of dy; before any
-    // move only y_prev's column), its x and case into the motion
+    // the rows of sample t (stepped by `Walked::step`) into their branch's part, its x and
+    // case into the motion
     let feed = |sink: &mut RowSink, walked: &mut Walked, t: usize, chain: &ChainStepper| {
         let (yt, mv) = (chain.y_prev, walked.mv);
-        match mv {
-            Move::Left => walked.on_right = false,
-            Move::Right => walked.on_right = true,
-            Move::Hold => {}
-        }
         if t < warmup {
             return Ok(());
         }
@@ -612,7 +607,7 @@ pub(crate) fn cascade_oe_factor_motion_from(
             let streamed = fold_stream_parts(&widths, threads, |sink| {
                 let mut chain = ChainStepper::new(linear, backlash, start, u, cols)?;
                 for t in 0..u.len() {
-                    walked.mv = chain.step(t)?.1;
+                    walked.step(&mut chain, t)?;
                     feed(sink, &mut walked, t, &chain)?;
                 }
                 Ok(())
@@ -647,6 +642,18 @@ impl Walked {
             on_right: false,
             motion: Motion::empty(),
         }
+    }
+
+    /// The walk to sample t: its case, and the branch of dy after it (before any move: only
+    /// y_prev's column, counted with L).
+    fn step(&mut self, chain: &mut ChainStepper, t: usize) -> Result<()> {
+        self.mv = chain.step(t)?.1;
+        match self.mv {
+            Move::Left => self.on_right = false,
+            Move::Right => self.on_right = true,
+            Move::Hold => {}
+        }
+        Ok(())
     }
 }
 
@@ -726,11 +733,8 @@ where
                 };
                 let mut walked = Walked::new();
                 for t in m - lead..m {
-                    match chain.step(t) {
-                        Ok((_, Move::Left)) => walked.on_right = false,
-                        Ok((_, Move::Right)) => walked.on_right = true,
-                        Ok(_) => {}
-                        Err(_) => return Ok(None),
+                    if walked.step(&mut chain, t).is_err() {
+                        return Ok(None);
                     }
                 }
                 let Some(at_m) = chain.snapshot(m - 1, walked.on_right) else {
@@ -738,7 +742,7 @@ where
                 };
                 let parts = fold_stream_parts(widths, 1, |sink| {
                     for t in m..u.len() {
-                        walked.mv = chain.step(t)?.1;
+                        walked.step(&mut chain, t)?;
                         feed(sink, &mut walked, t, &chain)?;
                     }
                     Ok(())
@@ -750,7 +754,7 @@ where
         let mut walked = Walked::new();
         let mut head = fold_stream_parts(widths, 1, |sink| {
             for t in 0..m {
-                walked.mv = chain.step(t)?.1;
+                walked.step(&mut chain, t)?;
                 feed(sink, &mut walked, t, &chain)?;
             }
             Ok(())
