@@ -23,7 +23,7 @@ from .._version import __version__
 from ..errors import DataError, ModelError
 from ._cascade import CascadeModel
 from ._export_c_compensator import compensator_c
-from ._export_c_inverse import backlash_inverse_c, c_literal
+from ._export_c_inverse import backlash_inverse_c, c_functions, c_literal
 from ._linear import LinearBlock
 from ._serialization import check_model
 from ._state_vector import AnyModel, state_names
@@ -74,10 +74,7 @@ def c_source(model: AnyModel, prefix: str = "bl", header: str | None = None) -> 
     cascade = isinstance(model, CascadeModel)
     guard = f"{P}_MODEL_H"
     h = _model_header(model, p, header, guard)
-    functions: list[str] = []
-
-    def function(signature: str, body: list[str]) -> None:
-        functions.append(signature + "\n{\n" + "\n".join(body) + "\n}\n")
+    functions, function = c_functions()
 
     def linear(name: str, block: LinearBlock, u: str, u_past: str, x_past: str, what: str, names: str = "ab") -> None:
         function(

@@ -17,7 +17,7 @@ from typing import Any
 
 from .. import _core
 from ._cascade import CascadeModel
-from ._export_c_inverse import c_literal
+from ._export_c_inverse import c_functions, c_literal
 from ._linear import LinearBlock
 from ._sandwich import SandwichModel
 
@@ -83,10 +83,7 @@ int {p}_inverse_init({p}_inverse *inverse, double threshold);
  * finite, 2 if the backlash cannot reach it, 3 if u overflows. */
 int {p}_inverse_step({p}_inverse *inverse, double reference, double *u);
 """
-    functions: list[str] = []
-
-    def function(signature: str, body: list[str]) -> None:
-        functions.append(signature + "\n{\n" + "\n".join(body) + "\n}\n")
+    functions, function = c_functions()
 
     for name, (feedthrough, a, b, d, _) in filters.items():
         body = [f"    double acc = {c_literal(feedthrough)} * v;", "    (void)in_past;", "    (void)out_past;"]

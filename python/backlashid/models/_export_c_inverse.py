@@ -11,7 +11,7 @@ library (libm) is needed.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from ._backlash import GeneralBacklash
 
@@ -57,23 +57,27 @@ int {p}_backlash_inverse_init({p}_backlash_inverse *inverse, double y0, double x
  * finite, 2 if the branch cannot reach the level (it turns or overflows first). */
 int {p}_backlash_inverse_step({p}_backlash_inverse *inverse, double y_d, double *x);
 """
-    functions = [_c_function(f"static int {p}_finite(double v)", ["    return v - v == 0.0; /* false for inf and NaN */"])]
+    functions, function = c_functions()
+    function(f"static int {p}_finite(double v)", ["    return v - v == 0.0; /* false for inf and NaN */"])
     if len(backlash.m_left) > 1 or len(backlash.m_right) > 1:  # a root search (unused, and so left out, for two straight branches)
         functions += _root_search_functions(backlash, p)
     return header, "\n".join(functions + _branch_root_functions(backlash, p) + _inverse_functions(p))
 
 
-def _c_function(signature: str, body: list[str]) -> str:
-    """A C function of ``signature`` with the body's lines."""
-    return signature + "\n{\n" + "\n".join(body) + "\n}\n"
+def c_functions() -> tuple[list[str], Callable[[str, list[str]], None]]:
+    """An empty list of C functions and the call that appends one: its signature (comment lines
+    first) and its body's lines (every C writer's one way of writing a function)."""
+    functions: list[str] = []
+
+    def function(signature: str, body: list[str]) -> None:
+        functions.append(signature + "\n{\n" + "\n".join(body) + "\n}\n")
+
+    return functions, function
 
 
 def _root_search_functions(backlash: GeneralBacklash, p: str) -> list[str]:
     """abs, ulp, the branches' slopes and the bracketed Newton search of the core's inverse."""
-    functions: list[str] = []
-
-    def function(signature: str, body: list[str]) -> None:
-        functions.append(_c_function(signature, body))
+    functions, function = c_functions()
 
     function(
         f"/* abs(v): the sign bit cleared (f64::abs) */\nstatic double {p}_abs(double v)",
@@ -107,10 +111,7 @@ def _root_search_functions(backlash: GeneralBacklash, p: str) -> list[str]:
 
 def _branch_root_functions(backlash: GeneralBacklash, p: str) -> list[str]:
     """``<p>_left_root`` / ``<p>_right_root``: the closed form of a straight branch, else the search."""
-    functions: list[str] = []
-
-    def function(signature: str, body: list[str]) -> None:
-        functions.append(_c_function(signature, body))
+    functions, function = c_functions()
 
     for name, right, m, shift in (("left", 0, backlash.m_left, backlash.c_left), ("right", 1, backlash.m_right, -backlash.c_right)):
         if len(m) == 1:  # degree 1: the closed form
@@ -132,10 +133,7 @@ def _branch_root_functions(backlash: GeneralBacklash, p: str) -> list[str]:
 
 def _inverse_functions(p: str) -> list[str]:
     """``<p>_backlash_inverse_init`` and ``<p>_backlash_inverse_step``."""
-    functions: list[str] = []
-
-    def function(signature: str, body: list[str]) -> None:
-        functions.append(_c_function(signature, body))
+    functions, function = c_functions()
 
     function(
         f"int {p}_backlash_inverse_init({p}_backlash_inverse *inverse, double y0, double x0, double threshold)",
