@@ -583,10 +583,7 @@ def _best_linear(u: NDArray[np.float64], y: NDArray[np.float64], order: int, fee
         raise NotConvergedError(
             f"the best linear approximation (order {order}) has no stable output-error fit ({exc}); its ARX start has "
             f"pole radius {arx_radius:.4f}"
-            + (": a pole on or beyond the unit circle is an integrating plant, e.g. a position output, which no "
-               "Wiener-Hammerstein model with stable blocks holds: fit a cascade or sandwich with "
-               "initial_state='estimate', or model the velocity" if arx_radius >= 0.999 else
-               ": try other orders nb, ns, a warm-up or a longer record")
+            + (": " + _INTEGRATING if arx_radius >= _INTEGRATOR_RADIUS else ": try other orders nb, ns, a warm-up or a longer record")
             + "; no iterate exists to return"
         ) from None
     return np.r_[np.zeros(delay), th[:n_num]], np.r_[1.0, th[lin.sizes[0] : lin.sizes[0] + order]], float(th[-1])
@@ -829,15 +826,21 @@ def _ranked_splits(
     return ranked
 
 
+# a pole this close to the unit circle is taken for an integrator, and the errors say so
+_INTEGRATOR_RADIUS = 0.999
+_INTEGRATING = (
+    "a pole on or beyond the unit circle is an integrating plant, e.g. a position output, which no Wiener-Hammerstein "
+    "model with stable blocks holds: fit a cascade or sandwich with initial_state='estimate', or model the velocity"
+)
+
+
 def _no_stable_split(poles: NDArray[np.complex128]) -> NotConvergedError:
     """The error when no split gives a stable start; it names an integrating plant."""
     radius = float(np.max(np.abs(poles))) if poles.size else 0.0
     return NotConvergedError(
         "no split of the best linear approximation's poles and zeros gives a stable start (its largest pole "
         f"radius is {radius:.4f}"
-        + ("; a pole on or beyond the unit circle is an integrating plant, e.g. a position output, which no "
-           "Wiener-Hammerstein model with stable blocks holds: fit a cascade or sandwich with "
-           "initial_state='estimate', or model the velocity" if radius >= 0.999 else "")
+        + ("; " + _INTEGRATING if radius >= _INTEGRATOR_RADIUS else "")
         + "); no iterate exists to return: try other orders nb, ns or a longer record"
     )
 
