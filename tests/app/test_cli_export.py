@@ -74,3 +74,12 @@ def test_bad_arguments_end_in_one_error_line(tmp_path: Path, model_file: Path) -
     assert res.exit_code == 1 and "no such model file" in res.output
     res = run("export", model_file, "--format", "matlab", "--out", tmp_path / "x")
     assert res.exit_code == 2 and "matlab" in res.output
+
+
+def test_a_file_name_that_would_inject_c_is_refused_and_nothing_is_written(tmp_path: Path, model_file: Path) -> None:
+    # the fuzz campaign's reproducer: the header's name is written into the source's #include
+    out = tmp_path / 'dir' / 'bl.h"\nint injected(void) { return 42; }\n#define Z '
+    res = run("export", model_file, "--format", "c", "--out", out)
+    assert res.exit_code == 1 and res.output.count("\n") == 1 and "Error: path = " in res.output
+    assert "letters, digits" in res.output
+    assert not [p for p in tmp_path.rglob("*") if p.is_file() and p != model_file]

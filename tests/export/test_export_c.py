@@ -345,3 +345,12 @@ def test_a_block_without_a_stable_inverse_leaves_the_compensator_out(tmp_path: P
     header, source = model.to_c(tmp_path / "plant")
     assert "No compensator (bl_inverse_step)" in header.read_text() and "unit circle" in header.read_text()
     assert "bl_inverse_step" not in source.read_text() and "bl_step(" in source.read_text()
+
+
+@pytest.mark.parametrize("name", ['bl.h"\nint injected(void) { return 42; }', "a b", "x*y", "-x", "ä"])
+def test_a_file_name_unsafe_inside_the_generated_include_is_refused(name: str, tmp_path: Path) -> None:
+    with pytest.raises(bid.DataError, match="may hold only letters, digits"):
+        bid.example1().to_c(tmp_path / name)
+    assert not list(tmp_path.iterdir())
+    header, source = bid.example1().to_c(tmp_path / "plant-v1.2_x+y")
+    assert '#include "plant-v1.2_x+y.h"' in source.read_text()

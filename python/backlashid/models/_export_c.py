@@ -37,6 +37,9 @@ _C_KEYWORDS = {
 }  # fmt: skip
 
 
+_FILE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*\Z")  # a header name safe inside #include "..." and /* */
+
+
 def check_prefix(prefix: Any) -> str:
     """A C identifier (not a keyword, not reserved) to start every generated name with."""
     if not isinstance(prefix, str) or not _IDENTIFIER.match(prefix) or prefix in _C_KEYWORDS or prefix.startswith(("__", "_")):
@@ -197,6 +200,11 @@ def _paths(path: Any, prefix: str) -> tuple[Path, Path]:
         raise DataError(f"path = {str(path)!r}: the folder {str(base.parent)!r} does not exist; create it or give another path")
     if not base.name or base.name in (".", ".."):
         raise DataError(f"path = {str(path)!r}: give a file name for the .h and .c files")
+    if not _FILE_NAME.match(base.name):  # the name is written into the C (#include "name.h")
+        raise DataError(
+            f"path = {str(path)!r}: the file name {base.name!r} may hold only letters, digits and . _ - + "
+            "(it is written into the generated C's #include); rename it"
+        )
     return base.with_name(base.name + ".h"), base.with_name(base.name + ".c")
 
 
