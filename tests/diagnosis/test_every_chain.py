@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import backlashid as bid
-from backlashid.diagnosis._verdict import Evidence, Score, decide, gap_share
+from backlashid.diagnosis._verdict import Evidence, Score, decide, gap_share, noise_named
 from backlashid.diagnosis.effects import AugmentedModel
 from backlashid.errors import DataError
 from backlashid.identify import evaluate, hammerstein_backlash
@@ -50,6 +50,19 @@ def test_rule_names_colored_noise_only_when_the_residual_is_noise():
     assert verdict.best == "unexplained" and any("input" in r for r in verdict.ruled_out)
     # later composition steps never name a noise model
     assert decide([noise], Evidence(1e-3, 0.5, 0.1, first_step=False)).best == "unexplained"
+
+
+def test_rule_holds_a_material_candidate_provisionally_for_the_colored_noise_after_it():
+    noise = Score("colored_noise", 1.0, 1e-9, -10.0, 0.0, deterministic=False)
+    material = Score("compliance", 0.6, 1e-12, -50.0, 0.4)
+    verdict = decide([material, noise, Score("friction", 0.9, 1e-4, -5.0, 0.1)], Evidence(1e-3, 1.0, 0.1))
+    assert verdict.best == "unexplained" and verdict.provisional == "compliance"
+    assert decide([Score("friction", 0.9, 1e-4, -5.0, 0.1), noise], Evidence(1e-3, 1.0, 0.1, input_p=1e-6)).provisional == ""
+    # on the provisional model's residual, the first step's noise rule
+    later = Evidence(5e-3, 0.5, 0.1, first_step=False)
+    assert noise_named(noise, later) == ()
+    assert noise_named(Score("colored_noise", 1.0, 0.2, -10.0, 0.0, deterministic=False), later)
+    assert noise_named(noise, Evidence(5e-3, 0.5, 0.1, position_p=1e-8, first_step=False))
 
 
 def test_gap_share_is_clipped_and_finite():
@@ -126,6 +139,28 @@ def test_two_effects_are_both_named_and_the_model_round_trips():
     assert metrics.simulation_rmse == pytest.approx(report.steps[-1].validation_rmse, rel=0.1)
     sim = bid.simulate_from_samples(report.model, u[N:], y[N:], report.warmup)
     assert np.sqrt(np.mean((sim - y[N:])[report.warmup :] ** 2)) == pytest.approx(metrics.simulation_rmse)
+
+
+@pytest.mark.parametrize("ar_std", [0.02, 0.08])
+def test_a_dead_time_with_colored_noise_names_both(ar_std: float):
+    """Colored noise is judged on the composed model's residual: named after the dead time,
+    whether the dead time closes half of the gap (small noise) or less (the gap then holds the
+    noise's predictable part, which no free run closes)."""
+    m = bid.example1()
+    u = _input(13)
+    rng = np.random.default_rng(14)
+    e = rng.standard_normal(u.size)
+    ar = np.zeros(u.size)
+    for t in range(1, u.size):  # AR(1) at pole 0.95, std ar_std
+        ar[t] = 0.95 * ar[t - 1] + ar_std * np.sqrt(1 - 0.95**2) * e[t]
+    y = m.simulate(_delayed(u, 2)) + ar + 0.005 * rng.standard_normal(u.size)
+    report = _diagnosed(m, u, y, candidates=["dead_time", "output_offset", "colored_noise"])
+    assert report.effects == ("dead_time", "colored_noise") and report.best_effect == "dead_time"
+    assert report.model.ar.size >= 1 and 0.8 < report.model.ar.sum() < 1.0  # AR(1) + white noise: about 0.95
+    assert report.steps[1].effect == "colored_noise" and report.steps[1].gap_closed == 0.0 and report.steps[1].p_value < 1e-6
+    assert "then colored_noise predicts the rest one step ahead" in report.verdict()
+    back = AugmentedModel.from_dict(json.loads(json.dumps(report.model.to_dict())))
+    assert np.array_equal(back.ar, report.model.ar)
 
 
 def test_noise_free_record_reads_as_noise_free():

@@ -37,7 +37,7 @@ from ._records import Nominal, nominal_chain, records_of
 from ._report import Candidate, CompositionStep, DiagnosisDetails, DiagnosisReport
 from ._start import INITIAL_STATES, describe, estimated_start, held_state, nominal_start, refined_start
 from ._statistics import modulation_p, paired_p, position_p, signature_removed
-from ._verdict import ALPHA, LATTICE_MATERIAL, Evidence, Naming, Score, Verdict, decide, gap_share, name_effects
+from ._verdict import ALPHA, CLOSE_ENOUGH, LATTICE_MATERIAL, Evidence, Naming, Score, Verdict, decide, gap_share, name_effects, noise_named
 from .analyses import (
     ModelErrorModel,
     NominalSignals,
@@ -374,9 +374,10 @@ def diagnose(
     # the nominal model's error, every candidate against it, the composition, the quantiser
     nom = _nominal_error(d)
     first = _first_step(d, names, nom, noise_std, seed)
-    steps, last = _composition(d, names, nom, first, compose, max_effects, seed)
-    grid, lattice_share = _lattice_check(d, names, steps, nom.mse)
-    naming = name_effects(first.verdict.best, tuple(s.effect for s in steps), lattice_share)
+    grid = lattice(np.concatenate([y for _, y in (*d.est, *d.val)])) if "quantization" in names else None
+    steps, last, named_first = _composition(d, names, nom, first, compose, max_effects, seed, grid)
+    lattice_share = _lattice_share(grid, steps, nom.mse)
+    naming = name_effects(named_first, tuple(s.effect for s in steps), lattice_share)
     final, final_run = _named_model(d, last, naming, grid)
     details = _details(d, nom, first, naming, grid, lattice_share, warmup is not None, nominal_converged)
     return _report(d, nom, first, naming, steps, final, final_run, details, noise_std is None, started)
@@ -428,34 +429,41 @@ class _NominalError:
     y_scored: Array  # the nominal's scored validation output
     tests: ResidualTests  # of the validation residual
     p_black_box: float
-    p_input: float
+    p_input: float  # the black box of input features, or the prewhitened ccf with u or x
     p_modulation: float
     p_position: float
+    p_input_black_box: float  # the cross-validated black box of input features alone
 
 
 def _nominal_error(d: _Diagnosis) -> _NominalError:
     """The nominal model on validation and the black-box tests of its residual."""
-    w = d.warmup
-    r0 = d.scored_val(d.ynom_val)
-    mse0 = float(r0 @ r0) / d.n
-    sig_e, sig_v = d.signals(d.ynom_est, d.ynom_val)
-    r_in, r_bb = black_box_residuals(sig_e, sig_v)
-    p_input, p_black_box = paired_p(r0, r_in), paired_p(r0, r_bb)
     phi, _ = fit_ar(d.problem(()), d.nominal.theta)
-    ynom_v_scored = np.concatenate(d.ynom_val)[d.keep_val]
+    return _residual_evidence(d, d.ynom_est, d.ynom_val, phi)
+
+
+def _residual_evidence(d: _Diagnosis, outs_est: list[Array], outs_val: list[Array], phi: Array) -> _NominalError:
+    """A model's validation residual (the model simulated as ``outs_est`` / ``outs_val``) and
+    the black-box tests of it; ``phi`` prewhitens the modulation test."""
+    w = d.warmup
+    r0 = d.scored_val(outs_val)
+    mse0 = float(r0 @ r0) / d.n
+    sig_e, sig_v = d.signals(outs_est, outs_val)
+    r_in, r_bb = black_box_residuals(sig_e, sig_v)
+    p_input_bb, p_black_box = paired_p(r0, r_in), paired_p(r0, r_bb)
+    y_v_scored = np.concatenate(outs_val)[d.keep_val]
     x_e_s = np.concatenate([x[w:] for x in d.x_est])
-    ynom_e_s = np.concatenate([o[w:] for o in d.ynom_est])
-    r_e_s = np.concatenate([(y - o)[w:] for (_, y), o in zip(d.est, d.ynom_est)])
+    y_e_s = np.concatenate([o[w:] for o in outs_est])
+    r_e_s = np.concatenate([(y - o)[w:] for (_, y), o in zip(d.est, outs_est)])
     x_v_s = np.concatenate([x[w:] for x in d.x_val])
-    p_modulation = modulation_p(r0, ynom_v_scored, phi)
+    p_modulation = modulation_p(r0, y_v_scored, phi)
     # the validation residual's own (prewhitened) cross-correlation with the input and with x:
     # a residual that depends on them is no noise, even where the black box fitted on an
     # estimation record of narrow excitation cannot follow it onto a richer validation record
     u_all, x_all = np.concatenate([u for u, _ in d.val]), np.concatenate(d.x_val)
     tests = residual_tests(r0, u_all[d.keep_val], x_all[d.keep_val])
-    p_input = min(p_input, tests["ccf_u"].p_adjusted, tests["ccf_x"].p_adjusted)
-    p_position = position_p(x_e_s, ynom_e_s, r_e_s, x_v_s, ynom_v_scored, r0)
-    return _NominalError(r0, mse0, sig_e, sig_v, r_bb, phi, ynom_v_scored, tests, p_black_box, p_input, p_modulation, p_position)
+    p_input = min(p_input_bb, tests["ccf_u"].p_adjusted, tests["ccf_x"].p_adjusted)
+    p_position = position_p(x_e_s, y_e_s, r_e_s, x_v_s, y_v_scored, r0)
+    return _NominalError(r0, mse0, sig_e, sig_v, r_bb, phi, y_v_scored, tests, p_black_box, p_input, p_modulation, p_position, p_input_bb)
 
 
 @dataclass
@@ -493,31 +501,54 @@ def _first_step(d: _Diagnosis, names: Sequence[str], nom: _NominalError, noise_s
 
 
 def _composition(
-    d: _Diagnosis, names: Sequence[str], nom: _NominalError, first: _FirstStep, compose: bool, max_effects: int, seed: int
-) -> tuple[list[CompositionStep], _Scored | None]:
-    """The effects named one after the other and the last model (None: nothing named)."""
-    best = first.verdict.best
-    if best not in first.scored:
-        return [], None
-    last = first.scored[best]
-    steps = [CompositionStep(best, first.gap_closed[best], math.sqrt(last.mse), float(last.p_value))]
-    if not compose or best in NOISE_MODELS:
-        return steps, last
+    d: _Diagnosis,
+    names: Sequence[str],
+    nom: _NominalError,
+    first: _FirstStep,
+    compose: bool,
+    max_effects: int,
+    seed: int,
+    grid: Lattice | None,
+) -> tuple[list[CompositionStep], _Scored | None, str]:
+    """The effects named one after the other, the last model (None: nothing named) and the
+    first effect named (or the first step's "none" / "unexplained"); colored noise is not
+    looked for where the measured outputs' lattice ``grid`` explains the residual's structure."""
+    verdict = first.verdict
+    best = verdict.best
+    provisional = best not in first.scored and compose and bool(verdict.provisional) and max_effects >= 2
+    if best not in first.scored and not provisional:
+        return [], None, best
+    last = first.scored[verdict.provisional if provisional else best]
+    steps = [CompositionStep(last.effect, first.gap_closed[last.effect], math.sqrt(last.mse), float(last.p_value))]
+    if not compose or last.effect in NOISE_MODELS:
+        return steps, last, best
     # continue from the augmented model
-    while len(steps) < max_effects:
-        nxt = _next_step(d, names, nom, first.floor, last, seed)
+    while len(steps) < max_effects and last.effect not in NOISE_MODELS:
+        nxt = _next_step(d, names, nom, first.floor, last, seed, grid)
         if nxt is None:
             break
-        last, step = nxt
-        steps.append(step)
-    return steps, last
+        last, added = nxt
+        steps.extend(added)
+    if len(steps) < max_effects and last.effect not in NOISE_MODELS:  # the colored noise the composed model's residual holds
+        noise = _noise_step(d, nom, last, first.floor, seed, grid)
+        if noise is not None:
+            last = noise[0]
+            steps.append(noise[1])
+    if not provisional:
+        return steps, last, best
+    # a provisional first effect stands with colored noise after it, or where the effects
+    # together close half of the nominal model's gap
+    together = gap_share(nom.mse, last.mse, first.gap)
+    if last.effect in NOISE_MODELS or together >= CLOSE_ENOUGH:
+        return steps, last, steps[0].effect
+    return [], None, best
 
 
 def _next_step(
-    d: _Diagnosis, names: Sequence[str], nom: _NominalError, floor: float, last: _Scored, seed: int
-) -> tuple[_Scored, CompositionStep] | None:
-    """The remaining candidates refitted on top of the last model, and the one the rule names
-    (None: no further one)."""
+    d: _Diagnosis, names: Sequence[str], nom: _NominalError, floor: float, last: _Scored, seed: int, grid: Lattice | None
+) -> tuple[_Scored, list[CompositionStep]] | None:
+    """The remaining candidates refitted on top of the last model, and the step(s) the rule
+    names (None: no further one; a provisional effect comes with its colored noise)."""
     final = last.model
     left = [e for e in names if e not in final.effects and e not in NOT_COMPOSED]
     if not left:
@@ -530,20 +561,51 @@ def _next_step(
     lvl = ALPHA / (len(more) + 1)
     sc = [_as_score(s, last.mse, gap_step, nom.y_scored, nom.phi, lvl, 1.0) for s in more.values()]
     nxt = decide(sc, Evidence(lvl, gap_step, floor, 1.0, 1.0, 1.0, 1.0, False))
-    if nxt.best not in more:
+    closed = {s.effect: s.gap_closed for s in sc}
+    if nxt.best in more:
+        chosen = more[nxt.best]
+        return chosen, [CompositionStep(nxt.best, closed[nxt.best], math.sqrt(chosen.mse), float(chosen.p_value))]
+    if nxt.best == "none" or not nxt.provisional:
         return None
-    chosen = more[nxt.best]
-    closed = next(s.gap_closed for s in sc if s.effect == nxt.best)
-    return chosen, CompositionStep(nxt.best, closed, math.sqrt(chosen.mse), float(chosen.p_value))
+    cand = more[nxt.provisional]
+    noise = _noise_step(d, nom, cand, floor, seed, grid)
+    if noise is None:
+        return None
+    return noise[0], [CompositionStep(cand.effect, closed[cand.effect], math.sqrt(cand.mse), float(cand.p_value)), noise[1]]
 
 
-def _lattice_check(d: _Diagnosis, names: Sequence[str], steps: list[CompositionStep], mse0: float) -> tuple[Lattice | None, float]:
-    """The quantiser after the noise: the measured values' lattice (None without one, or without
-    quantization among the candidates) and its rounding variance over the final model's
+def _noise_step(
+    d: _Diagnosis, nom: _NominalError, base: _Scored, floor: float, seed: int, grid: Lattice | None
+) -> tuple[_Scored, CompositionStep] | None:
+    """colored_noise on top of ``base`` if the rule names it on ``base``'s residual
+    (:func:`noise_named`), else None; never where the measured outputs' lattice ``grid``
+    rounds off a material share of that residual (a rounding error is correlated where the
+    output moves slowly: the quantiser explains it, see :func:`name_effects`)."""
+    if "colored_noise" in base.model.effects or (grid is not None and grid.q**2 / 12.0 >= LATTICE_MATERIAL * base.mse):
+        return None
+    noise = _refit_all(d, base.model, ["colored_noise"], base.residual, seed).get("colored_noise")
+    if noise is None:
+        return None
+    level = ALPHA / 2  # the noise model and the black box
+    if not noise.p_value < level:
+        return None
+    ev = _residual_evidence(d, d.est_run(base.model), base.run.outputs, nom.phi)
+    gap = max(base.mse - floor, 0.0)
+    score = _as_score(noise, base.mse, gap, ev.y_scored, nom.phi, level, 1.0)
+    # the input dependence judged by the cross-validated black box alone: the composed model's
+    # parameters, refitted on records with colored noise, carry an estimation error that the
+    # prewhitened ccf finds though no model of the input predicts it on validation
+    if noise_named(score, Evidence(level, gap, floor, ev.p_black_box, ev.p_input_black_box, ev.p_modulation, ev.p_position, False)):
+        return None
+    return noise, CompositionStep(noise.effect, 0.0, math.sqrt(noise.mse), float(noise.p_value))
+
+
+def _lattice_share(grid: Lattice | None, steps: list[CompositionStep], mse0: float) -> float:
+    """The quantiser after the noise: the measured values' lattice's rounding variance (``grid``;
+    None without one, or without quantization among the candidates) over the final model's
     validation MSE."""
-    grid = lattice(np.concatenate([y for _, y in (*d.est, *d.val)])) if "quantization" in names else None
     model_mse = (steps[-1].validation_rmse ** 2) if steps else mse0
-    return grid, grid.q**2 / 12.0 / model_mse if grid is not None and model_mse > 0 else 0.0
+    return grid.q**2 / 12.0 / model_mse if grid is not None and model_mse > 0 else 0.0
 
 
 def _named_model(d: _Diagnosis, last: _Scored | None, naming: Naming, grid: Lattice | None) -> tuple[AugmentedModel | None, _Run | None]:

@@ -417,7 +417,9 @@ class DiagnosisReport:
         quantiser = f"; then quantization: {lattice}" if "quantization" in self.effects[1:] and lattice else ""
         if len(self.steps) > 1:
             parts = [
-                f"{st.effect} closes {_pct(st.gap_closed).strip()} of the {'gap' if i == 0 else 'rest'} (p = {_p(st.p_value)})"
+                f"{st.effect} predicts the rest one step ahead (a noise model: the free run is unchanged; p = {_p(st.p_value)})"
+                if st.effect == "colored_noise"
+                else f"{st.effect} closes {_pct(st.gap_closed).strip()} of the {'gap' if i == 0 else 'rest'} (p = {_p(st.p_value)})"
                 for i, st in enumerate(self.steps)
             ]
             return (

@@ -19,7 +19,16 @@ remaining gap (the step's MSE above the noise floor) it closes. The family-wise 
   ``MATERIAL`` of the gap, its noise model predicts the residual significantly better one step
   ahead, and the residual is neither explained by the input (a cross-validated black box of input
   features, or its prewhitened cross-correlation with the input or x), nor modulated by the model's output, nor a function of the drive's position;
-- else "unexplained".
+- else "unexplained"; where a significant deterministic candidate closes ``MATERIAL`` of the gap
+  (not half), the one of lowest BIC is the step's ``provisional`` effect: the diagnosis names it
+  with colored_noise when its own residual is colored noise (:func:`noise_named`: the noise rule
+  on that residual), since the gap then holds the predictable part of colored noise, which no
+  free run closes.
+
+:func:`noise_named`, after the composition's deterministic effects (and on a provisional
+effect): colored_noise is added when its noise model predicts the model's residual
+significantly better one step ahead and that residual depends neither on the input, nor on the
+output's modulation, nor on the drive's position.
 
 :func:`name_effects`, once the composition has named its effects: quantization is added where the
 measured outputs lie on a lattice whose rounding variance q^2 / 12 is at least ``LATTICE_MATERIAL``
@@ -35,7 +44,7 @@ from dataclasses import dataclass, field
 
 __all__ = [
     "ALPHA", "CLOSE_ENOUGH", "LATTICE_MATERIAL", "MATERIAL", "MATERIAL_GAP", "Evidence", "Naming", "Score", "Verdict", "decide",
-    "gap_share", "name_effects",
+    "gap_share", "name_effects", "noise_named",
 ]  # fmt: skip
 
 ALPHA = 0.01  # family-wise significance level of "the validation error improved"
@@ -120,11 +129,17 @@ class Verdict:
         Candidates that close half the gap yet were not named, and why.
     ruled_out : tuple of str
         Why colored_noise was not named (first step).
+    provisional : str
+        Where the answer is "unexplained": the significant deterministic candidate of lowest
+        BIC among those closing ``MATERIAL`` of the gap (empty: none). It is named with
+        colored_noise if its own residual is colored noise (:func:`noise_named`): the gap's
+        predictable part that no free run closes.
     """
 
     best: str
     not_named: dict[str, str] = field(default_factory=dict)
     ruled_out: tuple[str, ...] = ()
+    provisional: str = ""
 
 
 @dataclass(frozen=True)
@@ -214,7 +229,25 @@ def decide(scores: list[Score], ev: Evidence) -> Verdict:
             # no "closes half" here: a noise model predicts only the predictable part of colored
             # noise, its innovations are as unpredictable as white noise
             return Verdict(noise[0].effect, not_named)
-    return Verdict("unexplained", not_named, tuple(ruled_out))
+    material = [s.effect for s in deterministic if s.gap_closed >= MATERIAL]
+    return Verdict("unexplained", not_named, tuple(ruled_out), material[0] if material else "")
+
+
+def noise_named(noise: Score, ev: Evidence) -> tuple[str, ...]:
+    """Why colored_noise is not named on a model's residual after the first step (empty: it is
+    named): the first step's rule for colored noise, on that model's residual.
+
+    Examples
+    --------
+    >>> from backlashid.diagnosis._verdict import Evidence, Score, noise_named
+    >>> noise = Score("colored_noise", 1.0, 1e-9, -10.0, 0.0, deterministic=False)
+    >>> noise_named(noise, Evidence(level=0.005, gap=1.0, floor=0.2, first_step=False))
+    ()
+    >>> noise_named(noise, Evidence(level=0.005, gap=1.0, floor=0.2, input_p=1e-6, first_step=False))
+    ('the residual depends on the input (p 1e-06)',)
+    """
+    significant = {noise.effect} if noise.p_value < ev.level else set()
+    return tuple(_noise_ruled_out(noise, [], significant, ev))
 
 
 def _leaving_no_modulation(closing: list[Score], level: float, not_named: dict[str, str]) -> list[Score]:
