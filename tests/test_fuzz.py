@@ -696,6 +696,72 @@ def test_found_by_fuzzing(call, error, match):
         call()
 
 
+# -- what the second fuzz campaign found (the first hour), one case each ---------------------------
+
+_U = np.random.default_rng(0).uniform(-1.5, 1.5, 1200)
+_Y = bid.example1().simulate(_U) + 0.01 * np.random.default_rng(1).standard_normal(1200)
+
+
+@pytest.mark.parametrize(
+    "call, error, match",
+    [
+        (lambda: bid.Tracker(bid.example1(), noise_std=1e200), bid.DataError, "noise_std = 1e"),  # was OverflowError
+        (lambda: bid.example1().simulate(_U, band=0.9999999999999999), bid.DataError, "normal quantile is infinite"),  # StatisticsError
+        (
+            lambda: bid.diagnose(bid.example1(), (_U[:600], _Y[:600]), (_U[600:], _Y[600:] * 1e150)),
+            bid.DataError,
+            r"validation\[1\] \(y\) reaches .* scale the record",
+        ),  # a ValueError from scipy
+        (
+            lambda: bid.diagnose(bid.example1(), (_U[:600], _Y[:600]), (_U[600:], _Y[600:] * 1e-310), candidates=["quantization"]),
+            bid.DataError,
+            "where its squares overflow or vanish",
+        ),  # OverflowError in the lattice
+        (lambda: bid.fit_wiener_hammerstein(_U, np.zeros_like(_U)), bid.DataError, "the output y is constant"),  # IndexError
+        (lambda: bid.closed_loop(bid.example1(), np.full(200, 1e160), kp=1.0), bid.DataError, "reference reaches 1e"),  # "reaches 0"
+        (
+            lambda: bid.model_from_json(bid.example1().to_json().replace('"m_left": [1.0', '"m_left": [false', 1)),
+            bid.ModelError,
+            "a boolean among them",
+        ),  # loaded as 0.0
+        (lambda: bid.LinearBlock([0.5, False]), bid.ModelError, "a boolean among them"),
+    ],
+)
+def test_found_by_the_second_fuzzing(call, error, match):
+    with pytest.raises(error, match=match):
+        call()
+
+
+def test_a_sampled_band_of_huge_outputs_has_a_finite_std():
+    fit = bid.fit_cascade(_U, _Y, 2, 2, 3)
+    prediction = fit.predict(_U[:100] * 1e100, method="sampling", draws=20, seed=0)
+    assert np.all(np.isfinite(prediction.std)) and prediction.std.max() > 1e250  # was inf
+
+
+def test_a_tracker_and_a_compensator_shared_by_threads_take_turns():
+    """pyo3 refused a second thread's call ("Already mutably borrowed") while the core updated."""
+    import threading
+
+    tracker, comp = bid.Tracker(bid.example1()), bid.Compensator(bid.example1())
+    errors: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            for _ in range(100):
+                tracker.update(_U[:50], _Y[:50])
+                _ = tracker.samples, tracker.theta
+                comp.run(_U[:50])
+        except BaseException as exc:  # any error of a thread is the finding
+            errors.append(exc)
+
+    threads = [threading.Thread(target=work) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == [] and tracker.samples == 4 * 100 * 50
+
+
 def test_short_sandwich_record_is_evaluated():
     """one_step_prediction on a record shorter than the output block's lags (was a numpy
     broadcast error)."""

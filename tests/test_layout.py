@@ -21,7 +21,7 @@ import pytest
 import backlashid
 
 PACKAGE = Path(backlashid.__file__).parent
-SHARED = {"_validation", "_json", "_optional", "_core", "_docstrings", "_numerics", "_files", "_version", "_measures", "errors"}
+SHARED = {"_validation", "_json", "_optional", "_core", "_docstrings", "_numerics", "_files", "_version", "_measures", "_threads", "errors"}
 ENTRY_POINTS = {"backlashid.__main__"}  # ``python -m backlashid`` runs app._cli's main, as the console script does
 
 TOP_LEVEL_ALL = [

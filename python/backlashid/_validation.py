@@ -58,6 +58,9 @@ def as_coefficients(values: Any, name: str, *, allow_empty: bool = False) -> lis
     no text, booleans or complex numbers)."""
     if isinstance(values, (str, bytes, dict)) or values is None:
         raise ModelError(f"{name} must be a list of real numbers, got {shown(values)}")
+    if isinstance(values, (list, tuple)) and any(isinstance(v, (bool, np.bool_)) for v in values):
+        # NumPy turns [0.5, False] into floats without a word (a model file's "false")
+        raise ModelError(f"{name} must be a list of real numbers, got {shown(values)} (a boolean among them)")
     try:
         raw = np.asarray(values)
     except _CONVERSION_ERRORS:
@@ -136,6 +139,30 @@ def check_noise_std(value: Any, name: str = "noise_std") -> float:
     """A noise standard deviation: a positive finite number (within 1e-100..1e100, so that its
     square, which divides the costs, is a normal float)."""
     return check_real(value, name, low=NOISE_RANGE[0], high=NOISE_RANGE[1])
+
+
+SIGNAL_RANGE = (1e-100, 1e100)  # a signal's largest size whose squares and sums of squares stay normal floats
+
+
+def check_scale(values: NDArray[np.float64], name: str) -> NDArray[np.float64]:
+    """A finite signal whose largest size lies within ``SIGNAL_RANGE`` (or is 0): its squares
+    and their sums over a record neither overflow nor vanish in the subnormals.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid._validation import check_scale
+    >>> check_scale(np.array([1e-3, 2.0]), "y").size
+    2
+    """
+    size = float(np.max(np.abs(values))) if values.size else 0.0
+    low, high = SIGNAL_RANGE
+    if size > high or 0.0 < size < low:
+        raise DataError(
+            f"{name} reaches {size:.3g} in size, outside {low:g}..{high:g}, where its squares overflow or vanish: "
+            "scale the record (e.g. to SI units or divide by its standard deviation)"
+        )
+    return values
 
 
 def check_seed(value: Any, name: str = "seed") -> int:

@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
 from .._optional import pyplot
-from .._validation import check_real, check_warmup, shown
+from .._validation import check_real, check_scale, check_warmup, shown
 from ..errors import DataError, ModelError
 from ..identify import rmse
 from ..models import CascadeModel, CascadeState, SandwichModel, SandwichState
@@ -183,7 +183,7 @@ def closed_loop(
     True
     """
     native, state = native_chain(plant, initial_state, "plant")
-    r = _reference(reference)
+    r = check_scale(_reference(reference), "reference")  # a loop's squared errors of a 1e160 reference overflow
     k_p, k_i, k_d = (check_real(v, name) for v, name in ((kp, "kp"), (ki, "ki"), (kd, "kd")))
     limits = _saturation(saturation)
     ff = _feedforward(compensator, r, initial_state)

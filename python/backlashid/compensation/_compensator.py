@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
+from .._threads import Serialised
 from .._validation import as_scalar, as_signal, shown
 from ..errors import DataError, ModelError
 from ..models import CascadeModel, CascadeState, GeneralBacklash, LinearBlock, SandwichModel, SandwichState
@@ -169,7 +170,7 @@ class Compensator:
         native, state = native_chain(model, initial_state)
         self._model = model
         self._threshold = _threshold(threshold)
-        self._native = _core.Compensator(native, state, self._threshold)
+        self._native = Serialised(_core.Compensator(native, state, self._threshold))  # shared across threads: one call at a time
 
     @property
     def model(self) -> Chain:

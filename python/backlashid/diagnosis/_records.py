@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import check_signals
+from .._validation import check_scale, check_signals
 from ..errors import DataError, ModelError
 from ..identify import Structure, normalise
 from ..models import CascadeModel, LinearBlock, SandwichModel
@@ -150,6 +150,8 @@ def records_of(arg: Any, name: str) -> list[tuple[Array, Array]]:
             raise DataError(hint)
         label = name if len(pairs) == 1 else f"{name}[{k}]"
         u, y = check_signals((f"{label}[0] (u)", pair[0]), (f"{label}[1] (y)", pair[1]))
+        check_scale(u, f"{label}[0] (u)")
+        check_scale(y, f"{label}[1] (y)")
         out.append((np.array(u, dtype=np.float64), np.array(y, dtype=np.float64)))
     return out
 

@@ -307,9 +307,12 @@ def check_level(band: Any) -> float:
     if isinstance(band, bool) or not is_real(band):
         raise DataError(message)
     try:  # an int beyond the float range (10**400) is out of (0, 1) too
-        return check_real(band, "band", low=0.0, high=1.0, low_open=True, high_open=True)
+        level = check_real(band, "band", low=0.0, high=1.0, low_open=True, high_open=True)
     except DataError:
         raise DataError(message) from None
+    if not 0.5 + level / 2 < 1.0:  # the band's quantile rounds to 1: an infinitely wide band
+        raise DataError(f"band = {level!r}: so close to 1 that its normal quantile is infinite in floating point; give at most 0.9999999999")
+    return level
 
 
 def model_layout(model: Any) -> list[str]:
@@ -488,4 +491,8 @@ def sample_band(
         )
     stack = np.vstack(sims)
     lower, upper = np.quantile(stack, [0.5 - level / 2, 0.5 + level / 2], axis=0)
-    return Prediction(output, lower, upper, stack.std(axis=0, ddof=1), level, "sampling", draws=draws, invalid_draws=invalid)
+    # the std of outputs near the float range in units of their largest size (their squares overflow)
+    size = np.max(np.abs(stack), axis=0)
+    size[size == 0.0] = 1.0
+    std = size * (stack / size).std(axis=0, ddof=1)
+    return Prediction(output, lower, upper, std, level, "sampling", draws=draws, invalid_draws=invalid)

@@ -9,7 +9,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
-from .._validation import as_signal, check_choice, check_flag, check_int, check_real
+from .._threads import Serialised
+from .._validation import as_signal, check_choice, check_flag, check_int, check_noise_std, check_real
 from ..errors import DataError, ModelError
 from ..identify import FitResult, Structure
 from ..models import CascadeModel
@@ -196,7 +197,7 @@ class Tracker:
             cov = np.diag((0.3 * scale) ** 2)
         cov = (np.asarray(cov, dtype=np.float64) + np.asarray(cov, dtype=np.float64).T) / 2
         if noise_std is not None:
-            sigma = check_real(noise_std, "noise_std", low=0.0, low_open=True)
+            sigma = check_noise_std(noise_std)
             count = _PRIOR_NOISE_COUNT
         elif fit_noise is not None and np.isfinite(fit_noise) and fit_noise > 0:
             sigma, count = fit_noise, _PRIOR_NOISE_COUNT
@@ -232,7 +233,7 @@ class Tracker:
             float(memory),
             det,
         )
-        self._native = self._build(self._args)
+        self._native = Serialised(self._build(self._args))  # shared across threads: one call at a time
 
     @staticmethod
     def _build(args: tuple[Any, ...]) -> Any:
@@ -385,7 +386,7 @@ def _restore(args: tuple[Any, ...], structure: Structure, state: list[float]) ->
     tracker._args = args
     tracker._structure = structure
     tracker._names = structure.names
-    tracker._native = Tracker._build(args)
+    tracker._native = Serialised(Tracker._build(args))
     tracker._native.load(list(state))
     return tracker
 
