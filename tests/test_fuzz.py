@@ -702,6 +702,10 @@ _U = np.random.default_rng(0).uniform(-1.5, 1.5, 1200)
 _Y = bid.example1().simulate(_U) + 0.01 * np.random.default_rng(1).standard_normal(1200)
 
 
+_FEEDTHROUGH = bid.CascadeModel(bid.LinearBlock([0.5, 0.3], [-0.5], feedthrough=True), bid.GeneralBacklash(0.1, 0.1, [1.0], [1.0]))
+_FEEDTHROUGH = bid.fit_cascade(_U, _FEEDTHROUGH.simulate(_U) + 0.01 * np.random.default_rng(2).standard_normal(_U.size), 1, 2, 1, feedthrough=True).model
+
+
 @pytest.mark.parametrize(
     "call, error, match",
     [
@@ -725,6 +729,8 @@ _Y = bid.example1().simulate(_U) + 0.01 * np.random.default_rng(1).standard_norm
             "a boolean among them",
         ),  # loaded as 0.0
         (lambda: bid.LinearBlock([0.5, False]), bid.ModelError, "a boolean among them"),
+        (lambda: _FEEDTHROUGH.simulate(np.zeros((3, 4)), band=0.9), bid.DataError, r"u has shape \(3, 4\)"),  # ValueError
+        (lambda: _FEEDTHROUGH.simulate(1.0, band=0.9), bid.DataError, r"u has shape \(\)"),  # ValueError
     ],
 )
 def test_found_by_the_second_fuzzing(call, error, match):

@@ -50,6 +50,27 @@ def _corrupt_member() -> bytes:  # a valid zip directory, a member whose compres
     return bytes(raw)
 
 
+def _mat_flipped(position: int, value: int, compressed: bool) -> bytes:  # one byte of a .mat file changed
+    buf = io.BytesIO()
+    savemat(buf, {"u": DATA.u, "y": DATA.noisy}, do_compression=compressed)
+    raw = bytearray(buf.getvalue())
+    raw[position] = value
+    return bytes(raw)
+
+
+def _npz_claiming(name: str, elements: int, **arrays) -> bytes:  # a member whose .npy header claims `elements`
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        for key, values in arrays.items():
+            member = io.BytesIO()
+            np.save(member, values)
+            z.writestr(f"{key}.npy", member.getvalue())
+        header = io.BytesIO()
+        np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (elements,)})
+        z.writestr(f"{name}.npy", np.lib.format.magic(1, 0) + header.getvalue() + b"\0" * 64)
+    return buf.getvalue()
+
+
 def _json(obj) -> bytes:
     return json.dumps(obj).encode()
 
@@ -79,9 +100,16 @@ BAD_DATA = {
     "garbage.mat": RNG.bytes(3000),
     "empty.mat": b"",
     "truncated.mat": _mat()[:300],
+    # the second fuzz campaign: scipy's reader crashed (segmentation fault) on a complex flag
+    # without an imaginary part, raised zlib.error on damaged compressed data
+    "complex_flag.mat": _mat_flipped(145, 0x08, compressed=False),
+    "damaged_deflate.mat": _mat_flipped(1807, 0xFF ^ _mat_flipped(0, 0, True)[1807], compressed=True),
+    "claims_1e12.npz": _npz_claiming("u", 10**12, y=DATA.noisy),  # was a 7.28 TiB allocation
 }
 
 BAD_MODELS = {
+    "digits5001.json": _replace(MODEL, '"format_version": 1', '"format_version": ' + "9" * 5001),
+    "format_newer.json": _replace(MODEL, '"format_version": 1', '"format_version": 2'),
     "nested_list.json": ("[" * 10_000 + "]" * 10_000).encode(),
     "nested_object.json": ('{"a":' * 10_000 + "1" + "}" * 10_000).encode(),
     "nested_in_model.json": ('{"model": ' + '{"a":' * 5_000 + "1" + "}" * 5_000 + "}").encode(),
@@ -179,3 +207,21 @@ def test_a_missing_file_ends_with_one_error_line(tmp_path, good):
     assert "no such file" in line and "BACKLASHID_DATA" in line
     line = assert_one_error_line(["simulate", tmp_path / "missing.json", data, "-i", "u", "--out", out], out)
     assert "no such model file" in line
+
+
+def test_only_the_members_asked_for_are_read(tmp_path, good):
+    """A damaged member that no option selects is never read (readers loaded every member: a 4 GiB
+    one nobody asked for peaked at 4.2 GB)."""
+    data = tmp_path / "extra.npz"
+    data.write_bytes(_npz_claiming("junk", 10**12, u=DATA.u, y=DATA.noisy))
+    out = tmp_path / "sim.csv"
+    r = CliRunner().invoke(main, ["simulate", str(good[1]), str(data), "-i", "u", "-o", "y", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert out.exists()
+
+
+def test_a_newer_model_file_says_how_to_read_it(tmp_path, good):
+    bad = tmp_path / "newer.json"
+    bad.write_bytes(BAD_MODELS["format_newer.json"])
+    line = assert_one_error_line(["simulate", bad, good[0], "-i", "u", "--out", tmp_path / "o.csv"], tmp_path / "o.csv")
+    assert "pip install -U backlashid" in line

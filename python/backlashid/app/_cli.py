@@ -7,6 +7,7 @@ identified) ends the command with one line ``Error: ...`` and exit code 1, not a
 
 from __future__ import annotations
 
+import contextlib
 import contextvars
 import functools
 import json
@@ -44,13 +45,30 @@ def main() -> None:
     """Identify and simulate systems with general backlash (Voros' cascade and sandwich models)."""
 
 
+_FIGURE_OPTIONS = ("plots", "plots_dir", "png")  # the commands' options that draw figures
+
+
+def _plain_text(drawing: bool) -> contextlib.AbstractContextManager[Any]:
+    """Figures drawn with text as written: column names and units from the user's files are no
+    mathtext ("$x" or "\\foo" would stop the drawing; the package's own labels use none)."""
+    if not drawing:
+        return contextlib.nullcontext()
+    from .._optional import pyplot
+
+    try:
+        plt = pyplot()
+    except BacklashIdError:  # no matplotlib: the command says so where it draws
+        return contextlib.nullcontext()
+    return plt.rc_context({"text.parse_math": False})
+
+
 def _clean_errors(command: F) -> F:
     """Expected failures become one line on stderr and exit code 1 (click.ClickException); a
     FitWarning becomes one "Warning: ..." line on stderr (other warnings as Python shows them)."""
 
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with warnings.catch_warnings(record=True) as caught:
+        with warnings.catch_warnings(record=True) as caught, _plain_text(any(kwargs.get(k) for k in _FIGURE_OPTIONS)):
             warnings.simplefilter("always", FitWarning)
             try:
                 return command(*args, **kwargs)
@@ -514,6 +532,8 @@ def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:
         payload = json.loads(path.read_bytes().decode("utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: not a JSON file ({exc}); give the file written by backlashid fit --json") from None
+    except ValueError:  # an integer of more digits than Python converts (4300)
+        raise DataError(f"{path}: not a backlashid model (it holds a number of over 4300 digits); give the file written by backlashid fit --json") from None
     except RecursionError:
         raise DataError(f"{path}: not a backlashid model (JSON nested too deeply); give the file written by backlashid fit --json") from None
     if not isinstance(payload, dict):

@@ -23,6 +23,7 @@ import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -142,9 +143,9 @@ def _read_signals(path: str | Path, names: Sequence[str]) -> dict[str, NDArray[n
     if suffix in (".csv", ".txt"):
         signals = _read_csv(path, names)
     elif suffix == ".npz":
-        signals = _read_arrays(path, _load_npz(path), names, "array")
+        signals = _read_arrays(path, _load_npz(path, names), names, "array")
     elif suffix == ".mat":
-        signals = _read_arrays(path, _load_mat(path), names, "variable")
+        signals = _read_arrays(path, _load_mat(path, names), names, "variable")
     else:
         raise DataError(f"{path}: unknown file type {suffix!r}; give a .csv, .npz or .mat file")
     lengths = {name: len(v) for name, v in signals.items()}
@@ -480,30 +481,103 @@ def _csv_column(path: Path, header: list[str], body: list[list[str]], selector: 
     return values
 
 
-def _load_npz(path: Path) -> dict[str, NDArray]:
+def _load_npz(path: Path, names: Sequence[str]) -> dict[str, NDArray]:
+    """The arrays ``names`` select of an .npz file (no other member is read), each checked
+    against its member's size before it is allocated."""
     with path.open("rb") as fh:
         if fh.read(4) != b"PK\x03\x04":
             raise DataError(f"{path}: not a readable .npz file (not a zip archive); save the arrays with numpy.savez")
+    wanted = {_selector(s)[0] for s in names}
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
+        with zipfile.ZipFile(path) as archive:
+            members = {m.filename[:-4]: m for m in archive.infolist() if m.filename.endswith(".npy")}
+            out = {}
+            for name in sorted(wanted & set(members)):
+                with archive.open(members[name]) as fh:
+                    out[name] = _npy_member(path, name, fh, members[name].file_size)
+            # the names of the others, for a message naming what the file holds
+            return {**dict.fromkeys(members), **out}
     except ValueError as exc:  # pickled objects, an unknown .npy format
         raise DataError(f"{path}: cannot read the arrays ({exc}); save plain numeric arrays with numpy.savez") from None
     except (OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as exc:  # a corrupt or truncated archive
         raise DataError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc}); save the arrays again with numpy.savez") from None
 
 
-def _load_mat(path: Path) -> dict[str, NDArray]:
-    from scipy.io import loadmat
-    from scipy.io.matlab import MatReadError
+def _npy_member(path: Path, name: str, fh: Any, member_size: int) -> NDArray:
+    """One .npy member, its header's size checked against the bytes the member holds."""
+    fmt = np.lib.format
+    version = fmt.read_magic(fh)
+    shape, fortran, dtype = fmt.read_array_header_1_0(fh) if version == (1, 0) else fmt.read_array_header_2_0(fh)
+    if dtype.hasobject:
+        raise DataError(f"{path}: array {name!r} holds Python objects; save plain numeric arrays with numpy.savez")
+    claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if claimed > member_size:
+        raise DataError(
+            f"{path}: array {name!r} claims shape {shape} ({claimed:,} bytes) but its member holds {member_size:,} bytes: "
+            "the file is damaged; save the arrays again with numpy.savez"
+        )
+    data = np.frombuffer(fh.read(claimed), dtype=dtype)
+    if data.nbytes != claimed:
+        raise DataError(f"{path}: array {name!r} is truncated; save the arrays again with numpy.savez")
+    return data.reshape(shape, order="F" if fortran else "C")
 
-    try:
-        data = loadmat(path, squeeze_me=False)
-    except NotImplementedError:
-        raise DataError(f"{path}: a MATLAB v7.3 (HDF5) file; save it with save(..., '-v7') or export a CSV") from None
-    except (ValueError, OSError, TypeError, MatReadError) as exc:
-        raise DataError(f"{path}: not a readable MATLAB .mat file ({exc})") from None
-    return {k: v for k, v in data.items() if not k.startswith("__")}
+
+# Read in a child process: scipy's MATLAB reader is not hardened against damaged files (a
+# complex flag without an imaginary part crashes it with a segmentation fault, scipy 1.17), and a
+# crash must cost the caller one error, not its process.
+_MAT_CHILD = r"""
+import json, sys
+import numpy as np
+from scipy.io import loadmat, whosmat
+path, out, limit, *wanted = sys.argv[1:]
+try:
+    listed = {n: (int(np.prod(shape, dtype=object)), cls) for n, shape, cls in whosmat(path)}
+    for n in wanted:
+        if n in listed and 8 * listed[n][0] > int(limit):
+            print(json.dumps({"error": f"variable {n!r} claims {listed[n][0]:,} elements, more than the file can hold: the file is damaged"}))
+            sys.exit(0)
+    present = [n for n in wanted if n in listed]
+    data = loadmat(path, squeeze_me=False, variable_names=present) if present else {}
+except NotImplementedError:
+    print(json.dumps({"v73": True})); sys.exit(0)
+except MemoryError:
+    print(json.dumps({"memory": True})); sys.exit(0)
+except Exception as exc:
+    print(json.dumps({"error": f"{type(exc).__name__}: {str(exc)[:120]}"})); sys.exit(0)
+arrays = {k: v for k, v in data.items() if not k.startswith("__") and isinstance(v, np.ndarray) and v.dtype.kind in "biuf"}
+np.savez(out, **arrays)
+print(json.dumps({"listed": {n: c for n, (_, c) in listed.items()}, "saved": sorted(arrays)}))
+"""
+
+
+def _load_mat(path: Path, names: Sequence[str]) -> dict[str, NDArray]:
+    """The variables ``names`` select of a MATLAB file (no other is read; each checked against
+    the file's size before it is read), read in a child process."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+
+    wanted = sorted({_selector(s)[0] for s in names})
+    limit = 1032 * path.stat().st_size + (1 << 20)  # deflate compresses at most 1032:1
+    with tempfile.TemporaryDirectory() as folder:
+        out = Path(folder) / "arrays.npz"
+        done = subprocess.run(
+            [sys.executable, "-c", _MAT_CHILD, str(path), str(out), str(limit), *wanted], capture_output=True, text=True, check=False
+        )
+        if done.returncode != 0:
+            how = f"crashed with signal {-done.returncode}" if done.returncode < 0 else f"ended with exit code {done.returncode}"
+            raise DataError(f"{path}: not a readable MATLAB .mat file (scipy's reader {how}: the file is damaged); save it again")
+        said = json.loads(done.stdout.strip().splitlines()[-1])
+        if said.get("v73"):
+            raise DataError(f"{path}: a MATLAB v7.3 (HDF5) file; save it with save(..., '-v7') or export a CSV")
+        if said.get("memory"):
+            raise MemoryError(f"{path}: not enough memory to read it")
+        if "error" in said:
+            raise DataError(f"{path}: not a readable MATLAB .mat file ({said['error']}); save it again")
+        arrays = _load_npz(out, said["saved"]) if said["saved"] else {}
+    # variables that are no numeric arrays (cells, structs, text) are named with their class
+    return {n: arrays.get(n) if arrays.get(n) is not None else np.empty(0, dtype=object) for n in said["listed"]}
 
 
 def _read_arrays(path: Path, arrays: dict[str, NDArray], names: Sequence[str], kind: str) -> dict[str, NDArray[np.float64]]:

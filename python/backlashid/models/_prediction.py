@@ -315,6 +315,14 @@ def check_level(band: Any) -> float:
     return level
 
 
+def _one_record(u: Any) -> NDArray[np.float64]:
+    """The input of a band: one 1-D record."""
+    arr = as_signal(u, "u")
+    if arr.ndim != 1:
+        raise DataError(f"u has shape {arr.shape}: pass a 1-D signal (one record)")
+    return arr
+
+
 def model_layout(model: Any) -> list[str]:
     """The names of a model's parameters in the fits' layout (the core's, ``Problem.layout``)."""
     if hasattr(model, "output_linear"):
@@ -360,7 +368,7 @@ def linear_band(model: Any, u: ArrayLike, level: Any, initial_state: Any, covari
     """The first-order band of ``model.simulate(u, band=level)`` (the shared code of
     ``simulate`` and ``FitResult.predict(method="linear")``)."""
     level = check_level(level)
-    u = as_signal(u, "u")
+    u = _one_record(u)
     cov = check_covariance(model, covariance)
     sandwich = hasattr(model, "output_linear")
     lin = model.input_linear if sandwich else model.linear
@@ -453,7 +461,7 @@ def sample_band(
         If fewer than ``draws`` of the ``10 * draws`` draws are valid models.
     """
     level = check_level(band)
-    u = as_signal(u, "u")
+    u = _one_record(u)
     draws = check_int(draws, "draws", 2, 1_000_000)
     cov = check_covariance(model, None)
     theta = np.asarray(theta, dtype=np.float64)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Union
 
+from .._version import __version__
 from .._validation import is_real
 from ..errors import DataError, ModelError
 from ._backlash import GeneralBacklash
@@ -87,7 +88,12 @@ def model_from_dict(data: dict[str, Any]) -> Model:
         raise ModelError(f"unknown key(s) {', '.join(extra)} in a {data['model']} model description: use a dict from to_dict()")
     version = data.get("format_version", FORMAT_VERSION)
     if not is_real(version) or version != FORMAT_VERSION:
-        raise ModelError(f"format_version = {version!r}: this version of backlashid reads format {FORMAT_VERSION}")
+        newer = is_real(version) and version > FORMAT_VERSION
+        way_out = (
+            "it was written by a newer backlashid: upgrade (pip install -U backlashid) to read it"
+            if newer else "give a file written by backlashid's to_json() or fit --json"
+        )  # fmt: skip
+        raise ModelError(f"format_version = {version!r}: this version of backlashid ({__version__}) reads format {FORMAT_VERSION}; {way_out}")
     parts = {key: _block(data, key, kind) for key, kind in blocks.items()}
     # the fit's covariance (optional, a later addition: files without it read as before)
     covariance = ParameterCovariance.from_dict(data["covariance"]) if data.get("covariance") is not None else None
