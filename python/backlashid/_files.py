@@ -5,7 +5,9 @@ file or none, never a truncated one."""
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import re
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,13 +16,19 @@ from typing import IO, Any
 
 def _temporary(path: Path) -> tuple[int, Path]:
     """Create a new file beside ``path`` (same folder, so the rename stays on one file system)
-    with the permissions a plain ``open(path, "w")`` would give; return its descriptor and path."""
+    with the permissions a plain ``open(path, "w")`` would give; return its descriptor and path.
+
+    Its name holds the writer's process id: the temporary files of ``path`` that a killed
+    writer left (SIGKILL, a power cut: no handler runs) are removed here, the next time."""
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a folder: give a file name inside it", str(path))
+    _remove_orphans(path)
     try:
         kept: int | None = path.stat().st_mode & 0o7777  # replacing a file keeps its permissions
     except OSError:
         kept = None
     while True:
-        tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp")
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # the umask applies, as for open()
         except FileExistsError:  # pragma: no cover - a name collision of 48 random bits
@@ -28,6 +36,30 @@ def _temporary(path: Path) -> tuple[int, Path]:
         if kept is not None:
             os.chmod(tmp, kept)
         return fd, tmp
+
+
+def _remove_orphans(path: Path) -> None:
+    """Remove the temporary files of ``path`` whose writing process no longer runs."""
+    pattern = re.compile(rf"\.{re.escape(path.name)}\.(\d+)\.[0-9a-f]{{12}}\.tmp\Z")
+    with contextlib.suppress(OSError):
+        for sibling in path.parent.iterdir():
+            found = pattern.match(sibling.name)
+            if found and not _running(int(found.group(1))):
+                with contextlib.suppress(OSError):
+                    sibling.unlink()
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists (on this machine)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):  # exists but another user's, or no way to tell: keep its file
+        return True
+    return True
 
 
 @contextlib.contextmanager

@@ -122,3 +122,42 @@ def test_save_figure_writes_the_format_of_the_extension_atomically(tmp_path, mon
         save_figure(fig, tmp_path / "a.png")
     assert calls == [{"format": "png"}] and (tmp_path / "a.png").stat().st_size > 100  # the old figure
     assert leftovers(tmp_path) == []
+
+
+def test_a_killed_writers_temporary_file_is_removed_by_the_next_write(tmp_path):
+    """SIGKILL runs no handler: ``simulate --out`` killed mid-write left its partial temporary
+    file behind; the next write of that file removes it (its writer no longer runs)."""
+    import subprocess
+    import sys
+
+    target = tmp_path / "sim.csv"
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        alive = tmp_path / f".sim.csv.{child.pid}.0123456789ab.tmp"  # a writer still at work: kept
+        alive.write_text("partial")
+    finally:
+        child.kill()
+        child.wait()
+    dead = tmp_path / f".sim.csv.{child.pid}.0123456789ab.tmp"
+    assert dead.exists()
+    other = tmp_path / f".other.csv.{child.pid}.0123456789ab.tmp"  # another file's: not ours to remove
+    other.write_text("partial")
+    running = tmp_path / f".sim.csv.{os.getpid()}.ba9876543210.tmp"
+    running.write_text("partial")  # this process's own, still writing
+    write_text(target, "done")
+    assert target.read_text() == "done"
+    assert not dead.exists() and other.exists() and running.exists()
+
+
+def test_a_folder_as_the_target_is_named(tmp_path):
+    with pytest.raises(IsADirectoryError, match="is a folder") as info:
+        write_text(tmp_path, "x")
+    assert info.value.filename == str(tmp_path)
+    res = run("export", "--format", "json", "--out", tmp_path, _model(tmp_path))
+    assert res.exit_code == 1 and res.output.startswith(f"Error: {tmp_path}: is a folder") and ".tmp" not in res.output
+
+
+def _model(folder):
+    path = folder / "model.json"
+    path.write_text(bx.example1().to_json())
+    return path

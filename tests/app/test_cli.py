@@ -396,3 +396,18 @@ def test_fit_an_input_backlash_drive_that_starts_mid_motion(tmp_path):
     # load's lag still carries the start after the 20 skipped: measured 0.0137 against 0.0102)
     rest = bx.evaluate(api.model, u[2300:], w[2300:], warmup=20).simulation_rmse
     assert rest > 1.2 * payload["metrics"]["validation"]["simulation_rmse"]
+
+
+def test_absurd_orders_are_refused_in_one_line(csv_file):
+    """--na 40 --nb 40 --degree 15 ran 21 s and ended with exit 0 and a 3,000-character warning."""
+    for args in (["--na", "40"], ["--nb", "21"], ["--degree", "31"]):
+        r = run("fit", csv_file, "-i", "u", "-o", "y", *args)
+        assert r.exit_code == 2 and f"Invalid value for '{args[0]}'" in r.output
+
+
+def test_a_warning_names_at_most_six_uncertain_parameters():
+    from backlashid.identify._checks import uncertain_parameters
+
+    names = [f"a{k}" for k in range(1, 41)]
+    text = uncertain_parameters(names, np.full(40, 0.1), np.full(40, 1.0))
+    assert "a6 = 0.1 +- 1" in text and "a7" not in text and "and 34 more of 40" in text and len(text) < 400

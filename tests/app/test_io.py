@@ -145,14 +145,23 @@ def test_bad_files(tmp_path):
 
 @pytest.mark.parametrize(
     ("text", "n", "expected"),
-    [("10:20", 100, (10, 20)), (":5", 100, (0, 5)), ("-10:", 100, (90, 100)), ("50:1000", 100, (50, 100))],
+    [("10:20", 100, (10, 20)), (":5", 100, (0, 5)), ("-10:", 100, (90, 100)), ("50:100", 100, (50, 100)), ("-100:", 100, (0, 100))],
 )
 def test_parse_range(text, n, expected):
     s = parse_range(text, n, "--estimation")
     assert (s.start, s.stop) == expected
 
 
-@pytest.mark.parametrize(("text", "message"), [("10", "write a sample range as a:b"), ("a:b", "whole numbers"), ("20:10", "selects no samples")])
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("10", "write a sample range as a:b"),
+        ("a:b", "whole numbers"),
+        ("20:10", "selects no samples"),
+        ("50:1000", "1000 lies outside the record of 100 samples"),  # was clipped to 50:100 without a word
+        ("-101:", "-101 lies outside"),
+    ],
+)
 def test_parse_range_errors(text, message):
     with pytest.raises(DataError, match=message):
         parse_range(text, 100, "--validation")

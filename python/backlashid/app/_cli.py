@@ -39,6 +39,12 @@ METRIC_LABELS = {
 }
 
 
+# orders and degrees a backlash model of a machine can have: beyond them a fit runs for long and
+# determines nothing (--na 40 --nb 40 --degree 15 took 21 s to say so in a 3,000-character warning)
+ORDER = click.IntRange(0, 20)
+DEGREE = click.IntRange(1, 30)
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="backlashid")
 def main() -> None:
@@ -244,11 +250,11 @@ def _model_options(command: F) -> F:
                           "--metrics-warmup samples (at least 20) imply; rest: every record starts at rest (cascade, sandwich, "
                           "hammerstein)."),
         click.option("--feedthrough", is_flag=True, help="Give the linear blocks a direct (lag-0) term a_0 u(t) (and r_0 w(t))."),
-        click.option("--na", default=2, show_default=True, help="Input linear block: number of a (input) coefficients."),
-        click.option("--nb", default=2, show_default=True, help="Input linear block: number of b (feedback) coefficients."),
-        click.option("--nr", default=2, show_default=True, help="Sandwich output block: number of r coefficients (r1 = 1)."),
-        click.option("--ns", default=2, show_default=True, help="Sandwich output block: number of s coefficients."),
-        click.option("--degree", default=3, show_default=True, help="Polynomial degree of the backlash branches."),
+        click.option("--na", default=2, show_default=True, type=ORDER, help="Input linear block: number of a (input) coefficients."),
+        click.option("--nb", default=2, show_default=True, type=ORDER, help="Input linear block: number of b (feedback) coefficients."),
+        click.option("--nr", default=2, show_default=True, type=ORDER, help="Sandwich output block: number of r coefficients (r1 = 1)."),
+        click.option("--ns", default=2, show_default=True, type=ORDER, help="Sandwich output block: number of s coefficients."),
+        click.option("--degree", default=3, show_default=True, type=DEGREE, help="Polynomial degree of the backlash branches."),
         click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="Initial samples left out of the fit criterion (unknown initial state)."),
         click.option("--max-iter", default=50, show_default=True, type=click.IntRange(min=2), help="Iterations of the paper's algorithm before the refinement (cascade, sandwich)."),
         click.option("--coarse", type=click.IntRange(min=0), help="Samples of the coarse stage: iterations on the first ones, "
@@ -275,9 +281,9 @@ def _model_options(command: F) -> F:
               help="Start from this model (JSON from fit --json: its scaling, decimation and covariance are used).")
 @click.option("--fit-samples", default=5000, show_default=True, type=click.IntRange(min=100),
               help="Without --model: fit a cascade on this many first samples (--scale auto) and start from it.")
-@click.option("--na", default=2, show_default=True, help="Without --model: a coefficients of the start's fit.")
-@click.option("--nb", default=2, show_default=True, help="Without --model: b coefficients.")
-@click.option("--degree", default=3, show_default=True, help="Without --model: branch degree.")
+@click.option("--na", default=2, show_default=True, type=ORDER, help="Without --model: a coefficients of the start's fit.")
+@click.option("--nb", default=2, show_default=True, type=ORDER, help="Without --model: b coefficients.")
+@click.option("--degree", default=3, show_default=True, type=DEGREE, help="Without --model: branch degree.")
 @click.option("--forgetting", type=float, help="Forgetting factor lambda in (0, 1] [default 0.999: a window of about 1000 samples].")
 @click.option("--drift", type=float, help="Random-walk rate of every parameter (standard deviation of its change per sample).")
 @click.option("--method", type=click.Choice(["prediction_error", "regression"]), default="prediction_error", show_default=True,
@@ -691,9 +697,9 @@ def compensate(model_file: Path, reference_file: Path, column: str, range_: str 
 @click.option("--model-file", "--model", "model_file", type=click.Path(dir_okay=False, path_type=Path),
               help="Model JSON (from fit --json: a cascade, sandwich or input-backlash model); its scaling and decimation are used.")
 @click.option("--fit-cascade", is_flag=True, help="Fit a cascade on the estimation record instead of reading --model.")
-@click.option("--na", default=2, show_default=True, help="With --fit-cascade: a coefficients.")
-@click.option("--nb", default=2, show_default=True, help="With --fit-cascade: b coefficients.")
-@click.option("--degree", default=3, show_default=True, help="With --fit-cascade: branch degree.")
+@click.option("--na", default=2, show_default=True, type=ORDER, help="With --fit-cascade: a coefficients.")
+@click.option("--nb", default=2, show_default=True, type=ORDER, help="With --fit-cascade: b coefficients.")
+@click.option("--degree", default=3, show_default=True, type=DEGREE, help="With --fit-cascade: branch degree.")
 @click.option("--warmup", default=0, show_default=True, type=click.IntRange(min=0), help="With --fit-cascade: samples left out of the fit.")
 @click.option("--noise-std", type=float, help="Measurement noise std in output units if known [default: estimated].")
 @click.option("--initial-state", type=click.Choice(["estimate", "rest"]), default="estimate", show_default=True,

@@ -309,6 +309,9 @@ def parse_range(text: str, n: int, label: str) -> slice:
         stop = int(parts[1]) if parts[1].strip() else n
     except ValueError:
         raise DataError(f"{label} {text!r}: the bounds of a:b must be whole numbers") from None
+    for bound in (start, stop):
+        if not -n <= bound <= n:  # slicing would clip it silently
+            raise DataError(f"{label} {text!r}: {bound} lies outside the record of {n} samples; give bounds within -{n}..{n}")
     start, stop, _ = slice(start, stop).indices(n)
     if stop <= start:
         raise DataError(f"{label} {text!r} selects no samples of a record of {n}: give a < b within 0..{n}")

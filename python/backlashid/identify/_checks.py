@@ -66,14 +66,18 @@ def branch_problems(
     )
 
 
+SHOWN_PARAMETERS = 6  # parameters named in a warning, the others counted
+
+
 def uncertain_parameters(names: list[str], theta: NDArray[np.float64], standard_errors: NDArray[np.float64]) -> str | None:
     """The parameters whose standard error exceeds the magnitude of their estimate, in words,
     or None."""
     bad = [f"{n} = {t:.4g} +- {s:.2g}" for n, t, s in zip(names, theta, standard_errors) if s > abs(t)]
     if not bad:
         return None
+    shown = ", ".join(bad[:SHOWN_PARAMETERS]) + (f" and {len(bad) - SHOWN_PARAMETERS} more of {len(names)}" if len(bad) > SHOWN_PARAMETERS else "")
     return (
-        f"standard error larger than the estimate for {', '.join(bad)}: the data hardly determine "
+        f"standard error larger than the estimate for {shown}: the data hardly determine "
         f"{'this parameter' if len(bad) == 1 else 'these parameters'}; try a lower degree or lower orders, "
         "a longer record or a richer input"
     )

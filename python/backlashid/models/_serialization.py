@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any, Union
 
-from .._version import __version__
 from .._validation import is_real
+from .._version import __version__
 from ..errors import DataError, ModelError
 from ._backlash import GeneralBacklash
 from ._cascade import CascadeModel
