@@ -244,6 +244,19 @@ def identification_record(
         )
     if np.ptp(u_arr) == 0.0:
         raise constant_input("the input u is constant: the system is not excited; use a varying input")
+    steps = np.diff(u_arr)
+    if np.all(steps >= 0.0) or np.all(steps <= 0.0):
+        raise constant_input(
+            "the input u never changes direction (a time or sample-number column chosen as the input?): a backlash "
+            "shows only where its input reverses; choose the input signal, or a record in which it moves both ways"
+        )
+    if np.ptp(y_arr) == 0.0:
+        raise constant_input(
+            f"the output {y_name} is constant (0 % of its samples move): nothing of the system shows in it; a record at rest, "
+            f"or an input too small to move the load off the dead band: check the column chosen as {y_name}, or excite more"
+        )
+    if np.array_equal(u_arr, y_arr):
+        raise DataError(f"u and {y_name} are the same signal: choose the measured output as {y_name} (one column given twice?)")
     return u_arr, y_arr
 
 

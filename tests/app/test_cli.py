@@ -411,3 +411,21 @@ def test_a_warning_names_at_most_six_uncertain_parameters():
     names = [f"a{k}" for k in range(1, 41)]
     text = uncertain_parameters(names, np.full(40, 0.1), np.full(40, 1.0))
     assert "a6 = 0.1 +- 1" in text and "a7" not in text and "and 34 more of 40" in text and len(text) < 400
+
+
+@pytest.mark.parametrize(
+    "columns, message",
+    [
+        (["-i", "t", "-o", "y"], "never changes direction (a time or sample-number column chosen as the input?)"),
+        (["-i", "u", "-o", "u"], "u and y are the same signal"),  # one column as input and output
+        (["-i", "u", "-o", "rest"], "the output y is constant"),
+    ],
+)
+def test_a_wrong_column_is_named_in_one_line(tmp_path, example, columns, message):
+    """Were: "regressor is rank deficient: b2 is (nearly) a combination ..." and advice to lower
+    min_moving, which cannot help."""
+    path = tmp_path / "log.csv"
+    table = np.column_stack([np.arange(1500), example.u, example.noisy, np.full(1500, 0.25)])
+    np.savetxt(path, table, delimiter=",", header="t,u,y,rest", comments="", fmt="%.17g")
+    r = run("fit", path, *columns)
+    assert r.exit_code == 1 and message in r.output and "rank deficient" not in r.output, r.output

@@ -54,11 +54,28 @@ def test_quoted_cells_on_their_own_line_are_read(tmp_path):
     assert got["u[1]"].tolist() == [4.0, 9.0] and got["y, out"].tolist() == [5.0, 10.0] and got["0"].tolist() == [1.0, 6.0]
 
 
-def test_non_utf8_csv_names_the_byte_and_line(tmp_path):
+def test_a_latin1_csv_is_read_and_a_binary_file_named(tmp_path):
+    """Windows tools write Latin-1 (was refused as "not a UTF-8 text file", no way out)."""
     path = tmp_path / "latin1.csv"
-    path.write_bytes(b"u,y\n1,2\n3,4\n5,\xb56\n")
-    with pytest.raises(DataError, match=r"not a UTF-8 text file \(byte 14, line 4\)"):
+    path.write_bytes("u,y \u00b5m\n1,2\n3,4\n5,\u00b56\n".encode("latin-1"))
+    assert read_signals(path, ["u"])["u"].tolist() == [1.0, 3.0, 5.0]
+    with pytest.raises(DataError, match=r"column 'y \u00b5m' holds '\u00b56', not a number on line 4"):
+        read_signals(path, ["y \u00b5m"])
+    path.write_bytes(b"u,y\n1,2\n\x00\xff,3\n")
+    with pytest.raises(DataError, match=r"not a text file \(a NUL byte at byte 8, line 3\)"):
         read_signals(path, ["u"])
+
+
+def test_a_decimal_comma_csv_and_a_units_row_are_read(tmp_path):
+    path = tmp_path / "comma.csv"
+    path.write_text("u;y\n0,5;-1,25\n1;2,5\n")
+    assert read_signals(path, ["u", "y"])["y"].tolist() == [-1.25, 2.5]
+    path = tmp_path / "units.csv"
+    path.write_text("u,y\nV,mm\n1,2\n3,4\n")  # was: column 'u' holds 'V', not a number on line 2
+    assert read_signals(path, ["y"])["y"].tolist() == [2.0, 4.0]
+    path.write_text("u,y\nV,mm\n1,2\n3,x\n")
+    with pytest.raises(DataError, match="holds 'x', not a number on line 4"):
+        read_signals(path, ["y"])
 
 
 @pytest.fixture

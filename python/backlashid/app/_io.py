@@ -373,9 +373,12 @@ def _read_csv(path: Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]
     data = path.read_bytes()
     try:
         text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        raise DataError(f"{path}: not a UTF-8 text file (byte {exc.start}, line {line}); give a CSV with one column per signal") from None
+    except UnicodeDecodeError:
+        if b"\0" in data:  # no text encoding writes NUL bytes into a CSV
+            at = data.index(b"\0")
+            line = data.count(b"\n", 0, at) + 1
+            raise DataError(f"{path}: not a text file (a NUL byte at byte {at}, line {line}); give a CSV with one column per signal") from None
+        text = data.decode("latin-1")  # Windows tools write Latin-1 / cp1252 (a "µm" in a header); digits read the same
     first_line = text.lstrip().split("\n", 1)[0]
     delimiter = next((d for d in ",;\t" if d in first_line), None)
     lines = text.splitlines()
@@ -397,12 +400,25 @@ def _read_csv(path: Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]
     for k in range(1, len(header)):  # a blank header continues the one before (a merged cell)
         header[k] = header[k] or header[k - 1]
     body = rows[1:] if has_header else rows
+    first_line = 1 if has_header else 0
+    if has_header and len(body) > 1 and _units_row(body[0], body[1]):  # a units row under the header: skipped
+        body, first_line = body[1:], 2
     if not body:
         raise DataError(f"{path}: a header but no data rows")
     columns = {}
     for name in names:
-        columns[name] = _csv_column(path, header, body, name, 1 if has_header else 0, blank)
+        columns[name] = _csv_column(path, header, body, name, first_line, blank)
     return columns
+
+
+def _units_row(row: list[str], after: list[str]) -> bool:
+    """Whether ``row``, the first under the header, names units ("V", "mm"): no cell of it is a
+    number (a decimal comma counted as one) and the row after it holds numbers."""
+    cells = [c.strip() for c in row if c.strip()]
+    numbers = [c.strip() for c in after if c.strip()]
+    return bool(cells) and not any(_is_number(c) or _is_number(c.replace(",", ".")) for c in cells) and any(
+        _is_number(c) or _is_number(c.replace(",", ".")) for c in numbers
+    )
 
 
 def _csv_rows(path: Path, lines: list[str], delimiter: str) -> tuple[list[list[str]], list[int]]:
@@ -468,7 +484,11 @@ def _csv_column(path: Path, header: list[str], body: list[list[str]], selector: 
     try:
         return np.fromiter(map(float, cells), dtype=np.float64, count=len(cells))
     except ValueError:
-        pass  # find the cell and its line
+        pass  # a decimal comma ("0,27", with ";" or tabs between the columns), else find the cell and its line
+    try:
+        return np.fromiter((float(c.replace(",", ".")) for c in cells), dtype=np.float64, count=len(cells))
+    except ValueError:
+        pass
     values = np.empty(len(body))
     for i, row in enumerate(body):
         cell = row[position].strip() if position < len(row) else ""
