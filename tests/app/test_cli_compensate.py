@@ -105,3 +105,21 @@ def test_refusals_end_with_one_error_line(tmp_path: Path, reference_file: Path) 
     assert not (tmp_path / "u.csv").exists()
     negative = run("compensate", model_file, reference_file, "--threshold", "-1", "--out", tmp_path / "u.csv")
     assert negative.exit_code == 2 and "--threshold" in negative.output
+
+
+def test_a_reference_beyond_the_fits_outputs_is_warned(tmp_path: Path, reference_file: Path) -> None:
+    """A reference 18x beyond the data was compensated without a word; the fit file now keeps the
+    outputs its records visited."""
+    data = bx.example_data(bx.example1(), 1500, snr=25, seed=0)
+    log = tmp_path / "log.csv"
+    np.savetxt(log, np.column_stack([data.u, data.noisy]), delimiter=",", header="u,y", comments="", fmt="%.17g")
+    fit_file = tmp_path / "fit.json"
+    assert run("fit", log, "-i", "u", "-o", "y", "--json", fit_file).exit_code == 0
+    low, high = json.loads(fit_file.read_text())["data"]["output_range"]
+    assert (low, high) == (float(data.noisy.min()), float(data.noisy.max()))
+    inside = tmp_path / "inside.csv"
+    np.savetxt(inside, 0.5 * (low + high) + 0.4 * (high - low) * np.sin(np.arange(600) / 30.0), header="position", comments="")
+    res = run("compensate", fit_file, inside, "-r", "position", "--out", tmp_path / "u.csv")
+    assert res.exit_code == 0 and "Warning" not in res.output, res.output
+    res = run("compensate", fit_file, reference_file, "-r", "position", "--out", tmp_path / "u.csv")  # 28..32, far above
+    assert res.exit_code == 0 and "Warning: the reference spans" in res.output and "extrapolates the model" in res.output

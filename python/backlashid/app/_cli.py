@@ -526,6 +526,23 @@ def _band_in_measured_units(model: Any, scaling: Any, u: Any) -> tuple[Any, Any,
     return lower, upper, f"95 % prediction band (parameter uncertainty), median half-width {half:.2g}"
 
 
+def _warn_beyond_fit(reference: Any, visited: Any) -> None:
+    """A "Warning:" line when the reference leaves the outputs the fit's records visited by more
+    than a tenth of their span: the compensator then extrapolates the model (branches, blocks)."""
+    if not (isinstance(visited, list) and len(visited) == 2 and all(isinstance(v, (int, float)) for v in visited)):
+        return  # a plain model file, or one written before the range was kept
+    lo, hi = float(visited[0]), float(visited[1])
+    span = hi - lo
+    r_lo, r_hi = float(np.min(reference)), float(np.max(reference))
+    if span > 0 and (r_lo < lo - 0.1 * span or r_hi > hi + 0.1 * span):
+        times = max(hi - r_lo, r_hi - lo) / span
+        click.echo(
+            f"Warning: the reference spans {r_lo:.6g} to {r_hi:.6g}, {times:.3g} times the span of the outputs the fit's records "
+            f"visited ({lo:.6g} to {hi:.6g}): the compensator extrapolates the model there; fit on records that reach that range",
+            err=True,
+        )
+
+
 def _read_model_file(path: Path) -> tuple[Any, Any, dict[str, Any]]:
     """(model, scaling, data description) from a fit JSON (``backlashid fit --json``) or a
     plain model JSON (``model.to_json()``)."""
@@ -671,6 +688,7 @@ def compensate(model_file: Path, reference_file: Path, column: str, range_: str 
                + ("; a linear block is non-minimum phase: its inverse is the stable approximation" if compensator.approximate else ""))
     click.echo(f"tracking RMSE of the model's simulated output after the first {d} samples: {rmse:.6g} (simulation on the model)")
     click.echo(f"input range {columns['u'].min():.6g} to {columns['u'].max():.6g}")
+    _warn_beyond_fit(record.u, described.get("output_range"))
     click.echo(f"wrote {out}")
     if png is not None:
         from .._optional import pyplot

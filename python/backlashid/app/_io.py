@@ -842,6 +842,8 @@ def select_records(
         "validation": val.source if val is not None else None,
         "validation_samples": len(val) if val is not None else 0,
         "decimate": decimate_by,
+        # the outputs the records visited: a compensator's reference beyond them extrapolates the model
+        "output_range": [float(min(r.y.min() for r in (est, val) if r is not None)), float(max(r.y.max() for r in (est, val) if r is not None))],
     }
     return Selection(est, val, description, tuple(parts), tuple(files.validation_parts))
 
