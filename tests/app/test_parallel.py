@@ -341,3 +341,97 @@ def test_small_work_runs_in_process_and_large_on_the_cluster(records, expected, 
         fit_many(records[:2], scheduler="cluster")
     with pytest.raises(DataError, match="inline"):
         fit_many(records[:2], scheduler="inline", n_workers=2)
+
+
+# -- timeouts and a lost scheduler (the first hour's fleet findings) ------------------------------
+
+
+class Hangs:
+    """An input whose conversion never ends on a worker (as a record that hangs a fit would)."""
+
+    def __init__(self):
+        self.parent = os.getpid()
+
+    def __len__(self):
+        return 400
+
+    def __array__(self, *args, **kwargs):
+        if os.getpid() != self.parent:
+            import time
+
+            time.sleep(600)
+        raise AssertionError("converted in the calling process, not on a worker")
+
+
+HUNG_SLOT = 3
+
+
+def test_a_record_past_its_timeout_gets_an_error_and_the_others_their_results(records, expected):
+    """One hanging record hung fit_many for ever; with timeout= its slot says so, its worker is
+    restarted, and every other record's result comes back, bit for bit."""
+    import time
+
+    datasets = list(records[:12])
+    datasets[HUNG_SLOT] = (Hangs(), records[HUNG_SLOT][1])
+    started = time.monotonic()
+    results = fit_many(datasets, n_workers=2, progress=False, timeout=5.0, **OPTIONS)
+    assert time.monotonic() - started < 120
+    for i, (got, want) in enumerate(zip(results, expected[:12])):
+        if i == HUNG_SLOT:
+            assert isinstance(got, BacklashIdError) and f"record {HUNG_SLOT}: no result within timeout = 5 s" in str(got)
+        else:
+            assert_same(got, want)
+
+
+def test_timeout_is_checked_and_needs_worker_processes(records):
+    with pytest.raises(DataError, match="timeout"):
+        fit_many(records[:2], timeout=-1.0, **OPTIONS)
+    with pytest.raises(DataError, match="scheduler='inline'"):
+        fit_many(records[:2], timeout=5.0, scheduler="inline", **OPTIONS)
+
+
+def test_a_lost_scheduler_ends_the_fleet_with_an_error_per_record_left(records, monkeypatch, tmp_path):
+    """A scheduler that dies left fit_many neither returning nor raising."""
+    import subprocess
+    import threading
+    import time
+
+    monkeypatch.setattr(parallel, "_LOST_AFTER", 3.0)
+    scheduler = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--port", "0", "--no-dashboard", "--scheduler-file", "sched.json"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path,
+    )  # fmt: skip
+    worker = None
+    try:
+        address = _wait_for_address(tmp_path / "sched.json")
+        worker = subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-dashboard"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join([os.path.dirname(__file__), os.environ.get("PYTHONPATH", "")])},
+        )  # fmt: skip
+        datasets = list(records[:6])
+        datasets[1] = (Hangs(), records[1][1])
+        threading.Timer(8.0, scheduler.kill).start()
+        started = time.monotonic()
+        results = fit_many(datasets, address=address, progress=False, **OPTIONS)
+        assert time.monotonic() - started < 90
+        assert any(isinstance(r, BacklashIdError) and "the Dask scheduler was lost" in str(r) for r in results)
+    finally:
+        for process in (scheduler, worker):
+            if process is not None:
+                process.kill()
+                process.wait()
+
+
+def _wait_for_address(path):
+    import json
+    import time
+
+    for _ in range(300):
+        if path.exists():
+            try:
+                return json.loads(path.read_text())["address"]
+            except (ValueError, KeyError):
+                pass
+        time.sleep(0.1)
+    raise AssertionError("the scheduler did not start")

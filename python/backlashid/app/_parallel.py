@@ -22,17 +22,19 @@ Needs the ``dask`` extra: ``pip install 'backlashid[dask]'``.
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import logging
 import os
 import pickle
+import time
 import uuid
 from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
 from typing import Any, Callable, Literal
 
 from .._docstrings import fill
-from .._validation import check_choice
+from .._validation import check_choice, check_real
 from ..errors import BacklashIdError, DataError
 from ..identify import FitResult, fit_cascade, fit_sandwich
 
@@ -54,7 +56,16 @@ scheduler : {"auto", "dask", "inline"}, default "auto"
     ``"dask"`` on Dask as above; ``"auto"`` on Dask when ``client``, ``address`` or
     ``n_workers`` is given, else in this process when the machine has one core or the work is
     too small to pay for starting a cluster (fewer than 300,000 samples in all for fits,
-    30,000 for diagnoses; starting the embedded cluster costs about 7 s), else on Dask."""
+    30,000 for diagnoses; starting the embedded cluster costs about 7 s), else on Dask.
+    In this process, a record that ends the Python process (a segmentation fault in a
+    library, the out-of-memory killer) ends the caller with every result; on Dask only its
+    worker dies and the record gets an error in its slot.
+timeout : float, optional
+    Seconds a record may take: a record without a result by then gets a
+    :class:`~backlashid.BacklashIdError` in its slot, and the worker process running it is
+    restarted (a hung record stops there, the others go on). Runs on Dask, each record its
+    own task, as many at a time as the workers have threads (not with ``scheduler="inline"``:
+    a computation in this process cannot be stopped)."""
 _INSTALL = "pip install 'backlashid[dask]'"
 _TASKS_PER_THREAD = 8  # records are grouped into at most this many tasks per worker thread
 
@@ -172,6 +183,7 @@ def fit_many(
     n_workers: int | None = None,
     progress: bool = True,
     scheduler: Where = "auto",
+    timeout: float | None = None,
     **fit_options: Any,
 ) -> list[FitResult | Exception]:
     """Identify every record of ``datasets`` on Dask distributed; results in input order.
@@ -225,13 +237,14 @@ def fit_many(
     if fit is None:
         raise DataError(f"kind = {kind!r}: use 'cascade' (fit_cascade) or 'sandwich' (fit_sandwich)")
     _check_options(fit_options, fit.__name__, [fit], ("u", "y", "w"))
-    _check_where(client, address, n_workers, scheduler)
-    return _run_all(datasets, _record, kind, fit_options, client, address, n_workers, progress, scheduler)
+    timeout = _check_where(client, address, n_workers, scheduler, timeout)
+    return _run_all(datasets, _record, kind, fit_options, client, address, n_workers, progress, scheduler, timeout)
 
 
 def _run_all(
     items: Sequence[Any], parse: Callable[[Any, int], Any], job: str, options: dict[str, Any],
     client: Any, address: str | None, n_workers: int | None, progress: bool, scheduler: str = "auto",
+    timeout: float | None = None,
 ) -> list[Any]:
     """Parse every item (a malformed one gets its DataError in its slot) and run ``job`` on
     the others: in this process when ``scheduler`` says so (or, for "auto", when the work is
@@ -247,13 +260,21 @@ def _run_all(
             results[i] = exc
     if not todo:
         return results
-    if _inline(scheduler, job, todo, client, address, n_workers):
+    if timeout is None and _inline(scheduler, job, todo, client, address, n_workers):
         _run_inline(todo, job, options, progress, results)
         return results
     distributed = _distributed()
     with ExitStack() as stack:
         client = _client(stack, distributed, client, address, n_workers, len(todo))
-        _run(distributed, client, todo, job, options, progress, results)
+        try:
+            if timeout is None:
+                _run(distributed, client, todo, job, options, progress, results)
+            else:
+                _run_timed(distributed, client, todo, job, options, progress, results, timeout)
+        except _SchedulerLost as lost:
+            for i, _ in todo:
+                if results[i] is None:
+                    results[i] = BacklashIdError(f"record {i}: {lost}; the records that came back before keep their results")
     return results
 
 
@@ -304,8 +325,13 @@ def _run_inline(todo: list[tuple[int, Any]], job: str, options: dict[str, Any], 
             bar.close()
 
 
-def _check_where(client: Any, address: str | None, n_workers: int | None, scheduler: Any) -> None:
+def _check_where(client: Any, address: str | None, n_workers: int | None, scheduler: Any, timeout: Any = None) -> float | None:
+    """Check where the work runs; return the per-record ``timeout`` (None: none)."""
     check_choice(scheduler, "scheduler", ("auto", "dask", "inline"))
+    if timeout is not None:
+        timeout = check_real(timeout, "timeout", low=0.0, low_open=True)
+        if scheduler == "inline":
+            raise DataError("timeout= stops a record's worker process: it runs on Dask; leave out scheduler='inline' (or the timeout)")
     if scheduler == "inline" and (client is not None or address is not None or n_workers is not None):
         raise DataError("scheduler='inline' runs in this process: leave out client=, address= and n_workers=")
     if client is not None and address is not None:
@@ -315,6 +341,7 @@ def _check_where(client: Any, address: str | None, n_workers: int | None, schedu
             raise DataError("n_workers sizes the embedded cluster: leave it out with client= or address=")
         if not isinstance(n_workers, int) or isinstance(n_workers, bool) or n_workers < 1:
             raise DataError(f"n_workers = {n_workers!r}: give a whole number >= 1")
+    return timeout
 
 
 def _client(stack: ExitStack, distributed: Any, client: Any, address: str | None, n_workers: int | None, n_items: int) -> Any:
@@ -360,6 +387,7 @@ def diagnose_many(
     n_workers: int | None = None,
     progress: bool = True,
     scheduler: Where = "auto",
+    timeout: float | None = None,
     **options: Any,
 ) -> list[Any]:
     """Diagnose every case on Dask distributed, as :func:`fit_many` fits.
@@ -400,8 +428,8 @@ def diagnose_many(
     from ..diagnosis import diagnose
 
     _check_options(options, "diagnose", [diagnose], ("model", "estimation", "validation"))
-    _check_where(client, address, n_workers, scheduler)
-    return _run_all(cases, _case, "diagnose", options, client, address, n_workers, progress, scheduler)
+    timeout = _check_where(client, address, n_workers, scheduler, timeout)
+    return _run_all(cases, _case, "diagnose", options, client, address, n_workers, progress, scheduler, timeout)
 
 
 def _tracked(start: Any) -> Callable[[Any, int], tuple[Any, Any, Any]]:
@@ -435,6 +463,7 @@ def track_many(
     n_workers: int | None = None,
     progress: bool = True,
     scheduler: Where = "auto",
+    timeout: float | None = None,
     **track_options: Any,
 ) -> list[Any]:
     """Track every record's parameters on Dask distributed, as :func:`fit_many` fits.
@@ -481,8 +510,8 @@ def track_many(
     from ..tracking import Tracker, track
 
     _check_options(track_options, "track", [track, Tracker], ("u", "y", "model_or_structure"))
-    _check_where(client, address, n_workers, scheduler)
-    return _run_all(datasets, _tracked(start), "track", track_options, client, address, n_workers, progress, scheduler)
+    timeout = _check_where(client, address, n_workers, scheduler, timeout)
+    return _run_all(datasets, _tracked(start), "track", track_options, client, address, n_workers, progress, scheduler, timeout)
 
 
 def _run(
@@ -547,13 +576,16 @@ def _collect(
     distributed: Any, client: Any, futures: list[Any], batches: list[Any], results: list[Any], bar: Any, why: bool = False,
 ) -> list[Any]:
     """Wait for ``futures`` (one per batch), write each finished batch's outcomes into
-    ``results`` and return the batches that did not finish (with the reason when ``why``)."""
+    ``results`` and return the batches that did not finish (with the reason when ``why``).
+    Raises :class:`_SchedulerLost` when the client loses its scheduler for good."""
     slots = {future.key: batch for future, batch in zip(futures, batches)}
     remaining = set(slots)
     failed: list[Any] = []
+    watch = _Watch(client)
     try:
-        # Results are fetched in batches of what has finished (one round trip per batch).
-        for done in distributed.as_completed(futures, loop=client.loop).batches():
+        pending = list(futures)
+        while pending:
+            done, pending = _wait(pending, watch)
             finished = [f for f in done if f.status == "finished"]
             for future in done:
                 if future.status != "finished":  # erred (KilledWorker) or cancelled (data lost)
@@ -566,9 +598,123 @@ def _collect(
                 if bar is not None:
                     bar.update(len(payloads))
     finally:
-        if remaining:  # an interrupt: stop what is left
+        if remaining and client.status == "running":  # an interrupt: stop what is left
             client.cancel([f for f in futures if f.key in remaining])
     return failed
+
+
+_POLL = 0.25  # s between looks at the futures, the client's connection and the deadlines
+_LOST_AFTER = 30.0  # s without a connection to the scheduler before its records are given up
+
+
+class _SchedulerLost(BacklashIdError):
+    """The client lost its scheduler: the records without a result get this in their slots."""
+
+
+class _Watch:
+    """How long the client has been without its scheduler."""
+
+    def __init__(self, client: Any) -> None:
+        self.client = client
+        self.since: float | None = None
+
+    def check(self) -> None:
+        status = self.client.status
+        if status == "running":
+            self.since = None
+            return
+        now = time.monotonic()
+        self.since = self.since or now
+        if status in ("closed", "closing", "failed") or now - self.since > _LOST_AFTER:
+            raise _SchedulerLost(
+                f"the Dask scheduler was lost before its result came back (the client is {status!r} after "
+                f"{now - self.since:.0f} s); run it again"
+            )
+
+
+def _wait(pending: list[Any], watch: _Watch) -> tuple[list[Any], list[Any]]:
+    """The futures of ``pending`` done now, or after up to ``_POLL`` seconds, and those still
+    pending, after checking the client's connection (a lost scheduler would leave them pending
+    for ever). Polls ``Future.done`` (no default client needed: the fleet's client is not set
+    as the default)."""
+    deadline = time.monotonic() + _POLL
+    while True:
+        watch.check()
+        done = [f for f in pending if f.done()]
+        if done or time.monotonic() >= deadline:
+            return done, [f for f in pending if f not in done]
+        time.sleep(0.02)
+
+
+def _run_timed(
+    distributed: Any,
+    client: Any,
+    todo: list[tuple[int, Any]],
+    job: str,
+    options: dict[str, Any],
+    progress: bool,
+    results: list[Any],
+    timeout: float,
+) -> None:
+    """Each record its own task, at most as many running as the workers have threads (so a
+    task runs from the moment it is sent); one without a result after ``timeout`` seconds is
+    cancelled, its slot gets an error naming it, and its worker process is restarted (the only
+    way to stop a computation)."""
+    label = job if job in ("diagnose", "track") else f"fit_{job}"
+    client.wait_for_workers(1)
+    client.run(_warm)  # the imports are no record's time
+    threads = max(sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()), 1)
+    run = uuid.uuid4().hex[:8]
+    bar = _progress_bar(label, progress, len(todo))
+    queue = list(todo)
+    running: dict[Any, tuple[int, Any, float]] = {}  # future -> (index, record, deadline)
+    watch = _Watch(client)
+    try:
+        while queue or running:
+            while queue and len(running) < threads:
+                i, record = queue.pop(0)
+                future = client.submit(_batch, [record], job=job, options=options, pure=False, key=f"backlashid-{label}-timed-{i}-{run}")
+                running[future] = (i, record, time.monotonic() + timeout)
+            done, _ = _wait(list(running), watch)
+            for future in done:
+                i, _, _ = running.pop(future)
+                try:
+                    results[i] = future.result()[0]
+                except Exception as exc:  # its worker died: the record's error, as in _run
+                    results[i] = BacklashIdError(f"record {i}: its worker process died or its task was lost ({type(exc).__name__}: {exc})")
+                if bar is not None:
+                    bar.update(1)
+            now = time.monotonic()
+            for future in [f for f, (_, _, deadline) in running.items() if now > deadline]:
+                i, _, _ = running.pop(future)
+                _stop(client, future)
+                results[i] = BacklashIdError(
+                    f"record {i}: no result within timeout = {timeout:g} s; its worker process was restarted "
+                    "(run the record alone to see how long it takes)"
+                )
+                if bar is not None:
+                    bar.update(1)
+    finally:
+        if running and client.status == "running":
+            client.cancel(list(running))
+        if bar is not None:
+            bar.close()
+
+
+def _stop(client: Any, future: Any) -> None:
+    """Cancel ``future`` and restart the worker process that runs it (a running task cannot be
+    cancelled otherwise); a worker that cannot be restarted (no nanny) keeps running it."""
+    workers = [address for address, keys in client.processing().items() if future.key in keys]
+    client.cancel([future])
+    if workers:
+        with contextlib.suppress(Exception):
+            client.restart_workers(workers, raise_for_error=False)
+            client.run(_warm)
+
+
+def _warm() -> None:
+    """Run on every worker before timed records: the package's imports, once per process."""
+    from .. import diagnosis, identify, tracking  # noqa: F401 - imported for their cost
 
 
 def _gathered(client: Any, finished: list[Any], failed: list[Any], slots: dict[Any, Any], why: bool) -> list[tuple[Any, Any]]:
