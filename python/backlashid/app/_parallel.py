@@ -714,7 +714,10 @@ def _stop(client: Any, future: Any) -> None:
 
 def _warm() -> None:
     """Run on every worker before timed records: the package's imports, once per process."""
-    from .. import diagnosis, identify, tracking  # noqa: F401 - imported for their cost
+    import importlib
+
+    for module in ("backlashid.identify", "backlashid.diagnosis", "backlashid.tracking"):
+        importlib.import_module(module)
 
 
 def _gathered(client: Any, finished: list[Any], failed: list[Any], slots: dict[Any, Any], why: bool) -> list[tuple[Any, Any]]:
