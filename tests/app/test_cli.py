@@ -429,3 +429,13 @@ def test_a_wrong_column_is_named_in_one_line(tmp_path, example, columns, message
     np.savetxt(path, table, delimiter=",", header="t,u,y,rest", comments="", fmt="%.17g")
     r = run("fit", path, *columns)
     assert r.exit_code == 1 and message in r.output and "rank deficient" not in r.output, r.output
+
+
+def test_names_and_units_that_are_no_mathtext_are_drawn_as_written(tmp_path, example):
+    """A column named "$\\foo$" or a unit "$^" stopped the figures with matplotlib's
+    ParseFatalException; the log axes' own mathtext tick labels must still render."""
+    path = tmp_path / "log.csv"
+    np.savetxt(path, np.column_stack([example.u, example.noisy]), delimiter=",", header="$\\foo$,y", comments="", fmt="%.17g")
+    r = run("fit", path, "-i", "$\\foo$", "-o", "y", "--output-unit", "$^", "--plots", tmp_path / "figs")
+    assert r.exit_code == 0, r.output
+    assert {p.name for p in (tmp_path / "figs").iterdir()} >= {"simulation.png", "residuals.png", "characteristic.png"}

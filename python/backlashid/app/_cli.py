@@ -7,7 +7,6 @@ identified) ends the command with one line ``Error: ...`` and exit code 1, not a
 
 from __future__ import annotations
 
-import contextlib
 import contextvars
 import functools
 import json
@@ -51,21 +50,10 @@ def main() -> None:
     """Identify and simulate systems with general backlash (Voros' cascade and sandwich models)."""
 
 
-_FIGURE_OPTIONS = ("plots", "plots_dir", "png")  # the commands' options that draw figures
-
-
-def _plain_text(drawing: bool) -> contextlib.AbstractContextManager[Any]:
-    """Figures drawn with text as written: column names and units from the user's files are no
-    mathtext ("$x" or "\\foo" would stop the drawing; the package's own labels use none)."""
-    if not drawing:
-        return contextlib.nullcontext()
-    from .._optional import pyplot
-
-    try:
-        plt = pyplot()
-    except BacklashIdError:  # no matplotlib: the command says so where it draws
-        return contextlib.nullcontext()
-    return plt.rc_context({"text.parse_math": False})
+def _plain(text: Any) -> Any:
+    """A name or unit from the user's files as figure text: a "$" is shown, not read as the
+    start of mathtext ("$x" or "$\\foo$" stopped the drawing; the tick labels' own mathtext stays)."""
+    return text.replace("$", r"\$") if isinstance(text, str) else text
 
 
 def _clean_errors(command: F) -> F:
@@ -74,7 +62,7 @@ def _clean_errors(command: F) -> F:
 
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with warnings.catch_warnings(record=True) as caught, _plain_text(any(kwargs.get(k) for k in _FIGURE_OPTIONS)):
+        with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", FitWarning)
             try:
                 return command(*args, **kwargs)
@@ -459,6 +447,7 @@ def _dashboard_units(output: str, decimate_by: int) -> dict[str, Any]:
     """The diagnosis dashboard's ``output`` label and ``sample_time`` from the unit options."""
     units = _UNITS.get() or {}
     unit, dt = units.get("output_unit"), units.get("sample_time")
+    output, unit = _plain(output), _plain(unit)
     return {"output": f"{output} [{unit}]" if unit else output, "sample_time": None if dt is None else dt * decimate_by}
 
 
@@ -472,8 +461,8 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup:
     units = _UNITS.get() or {}
     factor = int(sel.description.get("decimate", 1))
     dt = 1.0 if units.get("sample_time") is None else units["sample_time"] * factor
-    output_name, input_name = str(sel.description["output"]), str(sel.description["input"])
-    output_unit = units.get("output_unit")
+    output_name, input_name = _plain(str(sel.description["output"])), _plain(str(sel.description["input"]))
+    output_unit = _plain(units.get("output_unit"))
     # with m_L1 = 1 (and r1 = 1) the backlash's x and y are in the output's units (model units when scaled)
     model_unit = "model units" if not scaling.is_identity else (f"{output_unit}, as {output_name}" if output_unit else f"units of {output_name}")
     u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
