@@ -123,3 +123,19 @@ def test_a_reference_beyond_the_fits_outputs_is_warned(tmp_path: Path, reference
     assert res.exit_code == 0 and "Warning" not in res.output, res.output
     res = run("compensate", fit_file, reference_file, "-r", "position", "--out", tmp_path / "u.csv")  # 28..32, far above
     assert res.exit_code == 0 and "Warning: the reference spans" in res.output and "extrapolates the model" in res.output
+
+
+def test_the_figure_is_in_the_records_units_and_time(tmp_path: Path, reference_file: Path, monkeypatch) -> None:
+    """Its axes said "units of the record" in samples: compensate had no unit or sample-time options."""
+    from backlashid.app import _cli
+
+    drawn = []
+    monkeypatch.setattr(_cli, "_save", lambda plt, fig, path: drawn.append(fig) or path)
+    model_file = tmp_path / "model.json"
+    model_file.write_text(bx.example1().to_json())
+    res = run("compensate", model_file, reference_file, "-r", "position", "--reference-offset", "-30", "--out", tmp_path / "u.csv",
+              "--png", tmp_path / "c.png", "--sample-time", "0.001", "--input-unit", "V", "--output-unit", "mm")
+    assert res.exit_code == 0, res.output
+    top, bottom = drawn[0].axes[:2]
+    assert (top.get_ylabel(), bottom.get_ylabel(), bottom.get_xlabel()) == ("output [mm]", "input [V]", "time [s]")
+    assert bottom.get_xlim()[1] == pytest.approx(0.6, rel=0.1)  # 600 samples of 1 ms

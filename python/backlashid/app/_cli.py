@@ -630,6 +630,7 @@ def simulate(model_file: Path, data: Path, input_: str, output: str | None, rang
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="CSV to write: reference, u (the input to apply) and y_model (the model's simulated output with it).")
 @click.option("--png", "png", type=click.Path(dir_okay=False, path_type=Path), help="Also draw the reference, the model's output and the input here.")
+@_unit_options
 @_clean_errors
 def compensate(model_file: Path, reference_file: Path, column: str, range_: str | None, offset: float, threshold: float, out: Path,
                png: Path | None) -> None:
@@ -684,13 +685,15 @@ def compensate(model_file: Path, reference_file: Path, column: str, range_: str 
 
         plt = pyplot()
         fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
-        t = np.arange(len(record))
+        units = _UNITS.get() or {}
+        out_unit, in_unit, dt = _plain(units.get("output_unit")), _plain(units.get("input_unit")), units.get("sample_time")
+        t = np.arange(len(record)) * (1.0 if dt is None else dt * factor)
         axes[0].plot(t, record.u, color="k", lw=1.2, label="reference")
         axes[0].plot(t, columns["y_model"], color="C0", lw=0.9, ls="--", label="model output with the compensator's input (simulation)")
-        axes[0].set_ylabel("output (units of the record)")
+        axes[0].set_ylabel(f"output [{out_unit}]" if out_unit else "output (the record's units: give --output-unit)")
         axes[1].plot(t, columns["u"], color="C1", lw=0.9, label="compensator's input u")
-        axes[1].set_ylabel("input (units of the record)")
-        axes[1].set_xlabel("sample" + (f" (decimated by {factor})" if factor > 1 else ""))
+        axes[1].set_ylabel(f"input [{in_unit}]" if in_unit else "input (the record's units: give --input-unit)")
+        axes[1].set_xlabel(("time [s]" if dt is not None else "sample") + (f" (decimated by {factor})" if factor > 1 else ""))
         for ax in axes:
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the axes, not on the data
