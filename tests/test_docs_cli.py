@@ -8,6 +8,7 @@ reader pasting them would), in a folder laid out as the workplace is: the reposi
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import subprocess
@@ -71,4 +72,45 @@ def test_every_command_of_docs_cli_runs_as_written_from_the_repository_root(tmp_
     missing = [name for name in OUTPUTS if not (root / name).is_file()]
     assert not missing, f"docs/cli.md's commands did not write {missing}"
     assert "Error:" not in run.stdout + run.stderr
+    printed = run.stdout.splitlines()
+    for line in printed_lines(DOC.read_text()):  # the page's quoted output is what the commands print
+        assert any(same_line(line, out) for out in printed), f"docs/cli.md quotes a line the commands no longer print:\n{line}"
     print(f"docs/cli.md: {len(bash_blocks(DOC.read_text()))} blocks ran in {elapsed:.1f} s")
+
+
+def printed_lines(text: str) -> list[str]:
+    """The lines of the ```text blocks marked as the commands' printed output."""
+    blocks = re.findall(r"^<!-- printed:[^\n]*-->\n```text\n(.*?)^```", text, flags=re.S | re.M)
+    return [line for block in blocks for line in block.splitlines() if line.strip()]
+
+
+def same_line(quoted: str, printed: str, rel: float = 0.15) -> bool:
+    """Whether a printed line says what the quoted one does: the same words, numbers within
+    ``rel`` (p-values and other numbers in e-notation within a factor of 100).
+
+    >>> same_line("closes 95 % (p = 2.0e-16)", "closes 93 % (p = 7.1e-17)")
+    True
+    >>> same_line("closes 95 % of the gap", "closes 60 % of the gap")
+    False
+    """
+    a, b = quoted.split(), printed.split()
+    if len(a) != len(b):
+        return False
+    for x, y in zip(a, b):
+        fx, fy = _number(x), _number(y)
+        if fx is None or fy is None:
+            if x != y:
+                return False
+        elif "e" in x.lower():
+            if (fx == 0) != (fy == 0) or (fx != 0 and abs(math.log10(abs(fx)) - math.log10(abs(fy))) > 2):
+                return False
+        elif abs(fx - fy) > rel * max(abs(fx), abs(fy), 1e-12):
+            return False
+    return True
+
+
+def _number(token: str) -> float | None:
+    try:
+        return float(token.strip("%,;()"))
+    except ValueError:
+        return None
