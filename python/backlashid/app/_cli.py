@@ -469,7 +469,7 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup:
     sim = result.model.simulate(u_m, internals=True)
     is_sandwich = isinstance(result.model, SandwichModel)
     ax = plot_characteristic(result.model.backlash, sim.x, sim.y if is_sandwich else y_m, unit=model_unit,
-                             title="Estimated branches over the estimation data")
+                             title="Estimated branches over the estimation data", warmup=result.warmup)
     if not is_sandwich:
         ax.collections[0].set_label("(simulated x(t), measured y(t))")
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize="small")
@@ -495,7 +495,7 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup:
                          band=_band_in_measured_units(result.model, scaling, record.u),
                          title=f"Measured and simulated output, {which} record")
     paths.append(_save(plt, ax.figure, out / "simulation.png"))
-    fig = plot_residuals((record.y - y_sim)[warmup_here:], record.u[warmup_here:], ylabel=output_name, unit=output_unit,
+    fig = plot_residuals((record.y - y_sim)[warmup_here:], record.u[warmup_here:], ylabel=output_name, unit=output_unit, warmup=warmup_here,
                          **time_unit, title=f"Residual diagnostics, free-run simulation error on the {which} record "
                                             f"(input {input_name}, after the {warmup_here}-sample warm-up)")
     paths.append(_save(plt, fig, out / "residuals.png"))
