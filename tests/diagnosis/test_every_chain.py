@@ -58,6 +58,11 @@ def test_rule_holds_a_material_candidate_provisionally_for_the_colored_noise_aft
     verdict = decide([material, noise, Score("friction", 0.9, 1e-4, -5.0, 0.1)], Evidence(1e-3, 1.0, 0.1))
     assert verdict.best == "unexplained" and verdict.provisional == "compliance"
     assert decide([Score("friction", 0.9, 1e-4, -5.0, 0.1), noise], Evidence(1e-3, 1.0, 0.1, input_p=1e-6)).provisional == ""
+    # one that closes half but a rule keeps from being named (its residual still modulated) is not
+    modulated = Evidence(1e-3, 1.0, 0.1, modulation_p=1e-9)
+    drift = Score("width_drift", 0.2, 1e-12, -80.0, 0.8, modulation_left_p=1e-6)
+    verdict = decide([drift, noise], modulated)
+    assert verdict.best == "unexplained" and "width_drift" in verdict.not_named and verdict.provisional == ""
     # on the provisional model's residual, the first step's noise rule
     later = Evidence(5e-3, 0.5, 0.1, first_step=False)
     assert noise_named(noise, later) == ()

@@ -229,7 +229,8 @@ def decide(scores: list[Score], ev: Evidence) -> Verdict:
             # no "closes half" here: a noise model predicts only the predictable part of colored
             # noise, its innovations are as unpredictable as white noise
             return Verdict(noise[0].effect, not_named)
-    material = [s.effect for s in deterministic if s.gap_closed >= MATERIAL]
+    # a candidate that closes half the gap yet a rule kept from being named is never provisional
+    material = [s.effect for s in deterministic if MATERIAL <= s.gap_closed < CLOSE_ENOUGH and s.effect not in not_named]
     return Verdict("unexplained", not_named, tuple(ruled_out), material[0] if material else "")
 
 
