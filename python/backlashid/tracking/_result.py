@@ -171,6 +171,7 @@ class TrackResult:
                 ax.plot(t, true[:, k], color="k", linestyle="--", linewidth=0.9, label="true")
             for alarm in self.alarms:
                 ax.axvline(alarm.sample, color="C3", linewidth=0.8, alpha=0.7)
+            ax.set_ylim(*_settled_limits(v, s, None if true is None else true[:, k]))
             ax.set_title(name, fontsize=10)
             ax.tick_params(labelsize=8)
             ax.locator_params(axis="x", nbins=5)
@@ -190,3 +191,33 @@ class TrackResult:
         if path is not None:
             fig.savefig(path, dpi=120)
         return fig
+
+
+SETTLING = 0.05  # the first share of the samples whose wide start does not set a panel's y range
+
+
+def _settled_limits(v: NDArray[np.float64], s: NDArray[np.float64], true: NDArray[np.float64] | None) -> tuple[float, float]:
+    """A panel's y limits: the estimate and its +-2 s.e. band after the first ``SETTLING`` of
+    the samples (the tracker's start, drawn but clipped), and the truth if given.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.tracking._result import _settled_limits
+    >>> v = np.r_[5.0, np.ones(99)]
+    >>> lo, hi = _settled_limits(v, np.full(100, 0.01), None)
+    >>> bool(lo < 0.98 and 1.02 < hi < 1.1)
+    True
+    """
+    start = int(SETTLING * v.size)
+    parts = [v[start:] - 2 * s[start:], v[start:] + 2 * s[start:]]
+    if true is not None:
+        parts.append(true)
+    values = np.concatenate(parts)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return (-1.0, 1.0)
+    lo, hi = float(values.min()), float(values.max())
+    pad = 0.08 * (hi - lo) if hi > lo else max(abs(hi), 1.0) * 0.05
+    return lo - pad, hi + pad
+
