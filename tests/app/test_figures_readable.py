@@ -251,3 +251,21 @@ def test_residual_time_axis_says_where_it_starts():
     assert fig.axes[0].lines[0].get_xdata()[0] == pytest.approx(0.5)
     fig = plot_residuals(e, u)
     assert fig.axes[0].get_xlabel() == "sample of the residual"
+
+
+def test_the_wiener_hammerstein_curve_is_one_line_without_branch_talk():
+    """The static curve was drawn as two tied branches, one hidden under the other, with a
+    legend about branches "not active"."""
+    import backlashid as bid
+
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal(3000)
+    x = np.zeros(3000)
+    for t in range(1, 3000):
+        x[t] = 0.7 * x[t - 1] + 0.3 * u[t - 1]
+    y = np.tanh(x) + 0.01 * rng.standard_normal(3000)
+    ax = bid.fit_wiener_hammerstein(u, y, nb=2, ns=2, degree=5).plot(u)
+    labels = [line.get_label() for line in ax.get_lines()]
+    assert labels == ["f(x)"]
+    assert not any("active" in t.get_text() for t in ax.get_legend().get_texts())
+    plt.close(ax.figure)

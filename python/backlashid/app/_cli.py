@@ -468,9 +468,12 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup:
     u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
     sim = result.model.simulate(u_m, internals=True)
     is_sandwich = isinstance(result.model, SandwichModel)
-    ax = plot_characteristic(result.model.backlash, sim.x, sim.y if is_sandwich else y_m, unit=model_unit,
-                             title="Estimated branches over the estimation data", warmup=result.warmup)
-    if not is_sandwich:
+    if not hasattr(result, "history"):  # the Wiener-Hammerstein fit: one static curve, no branches
+        ax = result.plot(u_m, title="Estimated static nonlinearity over the estimation data")
+    else:
+        ax = plot_characteristic(result.model.backlash, sim.x, sim.y if is_sandwich else y_m, unit=model_unit,
+                                 title="Estimated branches over the estimation data", warmup=result.warmup)
+    if not is_sandwich and hasattr(result, "history"):
         ax.collections[0].set_label("(simulated x(t), measured y(t))")
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize="small")
     paths = [_save(plt, ax.figure, out / "characteristic.png")]

@@ -448,8 +448,7 @@ class WienerHammersteinFit:
 
     @fill(axes=AXES)
     def plot(self, u: ArrayLike | None = None, *, ax: Any = None, title: str | None = None) -> Any:
-        """Plot the static nonlinearity f (the tied branches L = R);
-        :func:`backlashid.app.plot_characteristic`.
+        """Plot the static nonlinearity f (the tied branches L = R: one curve).
 
         Parameters
         ----------
@@ -458,13 +457,26 @@ class WienerHammersteinFit:
             [-1, 1], about the range of x on the estimation data.
         {axes}
         """
-        from ..plotting import plot_characteristic
+        from .._optional import pyplot
 
         title = title or f"Static nonlinearity f, degree {self.degree}"
+        if ax is None:
+            _, ax = pyplot().subplots(figsize=(6.4, 4.8))
+        f = self.model.backlash  # its two branches are one curve, L = R = f: no dead band, no "active" branch
         if u is None:
-            return plot_characteristic(self.model.backlash, x_range=(-1.0, 1.0), ax=ax, title=title)
-        sim = self.model.simulate(u, internals=True)
-        return plot_characteristic(self.model.backlash, sim.x, sim.y, ax=ax, title=title)
+            lo, hi = -1.0, 1.0
+        else:
+            sim = self.model.simulate(u, internals=True)
+            lo, hi = float(np.min(sim.x)), float(np.max(sim.x))
+            ax.scatter(sim.x, sim.y, s=2, color="0.6", alpha=0.5, zorder=1, label="(x(t), f(x(t))) on this input")
+        xs = np.linspace(lo, hi, 400)
+        ax.plot(xs, f.left(xs), color="C0", lw=2, zorder=2, label="f(x)")
+        ax.set_xlabel("x(t), output of G1")
+        ax.set_ylabel("f(x), input of G2")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best", fontsize="small")
+        return ax
 
 
 # -- the compiled problem and its parameter vector ------------------------------------------------
