@@ -16,8 +16,6 @@ names the file and says what to change.
 
 from __future__ import annotations
 
-import csv
-import re
 import zipfile
 import zlib
 from collections.abc import Sequence
@@ -29,6 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
+from ._csv import read_csv
+from ._csv import split_selector as _selector
 
 __all__ = [
     "Record",
@@ -42,7 +42,6 @@ __all__ = [
     "split_fraction",
 ]
 
-_SELECTOR = re.compile(r"^(?P<name>.*?)\[(?P<index>-?\d+)\]$")
 
 
 @dataclass(frozen=True)
@@ -141,7 +140,7 @@ def _read_signals(path: str | Path, names: Sequence[str]) -> dict[str, NDArray[n
         raise DataError(_missing(path))
     suffix = path.suffix.lower()
     if suffix in (".csv", ".txt"):
-        signals = _read_csv(path, names)
+        signals = read_csv(path, names)
     elif suffix == ".npz":
         signals = _read_arrays(path, _load_npz(path, names), names, "array")
     elif suffix == ".mat":
@@ -352,156 +351,6 @@ def split_fraction(fraction: float, n: int) -> tuple[slice, slice]:
 
 
 # -- file formats --------------------------------------------------------------------------------
-
-
-def _selector(text: str) -> tuple[str, int | None]:
-    m = _SELECTOR.match(text.strip())
-    if m:
-        return m.group("name"), int(m.group("index"))
-    return text.strip(), None
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def _read_csv(path: Path, names: Sequence[str]) -> dict[str, NDArray[np.float64]]:
-    data = path.read_bytes()
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        if b"\0" in data:  # no text encoding writes NUL bytes into a CSV
-            at = data.index(b"\0")
-            line = data.count(b"\n", 0, at) + 1
-            raise DataError(f"{path}: not a text file (a NUL byte at byte {at}, line {line}); give a CSV with one column per signal") from None
-        text = data.decode("latin-1")  # Windows tools write Latin-1 / cp1252 (a "µm" in a header); digits read the same
-    first_line = text.lstrip().split("\n", 1)[0]
-    delimiter = next((d for d in ",;\t" if d in first_line), None)
-    lines = text.splitlines()
-    if delimiter is None:  # whitespace-separated columns
-        rows, blank = [], []
-        for number, line in enumerate(lines, 1):
-            cells = line.split()
-            if cells:
-                rows.append(cells)
-            else:
-                blank.append(number)
-    else:
-        rows, blank = _csv_rows(path, lines, delimiter)
-    if not rows:
-        raise DataError(f"{path}: the file is empty")
-    first = [cell.strip() for cell in rows[0]]
-    has_header = not all(_is_number(c) for c in first if c)
-    header = first if has_header else []
-    for k in range(1, len(header)):  # a blank header continues the one before (a merged cell)
-        header[k] = header[k] or header[k - 1]
-    body = rows[1:] if has_header else rows
-    first_line = 1 if has_header else 0
-    if has_header and len(body) > 1 and _units_row(body[0], body[1]):  # a units row under the header: skipped
-        body, first_line = body[1:], 2
-    if not body:
-        raise DataError(f"{path}: a header but no data rows")
-    columns = {}
-    for name in names:
-        columns[name] = _csv_column(path, header, body, name, first_line, blank)
-    return columns
-
-
-def _units_row(row: list[str], after: list[str]) -> bool:
-    """Whether ``row``, the first under the header, names units ("V", "mm"): no cell of it is a
-    number (a decimal comma counted as one) and the row after it holds numbers."""
-    cells = [c.strip() for c in row if c.strip()]
-    numbers = [c.strip() for c in after if c.strip()]
-    return bool(cells) and not any(_is_number(c) or _is_number(c.replace(",", ".")) for c in cells) and any(
-        _is_number(c) or _is_number(c.replace(",", ".")) for c in numbers
-    )
-
-
-def _csv_rows(path: Path, lines: list[str], delimiter: str) -> tuple[list[list[str]], list[int]]:
-    """The non-blank rows of a delimited file and the numbers of its blank lines. A quoted
-    field must close on its own line: a stray quote is refused with the line it opened on,
-    whatever the file's length (the reader would otherwise swallow the rest of the file)."""
-    try:
-        rows = list(csv.reader(lines, delimiter=delimiter, strict=True))
-    except csv.Error:
-        rows = None
-    if rows is None or len(rows) != len(lines):  # one row per line, unless a quoted field ran on
-        _refuse_quoting(path, lines, delimiter)
-    kept = [row for row in rows if "".join(row).strip()]
-    blank = [] if len(kept) == len(rows) else [i for i, row in enumerate(rows, 1) if not "".join(row).strip()]
-    return kept, blank
-
-
-def _refuse_quoting(path: Path, lines: list[str], delimiter: str) -> None:
-    """Read again, row by row, to the first row that is not one line, and say where it starts.
-    A runaway quote ends at the reader's field size limit, so this stops early in a long file."""
-    reader = csv.reader(lines, delimiter=delimiter, strict=True)
-    start = 1  # the line the next row starts on
-    try:
-        for _ in reader:
-            if reader.line_num != start:
-                raise DataError(_open_quote(path, lines, start))
-            start = reader.line_num + 1
-    except csv.Error as exc:
-        if reader.line_num > start or str(exc).startswith("unexpected end of data"):
-            raise DataError(_open_quote(path, lines, start)) from None
-        raise DataError(f"{path}: line {start} is not valid CSV ({exc}); clean the file") from None
-    raise DataError(f"{path}: the file's quoting is not valid CSV; clean the file")  # pragma: no cover - the first pass failed
-
-
-def _open_quote(path: Path, lines: list[str], number: int) -> str:
-    line = lines[number - 1]
-    return (f"{path}: a quote opened on line {number} ({line[:40]!r}{'...' if len(line) > 40 else ''}) is not closed on that line; "
-            "remove the stray quote (a field of a signal file is one line)")
-
-
-def _csv_column(path: Path, header: list[str], body: list[list[str]], selector: str, first_line: int, blank: list[int]) -> NDArray[np.float64]:
-    name, index = _selector(selector)
-    if name.isdigit() and index is None and name not in header:
-        position = int(name)
-        width = max(len(r) for r in body)
-        if position >= width:
-            raise DataError(f"{path}: no column {position} (the file has {width}); count columns from 0")
-    else:
-        matches = [k for k, h in enumerate(header) if h == name]
-        if not header:
-            raise DataError(f"{path}: the file has no header; select columns by position (0, 1, ...)")
-        if not matches:
-            shown = ", ".join(repr(h) for h in dict.fromkeys(h for h in header if h))
-            raise DataError(f"{path}: no column {name!r}; the columns are {shown}")
-        k = 0 if index is None else index
-        if not -len(matches) <= k < len(matches):
-            raise DataError(f"{path}: {len(matches)} columns are named {name!r}; choose {name}[0] to {name}[{len(matches) - 1}]")
-        position = matches[k]
-    try:
-        cells = [row[position] for row in body]
-    except IndexError:  # short rows: their missing cells are empty
-        cells = [row[position] if position < len(row) else "" for row in body]
-    try:
-        return np.fromiter(map(float, cells), dtype=np.float64, count=len(cells))
-    except ValueError:
-        pass  # a decimal comma ("0,27", with ";" or tabs between the columns), else find the cell and its line
-    try:
-        return np.fromiter((float(c.replace(",", ".")) for c in cells), dtype=np.float64, count=len(cells))
-    except ValueError:
-        pass
-    values = np.empty(len(body))
-    for i, row in enumerate(body):
-        cell = row[position].strip() if position < len(row) else ""
-        try:
-            values[i] = float(cell)
-        except ValueError:
-            line = i + 1 + first_line
-            for b in blank:  # blank lines were skipped: count them back
-                if b <= line:
-                    line += 1
-            what = "is empty" if not cell else f"holds {cell[:30]!r}, not a number"
-            raise DataError(f"{path}: column {selector!r} {what} on line {line}; clean the file or select another column") from None
-    return values
 
 
 def _load_npz(path: Path, names: Sequence[str]) -> dict[str, NDArray]:
