@@ -132,7 +132,8 @@ class Compensator:
     :func:`compensate` as a stateful object: :meth:`step` takes the reference
     :attr:`delay` samples ahead and returns the input for now; :meth:`run` does it for a
     block of samples, and successive calls continue one record. It pickles with its state
-    (the model and the inverses' memories), to continue elsewhere.
+    (the model and the inverses' memories), to continue elsewhere. Threads may share one:
+    their calls take turns (one lock), each step seeing the state the previous one left.
 
     Parameters
     ----------

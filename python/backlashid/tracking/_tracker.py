@@ -100,6 +100,10 @@ class Tracker:
     very large (anti-windup, for stretches without excitation). The state is a fixed set of p x p numbers:
     memory does not grow with the record, and a pickled tracker continues with the same bits.
 
+    Threads may share one tracker: their updates and reads take turns (one lock), so each
+    update continues from the state the previous one left; interleaved blocks of one record
+    from two threads are still the caller's to order.
+
     A detector watches the dead-band width c_L + c_R: every ``spacing`` samples (by default
     3 / (1 - lambda): readings that share under 5 % of their data) it reads the tracked
     width and its standard error, and a two-sided CUSUM of the standardised deviations from
