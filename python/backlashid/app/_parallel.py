@@ -603,6 +603,7 @@ def _collect(
     return failed
 
 
+_WORKERS_WAIT = 120.0  # s a timed run waits for its first worker
 _POLL = 0.25  # s between looks at the futures, the client's connection and the deadlines
 _LOST_AFTER = 30.0  # s without a connection to the scheduler before its records are given up
 
@@ -661,7 +662,10 @@ def _run_timed(
     cancelled, its slot gets an error naming it, and its worker process is restarted (the only
     way to stop a computation)."""
     label = job if job in ("diagnose", "track") else f"fit_{job}"
-    client.wait_for_workers(1)
+    try:
+        client.wait_for_workers(1, timeout=_WORKERS_WAIT)
+    except TimeoutError:
+        raise BacklashIdError(f"no Dask worker joined the scheduler within {_WORKERS_WAIT:g} s: start workers, or give another client= or address=") from None
     client.run(_warm)  # the imports are no record's time
     threads = max(sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()), 1)
     run = uuid.uuid4().hex[:8]
