@@ -562,7 +562,9 @@ class DiagnosisReport:
             default 300), ``dpi`` (default 110), and the record's units: ``scaling`` (the
             :class:`~backlashid.identify.Scaling` of the records, so outputs and errors are
             drawn in measured units), ``output`` (axis label, e.g. ``"force [kip]"``),
-            ``sample_time`` (seconds per sample, so time is in seconds).
+            ``sample_time`` (seconds per sample, so time is in seconds), ``records`` (the
+            validation records' lengths, where each starts marked; found from the runs when
+            not given).
 
         Returns
         -------
