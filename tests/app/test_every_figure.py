@@ -88,6 +88,34 @@ def drawn(tmp_path_factory) -> dict[str, Figure]:
     return figures
 
 
+@pytest.fixture(scope="module")
+def api_drawn() -> dict[str, Figure]:
+    """Every figure the API draws itself (results with ``.plot()``), on Example 1 records,
+    a sandwich, a selection, a tracker, a closed loop and a Wiener-Hammerstein fit."""
+    import backlashid as bid
+
+    data, val = bid.example_data(bid.example1(), 3000, seed=1), bid.example_data(bid.example1(), 3000, seed=2)
+    fit = bid.fit_cascade(data.u, data.noisy, 2, 2, 3)
+    figures: dict[str, Figure] = {}
+
+    def keep(name: str, drawn) -> None:
+        figures[name] = drawn if isinstance(drawn, Figure) else drawn.figure
+
+    keep("FitResult.plot", fit.plot())
+    keep("Prediction.plot", fit.model.simulate(val.u, band=0.95).plot(measured=val.noisy))
+    metrics = bid.evaluate(fit.model, val.u, val.noisy, warmup=20)
+    keep("Metrics.plot", metrics.plot(val.noisy, fit.model.simulate(val.u)))
+    keep("DiagnosisReport.plot", bid.diagnose(fit.model, (data.u, data.noisy), (val.u, val.noisy), candidates=["dead_time", "output_offset"]).plot())
+    keep("TrackResult.plot", bid.track(val.u, val.noisy, fit, every=20).plot())
+    keep("ClosedLoop.plot", bid.closed_loop(fit.model, 0.8 * np.sin(2 * np.pi * np.arange(1500) / 500), kp=0.5, ki=0.05).plot())
+    selection = bid.select_structure(data.u, data.noisy, na=(1, 2), nb=(2,), degree=(1, 3))
+    keep("SelectionResult.plot", selection.plot())
+    keep("GeneralBacklash characteristic", bid.app.plot_characteristic(fit.model.backlash, x_range=(-2.0, 2.0)))
+    wh = bid.fit_wiener_hammerstein(data.u, np.tanh(data.noisy), nb=2, ns=2, degree=5)
+    keep("WienerHammersteinFit.plot", wh.plot(data.u))
+    return figures
+
+
 def collisions(fig: Figure) -> list[tuple[str, str]]:
     """Pairs of visible, non-empty texts whose drawn boxes overlap (by more than 2 px each way),
     tick labels of one axis among themselves excepted."""
@@ -129,6 +157,14 @@ def test_every_command_draws_its_figures(drawn):
 def test_no_two_labels_of_a_figure_collide(drawn):
     bad = {name: pairs for name, fig in drawn.items() if (pairs := collisions(fig))}
     assert not bad, f"colliding texts: {bad}"
+
+
+def test_the_apis_figures_are_readable_too(api_drawn):
+    """The figures of the results' own ``.plot()``: the same three checks."""
+    bad = {name: pairs for name, fig in api_drawn.items() if (pairs := collisions(fig))}
+    assert not bad, f"colliding texts: {bad}"
+    test_no_title_runs_over_two_lines(api_drawn)
+    test_the_data_fill_their_axes(api_drawn)
 
 
 def test_no_title_runs_over_two_lines(drawn):

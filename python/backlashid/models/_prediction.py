@@ -152,6 +152,9 @@ class ParameterCovariance:
         return cls(tuple(names), np.array(matrix, dtype=np.float64).reshape(len(matrix), -1) if matrix else np.zeros((0, 0)))
 
 
+WINDOW = 500  # samples a long prediction's figure is drawn over
+
+
 @dataclass(frozen=True)
 class Prediction:
     """A simulated output with its prediction band: where the noise-free output lies, given
@@ -258,16 +261,25 @@ class Prediction:
             If matplotlib is not installed.
         """
         if ax is None:
-            _fig, ax = pyplot().subplots(figsize=(9, 3.5), layout="constrained")
-        t = np.arange(self.output.size)
+            _fig, ax = pyplot().subplots(figsize=(10, 3.5), layout="constrained")
+        n = self.output.size
+        t = np.arange(n)
+        # a long record is drawn where the band is widest (WINDOW samples), so that the band and
+        # the measured output can be told from the simulation; the rest is the caller's to zoom to
+        shown = slice(0, n)
+        if n > 2 * WINDOW:
+            width = np.convolve(self.upper - self.lower, np.ones(WINDOW), mode="valid")
+            start = int(np.argmax(width))
+            shown = slice(start, start + WINDOW)
         if measured is not None:
-            ax.plot(t, as_signal(measured, "measured"), color="0.35", lw=0.6, label="measured output")
-        shade_band(ax, t, self)
-        ax.plot(t, self.output, color="C3", lw=0.9, label="simulated output")
+            ax.plot(t[shown], as_signal(measured, "measured")[shown], color="0.35", lw=0.8, label="measured output")
+        ax.fill_between(t[shown], self.lower[shown], self.upper[shown], color="C3", alpha=0.22, lw=0, label=self.describe())
+        ax.plot(t[shown], self.output[shown], color="C3", lw=0.9, label="simulated output")
         ax.set_xlabel("sample")
         ax.set_ylabel("output")
-        ax.set_title(title or f"Simulated output with its {self.describe()}")
-        ax.legend(loc="upper right", fontsize="small")
+        where = "" if shown.stop - shown.start == n else f"\nthe {WINDOW} of {n} samples where the band is widest"
+        ax.set_title((title or f"Simulated output with its {self.describe()}") + where)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")  # beside the data, not on it
         return ax.figure
 
     def describe(self) -> str:
