@@ -439,3 +439,23 @@ def test_names_and_units_that_are_no_mathtext_are_drawn_as_written(tmp_path, exa
     r = run("fit", path, "-i", "$\\foo$", "-o", "y", "--output-unit", "$^", "--plots", tmp_path / "figs")
     assert r.exit_code == 0, r.output
     assert {p.name for p in (tmp_path / "figs").iterdir()} >= {"simulation.png", "residuals.png", "characteristic.png"}
+
+
+def test_a_sandwichs_internal_signals_are_labelled_with_the_output_blocks_gain(tmp_path, monkeypatch):
+    """The backlash's x and y of a sandwich reach the output through G2 (r1 = 1): labelled "deg"
+    though G2's static gain scaled them."""
+    from backlashid.app import _cli
+
+    drawn = []
+    monkeypatch.setattr(_cli, "_save", lambda plt, fig, path: drawn.append(fig) or path)
+    truth = bx.SandwichModel(bx.LinearBlock([0.5], [-0.5]), bx.GeneralBacklash(0.1, 0.1, [1.0], [1.0]), bx.LinearBlock([1.0, 1.0], [-0.5]))
+    data = bx.example_data(truth, 3000, seed=3)
+    path = tmp_path / "sw.csv"
+    np.savetxt(path, np.column_stack([data.u, data.noisy]), delimiter=",", header="u,w", comments="", fmt="%.17g")
+    r = run("fit", path, "-i", "u", "-o", "w", "--model", "sandwich", "--nr", "2", "--ns", "1", "--degree", "1", "--plots", tmp_path / "figs",
+            "--output-unit", "deg", "--json", tmp_path / "sw.json")
+    assert r.exit_code == 0, r.output
+    fitted = bx.model_from_dict(json.loads((tmp_path / "sw.json").read_text())["model"])
+    gain = fitted.output_linear.static_gain()
+    label = drawn[0].axes[0].get_xlabel()
+    assert abs(gain - 1.0) > 0.05 and f"/ {gain:.3g}, G2's static gain" in label, label

@@ -465,6 +465,9 @@ def _fit_figures(out: Path, result: Any, scaling: Any, sel: Any, metrics_warmup:
     output_unit = _plain(units.get("output_unit"))
     # with m_L1 = 1 (and r1 = 1) the backlash's x and y are in the output's units (model units when scaled)
     model_unit = "model units" if not scaling.is_identity else (f"{output_unit}, as {output_name}" if output_unit else f"units of {output_name}")
+    if isinstance(result.model, SandwichModel):  # the backlash's y reaches the output through G2 (r1 = 1), not at unit gain
+        gain = float(result.model.output_linear.static_gain())  # inf at a pole at z = 1
+        model_unit = f"{model_unit} / {gain:.3g}, G2's static gain" if np.isfinite(gain) and abs(gain - 1.0) > 1e-3 else model_unit
     u_m, y_m = scaling.input_to_model(sel.estimation.u), scaling.output_to_model(sel.estimation.y)
     sim = result.model.simulate(u_m, internals=True)
     is_sandwich = isinstance(result.model, SandwichModel)
