@@ -524,7 +524,7 @@ def _composition(
         return steps, last, best
     # continue from the augmented model
     while len(steps) < max_effects and last.effect not in NOISE_MODELS:
-        nxt = _next_step(d, names, nom, first.floor, last, seed, grid)
+        nxt = _next_step(d, names, nom, first.floor, last, seed, grid, room=max_effects - len(steps))
         if nxt is None:
             break
         last, added = nxt
@@ -545,10 +545,11 @@ def _composition(
 
 
 def _next_step(
-    d: _Diagnosis, names: Sequence[str], nom: _NominalError, floor: float, last: _Scored, seed: int, grid: Lattice | None
+    d: _Diagnosis, names: Sequence[str], nom: _NominalError, floor: float, last: _Scored, seed: int, grid: Lattice | None, room: int
 ) -> tuple[_Scored, list[CompositionStep]] | None:
     """The remaining candidates refitted on top of the last model, and the step(s) the rule
-    names (None: no further one; a provisional effect comes with its colored noise)."""
+    names (None: no further one; a provisional effect comes with its colored noise, where
+    ``room`` leaves two more effects)."""
     final = last.model
     left = [e for e in names if e not in final.effects and e not in NOT_COMPOSED]
     if not left:
@@ -565,7 +566,7 @@ def _next_step(
     if nxt.best in more:
         chosen = more[nxt.best]
         return chosen, [CompositionStep(nxt.best, closed[nxt.best], math.sqrt(chosen.mse), float(chosen.p_value))]
-    if nxt.best == "none" or not nxt.provisional:
+    if nxt.best == "none" or not nxt.provisional or room < 2:
         return None
     cand = more[nxt.provisional]
     noise = _noise_step(d, nom, cand, floor, seed, grid)
