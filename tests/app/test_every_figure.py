@@ -22,7 +22,8 @@ matplotlib = pytest.importorskip("matplotlib")
 matplotlib.use("Agg")
 from matplotlib.collections import PolyCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.text import Text  # noqa: E402
+
+from figure_texts import collisions  # noqa: E402
 
 
 def _drive(path: Path) -> None:
@@ -116,38 +117,6 @@ def api_drawn() -> dict[str, Figure]:
     return figures
 
 
-def collisions(fig: Figure) -> list[tuple[str, str]]:
-    """Pairs of visible, non-empty texts whose drawn boxes overlap (by more than 2 px each way),
-    tick labels of one axis among themselves excepted."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    canvas = FigureCanvasAgg(fig)  # a saved and closed figure has lost its canvas
-    canvas.draw()
-    renderer = canvas.get_renderer()
-    owner: dict[int, object] = {}  # tick label -> its axis, for the ticks drawn (inside the view)
-    hidden: set[int] = set()  # tick labels of ticks outside the view: not drawn
-    for ax in fig.axes:
-        for axis in (ax.xaxis, ax.yaxis):
-            lo, hi = sorted(axis.get_view_interval())
-            for tick in [*axis.get_major_ticks(), *axis.get_minor_ticks()]:
-                for label in (tick.label1, tick.label2):
-                    drawn = lo - 1e-9 * (hi - lo) <= tick.get_loc() <= hi + 1e-9 * (hi - lo)
-                    (owner.__setitem__(id(label), axis) if drawn else hidden.add(id(label)))
-            owner[id(axis.get_offset_text())] = axis
-    texts = [t for t in fig.findobj(Text) if t.get_visible() and t.get_text().strip() and id(t) not in hidden]
-    boxes = [(t, t.get_window_extent(renderer)) for t in texts]
-    found = []
-    for i, (a, box_a) in enumerate(boxes):
-        for b, box_b in boxes[i + 1 :]:
-            if owner.get(id(a)) is not None and owner.get(id(a)) is owner.get(id(b)):
-                continue  # tick labels of one axis: matplotlib spaces them itself
-            width = min(box_a.x1, box_b.x1) - max(box_a.x0, box_b.x0)
-            height = min(box_a.y1, box_b.y1) - max(box_a.y0, box_b.y0)
-            if width > 2 and height > 2:
-                found.append((a.get_text()[:40], b.get_text()[:40]))
-    return found
-
-
 def test_every_command_draws_its_figures(drawn):
     names = {name.split(":")[0] for name in drawn}
     assert {"fit", "diagnose", "compensate", "track"} <= names
@@ -202,3 +171,11 @@ def test_the_data_fill_their_axes(drawn):
             low, high = min(s[0] for s in spans), max(s[1] for s in spans)
             y0, y1 = ax.get_ylim()
             assert (high - low) >= 0.2 * abs(y1 - y0), f"{name}, panel {ax.get_title()!r}: the data span {high - low:.3g} of a y range {abs(y1 - y0):.3g}"
+
+
+def test_the_collision_check_finds_two_labels_drawn_over_each_other():
+    fig = Figure(figsize=(4, 3))
+    ax = fig.add_subplot()
+    ax.text(0.5, 0.5, "first label")
+    ax.text(0.5, 0.5, "second label")
+    assert collisions(fig) == [("first label", "second label")]

@@ -3,8 +3,6 @@ and a high sampling rate do not hide what each figure is for (checked on the art
 
 from __future__ import annotations
 
-import itertools
-
 import matplotlib
 
 matplotlib.use("Agg")
@@ -15,6 +13,7 @@ import pytest
 
 import backlashid as bx
 from backlashid.app import plot_characteristic, plot_residuals, plot_simulation, plot_trajectories
+from figure_texts import collisions
 
 
 @pytest.fixture(autouse=True)
@@ -164,45 +163,6 @@ def test_spectrum_label_stays_on_two_lines(dt, unit):
 # -- residuals: no overlapping text, the lags from the data, the time axis said right -------------
 
 
-def _drawn_tick_labels(fig) -> dict:
-    """The tick labels drawn (their tick inside the view) of every axes of fig, insets too, by
-    the axis they belong to."""
-    drawn = {}
-    for ax in fig.findobj(matplotlib.axes.Axes):
-        for axis in (ax.xaxis, ax.yaxis):
-            low, high = sorted(axis.get_view_interval())
-            slack = 1e-9 * (high - low)
-            for tick in [*axis.get_major_ticks(), *axis.get_minor_ticks()]:
-                if low - slack <= tick.get_loc() <= high + slack:
-                    for label in (tick.label1, tick.label2):
-                        drawn[label] = axis
-    return drawn
-
-
-def _overlaps(fig) -> list[tuple[str, str]]:
-    """Pairs of visible, non-empty text artists of fig whose boxes overlap (tick labels of one
-    axis against each other aside)."""
-    fig.canvas.draw()
-    renderer = fig.canvas.get_renderer()
-    drawn = _drawn_tick_labels(fig)
-    every_tick_label = {label for ax in fig.findobj(matplotlib.axes.Axes) for axis in (ax.xaxis, ax.yaxis)
-                        for tick in [*axis.get_major_ticks(), *axis.get_minor_ticks()] for label in (tick.label1, tick.label2)}
-    texts = []
-    for artist in fig.findobj(matplotlib.text.Text):
-        if not artist.get_visible() or not artist.get_text().strip():
-            continue
-        if artist in every_tick_label and artist not in drawn:
-            continue  # a tick outside the view: not drawn
-        texts.append((artist, drawn.get(artist), artist.get_window_extent(renderer)))
-    found = []
-    for (a, axis_a, box_a), (b, axis_b, box_b) in itertools.combinations(texts, 2):
-        if axis_a is not None and axis_a is axis_b:
-            continue
-        if box_a.width and box_b.width and box_a.overlaps(box_b):
-            found.append((a.get_text(), b.get_text()))
-    return found
-
-
 @pytest.mark.parametrize("warmup", [0, 50])
 @pytest.mark.parametrize("ylabel", ["load", "load of the gearbox output shaft, measured at the arm"])
 def test_residual_figure_texts_do_not_overlap(ylabel, warmup):
@@ -212,7 +172,7 @@ def test_residual_figure_texts_do_not_overlap(ylabel, warmup):
     e = np.convolve(rng.standard_normal(n + 50), np.ones(50) / 7.0, mode="valid")[:n]
     fig = plot_residuals(e, u, dt=0.001, ylabel=ylabel, unit="deg", warmup=warmup,
                          title="Residual diagnostics, free-run simulation error on the validation record (input motor)")
-    assert _overlaps(fig) == []
+    assert collisions(fig, margin=0.0, touching=True) == []
 
 
 def test_residual_lags_follow_the_decay_of_the_correlations():

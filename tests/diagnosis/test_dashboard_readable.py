@@ -17,6 +17,8 @@ matplotlib = pytest.importorskip("matplotlib")
 matplotlib.use("Agg")
 from matplotlib.text import Text  # noqa: E402
 
+from figure_texts import collisions  # noqa: E402
+
 SPIKE = 40.0
 
 
@@ -46,43 +48,6 @@ def two(record):
 
 def _texts(fig):
     return [t for t in fig.findobj(Text) if t.get_visible() and t.get_text().strip()]
-
-
-def _tick_owner(text):
-    for ax in text.figure.axes:
-        for axis in (ax.xaxis, ax.yaxis):
-            if any(text is label for label in [*axis.get_ticklabels(which="both"), axis.get_offset_text()]):
-                return axis
-    return None
-
-
-def _drawn(text, owner):
-    """Whether a text is drawn: a tick label only where its tick is in the axis's view (the
-    others keep stale positions and are not drawn)."""
-    if owner is None or text is owner.get_offset_text():
-        return True
-    loc = text.get_position()[0 if owner.axis_name == "x" else 1]
-    lo, hi = sorted(owner.get_view_interval())
-    return lo - 1e-9 * (hi - lo) <= loc <= hi + 1e-9 * (hi - lo)
-
-
-def _collisions(fig, every=False):
-    """Pairs of drawn texts (``every``: of visible ones, drawn or not) whose boxes overlap (by
-    more than 2 px each way), tick labels of one axis among themselves excepted."""
-    fig.canvas.draw()
-    renderer = fig.canvas.get_renderer()
-    owned = [(t, _tick_owner(t)) for t in _texts(fig)]
-    boxes = [(t, t.get_window_extent(renderer), owner) for t, owner in owned if every or _drawn(t, owner)]
-    found = []
-    for i, (a, box_a, owner_a) in enumerate(boxes):
-        for b, box_b, owner_b in boxes[i + 1 :]:
-            if owner_a is not None and owner_a is owner_b:
-                continue
-            width = min(box_a.x1, box_b.x1) - max(box_a.x0, box_b.x0)
-            height = min(box_a.y1, box_b.y1) - max(box_a.y0, box_b.y0)
-            if width > 2 and height > 2:
-                found.append((a.get_text()[:50], b.get_text()[:50]))
-    return found
 
 
 def _ranking_texts(fig):
@@ -139,9 +104,9 @@ def test_title_is_one_line_on_the_figure(one, tmp_path):
 def test_no_two_texts_collide(one, two, tmp_path):
     for name, report in (("one record", one), ("two records", two)):
         fig = report.plot(tmp_path / f"{name}.png")
-        assert not _collisions(fig), f"{name}: {_collisions(fig)}"
+        assert not collisions(fig), f"{name}: {collisions(fig)}"
         # nor does a tick label out of view (visible, though not drawn) sit over another text
-        assert not _collisions(fig, every=True), f"{name}: {_collisions(fig, every=True)}"
+        assert not collisions(fig, every=True), f"{name}: {collisions(fig, every=True)}"
 
 
 def test_record_starts_are_marked(two, tmp_path):
@@ -178,7 +143,7 @@ def test_composed_effects_show_their_steps(one, tmp_path):
     assert "not named: its residual is still modulated" in by["compliance"]
     title = fig._suptitle.get_text()
     assert "\n" not in title and "dead_time + friction named" in title
-    assert not _collisions(fig)
+    assert not collisions(fig)
 
 
 def test_unexplained_and_a_named_noise_model_read_right(one, tmp_path):
@@ -189,7 +154,7 @@ def test_unexplained_and_a_named_noise_model_read_right(one, tmp_path):
     assert "not named: its residual is still modulated" in dict(zip(ticks, notes))["dead_time"]
     assert not any(n.startswith("named") for n in notes)
     assert fig._suptitle.get_text().startswith("Diagnosis: unexplained")
-    assert not _collisions(fig)
+    assert not collisions(fig)
     noise = next(c for c in one.ranking if c.effect == "colored_noise")
     named = dataclasses.replace(
         one, best_effect="colored_noise", effects=("colored_noise",), steps=(CompositionStep("colored_noise", 0.0, 0.6, 1e-11),)

@@ -270,7 +270,7 @@ def _run_all(
             if timeout is None:
                 _run(distributed, client, todo, job, options, progress, results)
             else:
-                _run_timed(distributed, client, todo, job, options, progress, results, timeout)
+                _run_timed(client, todo, job, options, progress, results, timeout)
         except _SchedulerLost as lost:
             for i, _ in todo:
                 if results[i] is None:
@@ -313,7 +313,7 @@ def _inline(scheduler: str, job: str, todo: list[tuple[int, Any]], client: Any, 
 
 def _run_inline(todo: list[tuple[int, Any]], job: str, options: dict[str, Any], progress: bool, results: list[Any]) -> None:
     """Every record one after the other in this process (the same task function as on a worker)."""
-    label = job if job in ("diagnose", "track") else f"fit_{job}"
+    label = _label(job)
     bar = _progress_bar(label, progress, len(todo))
     try:
         for i, record in todo:
@@ -514,6 +514,16 @@ def track_many(
     return _run_all(datasets, _tracked(start), "track", track_options, client, address, n_workers, progress, scheduler, timeout)
 
 
+def _label(job: str) -> str:
+    """The job's name on the progress bar and in the task keys."""
+    return job if job in ("diagnose", "track") else f"fit_{job}"
+
+
+def _threads(client: Any) -> int:
+    """Worker threads the client's scheduler knows of now."""
+    return int(sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
+
+
 def _run(
     distributed: Any,
     client: Any,
@@ -530,9 +540,8 @@ def _run(
     records did) is retried record by record, one at a time, each record sent with its task
     and with Dask's ``retries``; a record that still fails gets a
     :class:`~backlashid.BacklashIdError` naming its index in its slot."""
-    label = job if job in ("diagnose", "track") else f"fit_{job}"
-    threads = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
-    threads = max(threads, 4)  # a cluster still scaling up reports few workers
+    label = _label(job)
+    threads = max(_threads(client), 4)  # a cluster still scaling up reports few workers
     n_tasks = min(len(todo), _TASKS_PER_THREAD * threads)
     bounds = [len(todo) * k // n_tasks for k in range(n_tasks + 1)]
     batches = [todo[lo:hi] for lo, hi in zip(bounds, bounds[1:])]
@@ -549,7 +558,7 @@ def _run(
         del data  # the tasks hold the records now; each is released when its task is done
         if progress and bar is None:  # no tqdm: Dask's own text bar; it returns when everything is done
             distributed.progress(futures)
-        failed = _collect(distributed, client, futures, batches, results, bar)
+        failed = _collect(client, futures, batches, results, bar)
         # The records of lost batches again, one at a time, each sent with its task (not
         # scattered) and retried by Dask: a record that kills its worker takes no other
         # record's task with it (workers die rarely: the fleet's speed matters less here). A
@@ -559,7 +568,7 @@ def _run(
                 _batch, [[record]], job=job, options=options, pure=False, retries=_RETRIES,
                 key=[f"backlashid-{label}-alone-{i}-{run}"],
             )
-            for _, reason in _collect(distributed, client, [future], [[(i, record)]], results, bar, why=True):
+            for _, reason in _collect(client, [future], [[(i, record)]], results, bar, why=True):
                 results[i] = BacklashIdError(
                     f"record {i}: its worker process died or its task was lost, also when run again alone "
                     f"({reason}); the record may crash the worker (out of memory?): run it alone to see"
@@ -573,7 +582,7 @@ _RETRIES = 1  # Dask retries of a record run alone after its batch was lost (a l
 
 
 def _collect(
-    distributed: Any, client: Any, futures: list[Any], batches: list[Any], results: list[Any], bar: Any, why: bool = False,
+    client: Any, futures: list[Any], batches: list[Any], results: list[Any], bar: Any, why: bool = False,
 ) -> list[Any]:
     """Wait for ``futures`` (one per batch), write each finished batch's outcomes into
     ``results`` and return the batches that did not finish (with the reason when ``why``).
@@ -648,7 +657,6 @@ def _wait(pending: list[Any], watch: _Watch) -> tuple[list[Any], list[Any]]:
 
 
 def _run_timed(
-    distributed: Any,
     client: Any,
     todo: list[tuple[int, Any]],
     job: str,
@@ -661,27 +669,27 @@ def _run_timed(
     task runs from the moment it is sent); one without a result after ``timeout`` seconds is
     cancelled, its slot gets an error naming it, and its worker process is restarted (the only
     way to stop a computation)."""
-    label = job if job in ("diagnose", "track") else f"fit_{job}"
+    label = _label(job)
     try:
         client.wait_for_workers(1, timeout=_WORKERS_WAIT)
     except TimeoutError:
         raise BacklashIdError(f"no Dask worker joined the scheduler within {_WORKERS_WAIT:g} s: start workers, or give another client= or address=") from None
     client.run(_warm)  # the imports are no record's time
-    threads = max(sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()), 1)
+    threads = max(_threads(client), 1)
     run = uuid.uuid4().hex[:8]
     bar = _progress_bar(label, progress, len(todo))
     queue = list(todo)
-    running: dict[Any, tuple[int, Any, float]] = {}  # future -> (index, record, deadline)
+    running: dict[Any, tuple[int, float]] = {}  # future -> (index, deadline)
     watch = _Watch(client)
     try:
         while queue or running:
             while queue and len(running) < threads:
                 i, record = queue.pop(0)
                 future = client.submit(_batch, [record], job=job, options=options, pure=False, key=f"backlashid-{label}-timed-{i}-{run}")
-                running[future] = (i, record, time.monotonic() + timeout)
+                running[future] = (i, time.monotonic() + timeout)
             done, _ = _wait(list(running), watch)
             for future in done:
-                i, _, _ = running.pop(future)
+                i, _ = running.pop(future)
                 try:
                     results[i] = future.result()[0]
                 except Exception as exc:  # its worker died: the record's error, as in _run
@@ -689,8 +697,8 @@ def _run_timed(
                 if bar is not None:
                     bar.update(1)
             now = time.monotonic()
-            for future in [f for f, (_, _, deadline) in running.items() if now > deadline]:
-                i, _, _ = running.pop(future)
+            for future in [f for f, (_, deadline) in running.items() if now > deadline]:
+                i, _ = running.pop(future)
                 _stop(client, future)
                 results[i] = BacklashIdError(
                     f"record {i}: no result within timeout = {timeout:g} s; its worker process was restarted "
