@@ -427,8 +427,12 @@ class DiagnosisReport:
                 + f"; validation RMSE {self.nominal_validation_rmse:.4g} -> {self.steps[-1].validation_rmse:.4g}"
                 + quantiser
             )
-        sig = "its signature is gone" if best.signature_removed else "the change it predicts still correlates with its residual"
-        return f"{best.effect}: closes {_pct(best.gap_closed).strip()} of the gap (p = {_p(best.p_value)}); {sig}{quantiser}"
+        # the rule names it (significant, closes half); the signature is the dashboard's secondary check
+        sig = "is gone" if best.signature_removed else "still shows in its residual"
+        return (
+            f"{best.effect}: closes {_pct(best.gap_closed).strip()} of the gap (p = {_p(best.p_value)}); "
+            f"secondary check: the residual signature it predicts {sig}{quantiser}"
+        )
 
     def _not_noise(self) -> str:
         """Why the residual is not noise, as the diagnoser recorded it in ``details``."""
