@@ -29,10 +29,10 @@ from . import _records
 from ._checks import warn_if_suspicious
 from ._coarse import refine_whole
 from ._refine import OutputErrorFit, budget_hit, levenberg_marquardt, out_of_time, spectral_radius, time_budget
-from ._starts import linear_start, pole_restarts, scale_starts
+from ._starts import linear_start, pole_restarts, scale_starts, state_starts
 from ._state import lm_holding_vanishing
 from ._structure import Structure
-from ._valid import ValidOnly, acceptable_motion, record_motion, why_not_acceptable
+from ._valid import ValidOnly, acceptable_motion, record_motion
 
 __all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
 
@@ -982,6 +982,27 @@ def _acceptable_or_lower_degree(
     return refined, why, guard, checked
 
 
+def _acceptable_with_state(
+    setup: _Setup, refined: OutputErrorFit | None, arguments: dict[str, Any]
+) -> tuple[OutputErrorFit | _StateFit | None, str | None, tuple[NDArray[np.float64], float | None] | None, Any]:
+    """The refinement checked for acceptability (:func:`_acceptable_or_lower_degree`), then with
+    the record's initial state. With ``initial_state="estimate"`` the optimum is first refined
+    with its state and judged from that start: a record that starts mid-motion visits another x
+    range than the model started from rest, which the check from rest would wrongly refuse.
+    Returns the refinement, why the optimum was replaced, the checked optimum and the state."""
+    optimum = refined
+    refined, why, guard, checked = _acceptable_or_lower_degree(setup, refined, arguments)
+    lower, state = _with_initial_state(setup, refined, guard)
+    if why is None or setup.initial_state != "estimate" or optimum is None:
+        return lower, why, checked, state
+    # refused from rest: the optimum refined with its state, kept where it is acceptable from
+    # that start and cheaper than the continuation from the lower degree
+    free, free_state = _with_initial_state(setup, optimum, None)
+    if isinstance(free, _StateFit) and free.why is None and (lower is None or free.cost <= lower.cost):
+        return free, None, None, free_state
+    return lower, why, checked, state
+
+
 def _with_initial_state(
     setup: _Setup, refined: OutputErrorFit | None, guard: tuple[Any, int, float, bool] | None
 ) -> tuple[OutputErrorFit | _StateFit | None, dict[str, float] | list[dict[str, float]] | None]:
@@ -992,15 +1013,20 @@ def _with_initial_state(
     if s.initial_state != "estimate" or refined is None:
         return refined, None
     # the shifted record's first `shift` samples are zeros, right only from rest
+    warmup = max(s.warmup, s.shift)
     with_state = functools.partial(
-        _refine_with_state, s.structure, s.u, s.y, max(s.warmup, s.shift), restarts=s.restarts, perturbation=s.perturbation, seed=s.seed
-    )
+        _refine_with_state, s.structure, s.u, s.y, warmup, restarts=s.restarts, perturbation=s.perturbation, seed=s.seed,
+        check=(s.u, warmup, s.min_moving, s.valid),
+    )  # fmt: skip
     kept = refined
-    refined, state = with_state(kept, guard=guard)  # type: ignore[assignment]
-    if guard is None and why_not_acceptable(s.structure, s.whole, refined.theta, s.u, s.user_warmup, s.min_moving, s.valid) is not None:
-        if why_not_acceptable(s.structure, s.whole, kept.theta, s.u, s.user_warmup, s.min_moving, s.valid) is None:
-            # the state's refinement left the valid models: again, kept among them
-            refined, state = with_state(kept, guard=s.guard)  # type: ignore[assignment]
+    refined, state = with_state(kept, guard=guard)
+    if guard is None and refined.why is not None:
+        # the state's refinement left the acceptable models (judged from the record's own
+        # start): again, kept among them, where the start is one
+        try:
+            refined, state = with_state(kept, guard=s.guard)
+        except BacklashIdError:
+            pass
     state = [state] if s.several and isinstance(state, dict) else state  # one dict per record
     return refined, state
 
@@ -1033,12 +1059,19 @@ def _failure(
 
 
 def _final_motion(
-    setup: _Setup, theta: NDArray[np.float64], model: Model | None, checked: tuple[NDArray[np.float64], float | None] | None
+    setup: _Setup,
+    theta: NDArray[np.float64],
+    model: Model | None,
+    checked: tuple[NDArray[np.float64], float | None] | None,
+    refined: OutputErrorFit | _StateFit | None = None,
 ) -> tuple[float, tuple[float, float] | None]:
-    """The moving fraction and x's range (for the branch check) at the end: the check of the
+    """The moving fraction and x's range (for the branch check) at the end: from the record's
+    estimated start where the refinement with the state simulated it, else the check of the
     optimum found them at this very theta, or the whole record's problem has them from its last
     gradient pass there (or simulates once for both)."""
     s = setup
+    if model is not None and isinstance(refined, _StateFit) and refined.motion is not None and refined.motion[1] is not None:
+        return refined.motion[0], refined.motion[1]
     found = record_motion(s.structure, s.whole, theta, s.u, s.user_warmup) if model is not None else None
     x_range = found[1] if found is not None else None
     if model is None:
@@ -1096,7 +1129,7 @@ def _outcome(
     except ModelError as exc:
         model, invalid = None, exc
     failed, failure = _failure(structure, theta, rmse, invalid, setup.paper, setup.time_budget)
-    moving, x_range = _final_motion(setup, theta, model, checked)
+    moving, x_range = _final_motion(setup, theta, model, checked, refined)
     noise_var, covariance = _noise_and_covariance(structure, run, refined, failure, moving, setup.min_moving)
     converged = failure is None and (run.reason in CONVERGED or (refined is not None and refined.converged))
     reason = failed or (run.reason if run.reason in CONVERGED or not converged else "refined")
@@ -1181,8 +1214,7 @@ def _fit(
         initial_state=initial_state, time_budget=time_budget,
     )
     run, k, refined, segment = _coarse_to_fine(setup)
-    refined, why, guard, checked = _acceptable_or_lower_degree(setup, refined, arguments)
-    refined, state = _with_initial_state(setup, refined, guard)  # type: ignore[assignment]
+    refined, why, checked, state = _acceptable_with_state(setup, refined, arguments)
     result, x_range = _outcome(setup, run, k, refined, checked, segment, state)
     if why is not None:  # here, not in a stage: stacklevel 4 is the caller's line
         warnings.warn(
@@ -1229,6 +1261,10 @@ class _StateFit:
     converged: bool
     kept: int
     projected: NDArray[np.float64]
+    # judged from the record's estimated start (not from rest): why the model is not an
+    # acceptable one (None: it is), and its moving fraction and x range (None: not simulated)
+    why: str | None = None
+    motion: tuple[float, tuple[float, float] | None] | None = None
 
     def unscaled_covariance(self, names: list[str]) -> NDArray[np.float64]:
         # computed when asked, after the fit's checks of the estimate (a degenerate estimate
@@ -1247,13 +1283,15 @@ def _refine_with_state(
     perturbation: float,
     seed: int,
     guard: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool] | None = None,
+    check: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool] | None = None,
 ) -> tuple[_StateFit, dict[str, float] | list[dict[str, float]]]:
     """The output-error refinement of the model's estimate with the record's initial state as
     further parameters, from the state x0 = 0, w0 = 0 and (cascade) y_prev at the first
-    measured output (y(1) = y_prev when the record starts holding)."""
+    measured output (y(1) = y_prev when the record starts holding). With ``check`` (u,
+    warm-up, min_moving, branches) the result says whether it is acceptable from that start."""
     with_state = dataclasses.replace(structure, initial_state=True)
     p0 = structure.size
-    prob = with_state.problem(u, y, warmup)
+    prob = raw = with_state.problem(u, y, warmup)
     names = prob.names  # several records: one state block per record (x0_1@1, ..)
     start = np.zeros(len(names))
     start[:p0] = refined.theta
@@ -1268,6 +1306,18 @@ def _refine_with_state(
         lo[:p0] = hi[:p0] = start[:p0]
         start = lm_holding_vanishing(prob, start, p0, lo, hi).theta
     fit = lm_holding_vanishing(prob, start, p0)  # y_prev's column vanishes when the first sample moves
+    # a record that starts mid-motion (a position that integrates) misleads the search from
+    # rest: the input block's poles searched again with the state, and the search's starts
+    # made with the state free from the beginning (_starts.py)
+    rank = functools.partial(_state_rank, with_state, prob)
+    for trial in pole_restarts(with_state, prob, u, fit.theta, warmup):
+        fit = min(fit, trial, key=rank)
+    for theta in state_starts(with_state, raw, u, y, warmup):
+        try:
+            trial = lm_holding_vanishing(prob, theta, p0)
+        except BacklashIdError:
+            continue
+        fit = min(fit, trial, key=rank)
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
     # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
     rng = np.random.default_rng(seed)
@@ -1286,7 +1336,26 @@ def _refine_with_state(
     rank = int(np.linalg.matrix_rank(state_cols, tol=1e-10 * np.linalg.norm(state_cols, 2))) if state_cols.any() else 0
     projected = model_cols - state_cols @ (np.linalg.pinv(state_cols, rcond=1e-10) @ model_cols)
     state = _records.states(names, p0, fit.theta, isinstance(y, list))
-    return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, p0 + rank, projected), state
+    why, motion = _judged_from_state(with_state, raw, fit.theta, check) if check is not None else (None, None)
+    kept = p0 + rank
+    return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, kept, projected, why, motion), state
+
+
+def _state_rank(with_state: Structure, prob: Any, fit: OutputErrorFit) -> tuple[bool, float]:
+    """The order of the searches with the state: valid models first, then the cheapest."""
+    return (not _is_valid(with_state, prob, fit.theta), fit.cost)
+
+
+def _judged_from_state(
+    with_state: Structure, prob: _core.Problem, theta: NDArray[np.float64], check: tuple[Any, int, float, bool]
+) -> tuple[str | None, tuple[float, tuple[float, float] | None] | None]:
+    """Why the model of ``theta`` (model and initial state) is not acceptable (None: it is) and
+    its motion, simulated from the record's estimated start: a record that starts mid-motion
+    (a position that integrates) visits another x range than the model started from rest."""
+    u, warmup, min_moving, branches = check
+    why, moving = acceptable_motion(with_state, prob, theta, u, warmup, min_moving, branches)
+    found = record_motion(with_state, prob, theta, u, warmup)
+    return why, (moving, found[1] if found is not None else None) if moving is not None else None
 
 
 def _with_covariance(model: Model | None, structure: Structure, covariance: NDArray[np.float64]) -> Model | None:

@@ -15,6 +15,10 @@ things here avoid both:
 - :func:`pole_restarts`: from an estimate, the input block's poles moved to each of a few fixed
   pole sets (its numerator refitted so that x stays as close as possible to the estimate's),
   the linear block alone searched with everything else held, and the best ones refined whole.
+- :func:`state_starts`: for a search with the record's initial state, the linear fit and the
+  scale starts again with that state free from the beginning (and pole sets with a pole at
+  z = 1): a record that starts mid-motion, above all a position that integrates, misleads a
+  linear fit from rest, whose x then starts at the wrong place for good.
 
 Every search is the package's one bounded Levenberg-Marquardt (dead-band widths >= 0 by the
 problem's ``bounds()``); a start that raises is skipped. The per-sample work is the core's: the
@@ -24,6 +28,7 @@ Several records (a list of u) are filtered record by record and their rows stack
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -32,6 +37,7 @@ from numpy.typing import NDArray
 from .. import _core
 from ..errors import BacklashIdError
 from ..models import LinearBlock
+from ._records import y_prev_starts
 from ._refine import OutputErrorFit, levenberg_marquardt
 from ._structure import Structure
 
@@ -47,6 +53,11 @@ _SINGLE = (0.0, 0.5, 0.8, 0.95, -0.4)
 POLE_TOP = 2
 # The pole starts kept (by their cost) for the linear-only search.
 POLE_SCREEN = 9
+# The second poles beside an integrator (a pole at z = 1, just inside) of the state starts.
+_BESIDE_INTEGRATOR = (0.3, 0.6, 0.8, 0.9, 0.95)
+_INTEGRATOR = 0.999
+# Of the state starts' linear fits, this many best give scale starts.
+STATE_TOP = 2
 # LM steps of the linear start's search, and of each pole restart's linear-only search (a
 # screening: the POLE_TOP best are then searched whole).
 LINEAR_START_ITER = 30
@@ -164,6 +175,38 @@ def linear_start(structure: Structure, prob: object, u: Signal | list[Signal], y
     return fits[0]
 
 
+def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y: Signal | list[Signal], warmup: int) -> list[NDArray[np.float64]]:
+    """Full starts of the search with the record's initial state (``prob`` of ``structure``
+    with ``initial_state=True``): the linear output-error fit with the backlash at the identity
+    and the initial state free (y_prev at the first measured output, held), from the fixed
+    pole sets and those with a pole at z = 1; from the ``STATE_TOP`` best, the dead bands of
+    the data's x-scale (:func:`scale_starts`). None if no linear fit can be searched."""
+    s = structure
+    names = list(prob.names)  # type: ignore[attr-defined]
+    p0 = dataclasses.replace(s, initial_state=False).size
+    base, free = np.zeros(len(names)), np.zeros(len(names), dtype=bool)
+    base[names.index("m_R1")] = 1.0
+    free[: s.n_a + s.nb] = True
+    free[p0:] = True
+    for k, first in y_prev_starts(names, y, warmup) if not s.is_sandwich else []:
+        base[k], free[k] = first, False  # the identity holds y_prev's column at zero
+    dens = _denominators(s.nb)
+    if s.nb >= 2:  # a position that integrates: a pole at z = 1 (just inside) and another
+        dens += [np.real(np.poly([_INTEGRATOR, p, *np.zeros(s.nb - 2)]))[1:] for p in _BESIDE_INTEGRATOR]
+    starts = []
+    for den in dens:
+        theta = base.copy()
+        theta[: s.n_a] = _numerator(u, y, den, s.n_a, 2 if s.is_sandwich else 1, warmup)
+        theta[s.n_a : s.n_a + s.nb] = den
+        starts.append(theta)
+    costs = [_cost(prob, th) for th in starts]
+    order = [i for i in np.argsort(costs)[:4] if np.isfinite(costs[i])]
+    out = []
+    for linear in _search_linear(prob, [starts[i] for i in order], free, LINEAR_START_ITER)[:STATE_TOP]:
+        out += scale_starts(s, prob, linear)
+    return out
+
+
 def scale_starts(structure: Structure, prob: object, linear: OutputErrorFit) -> list[NDArray[np.float64]]:
     """Full starts from a linear fit: dead bands c_L = c_R = k std(x) for each k of
     ``SCALE_FRACTIONS``, m_R1 = 1 (the sandwich's output block from the fit's unit delay)."""
@@ -195,7 +238,7 @@ def pole_restarts(structure: Structure, prob: object, u: Signal | list[Signal], 
     except BacklashIdError:  # an unstable estimate's x overflows
         return []
     keep = np.roots(np.concatenate([[1.0], b_est])) if s.nb > 2 else None
-    free = np.zeros(s.size, dtype=bool)
+    free = np.zeros(len(theta), dtype=bool)  # theta may carry initial states (one per record)
     free[: s.n_a + s.nb] = True
     starts = []
     for den in _denominators(s.nb, keep):

@@ -29,17 +29,17 @@ def record_motion(
     u: NDArray[np.float64] | list[NDArray[np.float64]],
     warmup: int,
 ) -> tuple[float, tuple[float, float]] | None:
-    """The moving fraction of the model of ``theta`` on ``u`` after ``warmup`` (from rest) and
-    the range of x there, from the compiled problem ``prob`` of that record: one simulation, or
-    none where its last gradient pass ran at this theta (``Problem.motion``). None where the
-    problem's simulation is not the model's on ``u`` (several records, an initial state, a
-    shifted feedthrough block, another warm-up) or fails: then simulate the model."""
+    """The moving fraction of the model of ``theta`` on ``u`` after ``warmup`` and the range of
+    x there, from the compiled problem ``prob`` of that record (from rest, or from theta's
+    initial state for a problem with one): one simulation, or none where its last gradient pass
+    ran at this theta (``Problem.motion``). None where the problem's simulation is not the
+    model's on ``u`` (several records, a shifted feedthrough block, another warm-up) or fails:
+    then simulate the model (from rest)."""
     if (
         isinstance(u, list)
         or structure.shift
         or not hasattr(prob, "motion")
         or prob.records != 1
-        or prob.initial_state
         or prob.warmup != warmup
         or prob.samples != len(u)
     ):
