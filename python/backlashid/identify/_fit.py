@@ -29,7 +29,7 @@ from . import _records
 from ._checks import warn_if_suspicious
 from ._coarse import refine_whole
 from ._refine import OutputErrorFit, budget_hit, levenberg_marquardt, out_of_time, spectral_radius, time_budget
-from ._starts import linear_start, pole_restarts, scale_starts, state_starts
+from ._starts import linear_start, output_pole_restarts, pole_restarts, scale_starts, state_starts
 from ._state import lm_holding_vanishing
 from ._structure import Structure
 from ._valid import ValidOnly, acceptable_motion, record_motion
@@ -658,6 +658,7 @@ def _search(
     restarts: int,
     perturbation: float,
     seed: int,
+    mid_motion: bool = False,
     **iterations: Any,
 ) -> tuple[_Run, int, OutputErrorFit | None]:
     """The iterations from every start on the record of ``prob`` (u_arr, y_arr), the chosen iterate (index k of the run's history),
@@ -665,7 +666,8 @@ def _search(
     from the ARX start of every run and (default algorithm) from the dead bands of the data's
     x-scale on a linear output-error fit (``_starts.py``), the cheapest valid result, then the
     pole restarts and the seeded restarts. A start whose first iteration is rank deficient is
-    skipped while another remains."""
+    skipped while another remains; where every one is and no linear fit from rest gives a
+    start, a record that starts ``mid_motion`` takes the starts made with its state free."""
     runs = [_run(structure, prob, u_arr, y_arr, start, **iterations) for start in starts]
     usable = [r for r in runs if r.last_ls is not None]
     # starts that do not depend on white excitation (_starts.py): a linear output-error fit
@@ -681,6 +683,8 @@ def _search(
     converged = any(r.reason in CONVERGED for r in usable)
     extra = refine and not paper and not (converged and _lag1(u_arr) < WHITE_LAG1)
     scaled = _scaled_starts(structure, prob, u_arr, y_arr, iterations["warmup"], iterations["switching"]) if extra else []
+    if not usable and not scaled and mid_motion:  # the model parts of the starts made with the state (_starts.py)
+        scaled = _mid_motion_starts(structure, u_arr, y_arr, iterations["warmup"])
     if not usable:
         if not scaled:
             raise NotIdentifiableError(f"the first iteration could not be computed: {runs[0].error}") from None
@@ -697,6 +701,16 @@ def _search(
         structure, prob, u_arr, refined, extra=extra, restarts=restarts, perturbation=perturbation, seed=seed, warmup=iterations["warmup"]
     )
     return run, k, refined
+
+
+def _mid_motion_starts(structure: Structure, u_arr: Any, y_arr: Any, warmup: int) -> list[NDArray[np.float64]]:
+    """The model parts of :func:`state_starts` (the linear fit with the record's initial state
+    free): starts for a record whose linear fit from rest fails."""
+    with_state = dataclasses.replace(structure, initial_state=True)
+    try:
+        return [th[: structure.size] for th in state_starts(with_state, with_state.problem(u_arr, y_arr, warmup), u_arr, y_arr, warmup)]
+    except BacklashIdError:
+        return []
 
 
 def _scaled_starts(
@@ -777,7 +791,8 @@ def _restarted(
     # the input block from fixed pole sets, the rest held, then whole; kept only if cheaper.
     # They run again from wherever the seeded restarts moved the estimate (at most POLE_ROUNDS).
     for _round in range(POLE_ROUNDS):
-        for trial in pole_restarts(structure, prob, u_arr, refined.theta, warmup) if extra else []:
+        trials = [*pole_restarts(structure, prob, u_arr, refined.theta, warmup), *output_pole_restarts(structure, prob, refined.theta)] if extra else []
+        for trial in trials:
             if rank(trial) < rank(refined):
                 refined = trial
         moved = refined
@@ -934,7 +949,7 @@ def _search_first(setup: _Setup, end: int) -> tuple[_Run, int, OutputErrorFit | 
     return _search(
         s.structure, prob, u_end, y_end, s.starts, paper=s.paper, refine=s.refine, restarts=s.restarts,
         perturbation=s.perturbation, seed=s.seed, max_iter=s.max_iter, tol=s.tol, switching=s.switching, step=s.step,
-        reflect=s.reflect, warmup=s.warmup,
+        reflect=s.reflect, warmup=s.warmup, mid_motion=s.initial_state == "estimate",
     )
 
 
@@ -1310,7 +1325,7 @@ def _refine_with_state(
     # rest: the input block's poles searched again with the state, and the search's starts
     # made with the state free from the beginning (_starts.py)
     rank = functools.partial(_state_rank, with_state, prob)
-    for trial in pole_restarts(with_state, prob, u, fit.theta, warmup):
+    for trial in [*pole_restarts(with_state, prob, u, fit.theta, warmup), *output_pole_restarts(with_state, prob, fit.theta)]:
         fit = min(fit, trial, key=rank)
     for theta in state_starts(with_state, raw, u, y, warmup):
         try:

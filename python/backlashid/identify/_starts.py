@@ -15,6 +15,9 @@ things here avoid both:
 - :func:`pole_restarts`: from an estimate, the input block's poles moved to each of a few fixed
   pole sets (its numerator refitted so that x stays as close as possible to the estimate's),
   the linear block alone searched with everything else held, and the best ones refined whole.
+- :func:`output_pole_restarts`: the same for a sandwich's output block (its poles from the
+  fixed sets, the output block alone searched, the best ones refined whole): a fit can give
+  the input block the output block's dynamics and stop there.
 - :func:`state_starts`: for a search with the record's initial state, the linear fit and the
   scale starts again with that state free from the beginning (and pole sets with a pole at
   z = 1): a record that starts mid-motion, above all a position that integrates, misleads a
@@ -29,6 +32,7 @@ Several records (a list of u) are filtered record by record and their rows stack
 from __future__ import annotations
 
 import dataclasses
+import re
 from typing import Any
 
 import numpy as np
@@ -173,6 +177,31 @@ def linear_start(structure: Structure, prob: object, u: Signal | list[Signal], y
     except BacklashIdError:
         return None
     return fits[0]
+
+
+def output_pole_restarts(structure: Structure, prob: object, theta: NDArray[np.float64]) -> list[OutputErrorFit]:
+    """From a sandwich's estimate: its output block's denominator set to each fixed pole set
+    (numerator kept), the output block searched with the rest held, and the ``POLE_TOP`` best
+    searched whole. The fits (none for a cascade or an output block without poles)."""
+    names = structure.names
+    out_den = [k for k, n in enumerate(names) if re.fullmatch(r"s\d+", n)]
+    if not structure.is_sandwich or not out_den:
+        return []
+    free = np.zeros(len(theta), dtype=bool)  # theta may carry initial states
+    free[[k for k, n in enumerate(names) if re.fullmatch(r"r\d+", n)] + out_den] = True
+    starts = []
+    for den in _denominators(len(out_den)):
+        start = theta.copy()
+        start[out_den] = den
+        starts.append(start)
+    starts = [starts[i] for i in np.argsort([_cost(prob, th) for th in starts])[:POLE_SCREEN]]
+    out = []
+    for fit in _search_linear(prob, starts, free, POLE_ITER)[:POLE_TOP]:
+        try:
+            out.append(levenberg_marquardt(prob, fit.theta))  # type: ignore[arg-type]
+        except BacklashIdError:
+            continue
+    return out
 
 
 def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y: Signal | list[Signal], warmup: int) -> list[NDArray[np.float64]]:
