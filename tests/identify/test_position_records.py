@@ -113,3 +113,22 @@ def test_output_pole_restarts_need_a_sandwich():
     u, y, _ = _position_record("steps", 1)
     s = Structure(2, 2, 3)
     assert _starts.output_pole_restarts(s, s.problem(u, y), np.r_[0.1, 0.1, -1.5, 0.55, 0.3, 0.0, 0.01, 1.0, 0.5, 0.0, 0.015]) == []
+
+
+def test_a_dead_band_at_its_bound_is_held_in_the_covariance():
+    # an estimate with c_L = 0 on its bound: the factor's c_L column says nothing two-sided;
+    # the others' covariance is computed with it held there, its own variance is NaN
+    from backlashid.errors import NotIdentifiableError
+    from backlashid.identify._fit import _model_covariance
+
+    rng = np.random.default_rng(0)
+    block = np.triu(rng.standard_normal((4, 4))) + 3 * np.eye(4)
+    block[:, 1] = 0.0  # c_L's column
+    names = ["a1", "c_L", "c_R", "m_R1"]
+    cov = _model_covariance(block, np.array([0.5, 0.0, 0.2, 1.0]), names)
+    free = [0, 2, 3]
+    assert np.all(np.isnan(cov[1])) and np.all(np.isnan(cov[:, 1]))
+    expected = np.linalg.inv(block[:, free].T @ block[:, free])
+    assert np.allclose(cov[np.ix_(free, free)], expected, rtol=1e-10)
+    with pytest.raises(NotIdentifiableError):  # the same column with c_L off its bound: no covariance
+        _model_covariance(block, np.array([0.5, 0.1, 0.2, 1.0]), names)

@@ -1284,7 +1284,7 @@ class _StateFit:
     def unscaled_covariance(self, names: list[str]) -> NDArray[np.float64]:
         # computed when asked, after the fit's checks of the estimate (a degenerate estimate
         # with a zero column is reported by them, as on the path without a state)
-        return _core.lstsq(self.projected, np.zeros(len(self.projected)), names)[2]
+        return _model_covariance(self.projected, self.theta, names)
 
 
 def _refine_with_state(
@@ -1324,15 +1324,17 @@ def _refine_with_state(
     # a record that starts mid-motion (a position that integrates) misleads the search from
     # rest: the input block's poles searched again with the state, and the search's starts
     # made with the state free from the beginning (_starts.py)
+    # (a trial replaces the estimate only where the record determines its parameters)
     rank = functools.partial(_state_rank, with_state, prob)
-    for trial in [*pole_restarts(with_state, prob, u, fit.theta, warmup), *output_pole_restarts(with_state, prob, fit.theta)]:
-        fit = min(fit, trial, key=rank)
+    trials = [*pole_restarts(with_state, prob, u, fit.theta, warmup), *output_pole_restarts(with_state, prob, fit.theta)]
     for theta in state_starts(with_state, raw, u, y, warmup):
         try:
-            trial = lm_holding_vanishing(prob, theta, p0)
+            trials.append(lm_holding_vanishing(prob, theta, p0))
         except BacklashIdError:
             continue
-        fit = min(fit, trial, key=rank)
+    for trial in trials:
+        if rank(trial) < rank(fit) and _determined(trial, p0, names):
+            fit = trial
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
     # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
     rng = np.random.default_rng(seed)
@@ -1343,17 +1345,47 @@ def _refine_with_state(
             continue
         if (not _is_valid(with_state, prob, trial.theta), trial.cost) < (not _is_valid(with_state, prob, fit.theta), fit.cost):
             fit = trial
-    # the model block of the covariance with the state as nuisance parameters: the model's
-    # columns of the factor projected off the span of the state's, where a state column that is
-    # zero at the estimate (y_prev once the record starts moving) or redundant adds nothing
-    r = fit.r_aug[:-1, :-1]
-    model_cols, state_cols = r[:, :p0], r[:, p0:]
-    rank = int(np.linalg.matrix_rank(state_cols, tol=1e-10 * np.linalg.norm(state_cols, 2))) if state_cols.any() else 0
-    projected = model_cols - state_cols @ (np.linalg.pinv(state_cols, rcond=1e-10) @ model_cols)
+    projected, rank = _model_block(fit, p0)
     state = _records.states(names, p0, fit.theta, isinstance(y, list))
     why, motion = _judged_from_state(with_state, raw, fit.theta, check) if check is not None else (None, None)
     kept = p0 + rank
     return _StateFit(fit.theta[:p0].copy(), fit.cost, fit.n_residuals, fit.iterations, fit.converged, kept, projected, why, motion), state
+
+
+def _model_covariance(projected: NDArray[np.float64], theta: NDArray[np.float64], names: list[str]) -> NDArray[np.float64]:
+    """The unscaled covariance of the model's parameters from their block of the factor; a
+    dead band at its bound 0 (c_L or c_R) held there, its own variance NaN (it has no
+    two-sided one), where the block is singular with it free. NotIdentifiableError otherwise."""
+    try:
+        return _core.lstsq(projected, np.zeros(len(projected)), names)[2]
+    except NotIdentifiableError:
+        held = [k for k, n in enumerate(names) if n in ("c_L", "c_R") and theta[k] == 0.0]
+        if not held:
+            raise
+    free = [k for k in range(len(names)) if k not in held]
+    cov = np.full((len(names), len(names)), np.nan)
+    cov[np.ix_(free, free)] = _core.lstsq(projected[:, free], np.zeros(len(projected)), [names[k] for k in free])[2]
+    return cov
+
+
+def _determined(fit: OutputErrorFit, p0: int, names: list[str]) -> bool:
+    """Whether the record determines the model parameters of ``fit`` (its covariance exists)."""
+    try:
+        _model_covariance(_model_block(fit, p0)[0], fit.theta[:p0], names[:p0])
+    except BacklashIdError:
+        return False
+    return True
+
+
+def _model_block(fit: OutputErrorFit, p0: int) -> tuple[NDArray[np.float64], int]:
+    """The model block of the covariance with the state as nuisance parameters: the model's
+    columns of the factor projected off the span of the state's (where a state column that is
+    zero at the estimate, y_prev once the record starts moving, or redundant adds nothing),
+    and the rank of the state's columns."""
+    r = fit.r_aug[:-1, :-1]
+    model_cols, state_cols = r[:, :p0], r[:, p0:]
+    rank = int(np.linalg.matrix_rank(state_cols, tol=1e-10 * np.linalg.norm(state_cols, 2))) if state_cols.any() else 0
+    return model_cols - state_cols @ (np.linalg.pinv(state_cols, rcond=1e-10) @ model_cols), rank
 
 
 def _state_rank(with_state: Structure, prob: Any, fit: OutputErrorFit) -> tuple[bool, float]:
