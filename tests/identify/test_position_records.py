@@ -132,3 +132,27 @@ def test_a_dead_band_at_its_bound_is_held_in_the_covariance():
     assert np.allclose(cov[np.ix_(free, free)], expected, rtol=1e-10)
     with pytest.raises(NotIdentifiableError):  # the same column with c_L off its bound: no covariance
         _model_covariance(block, np.array([0.5, 0.1, 0.2, 1.0]), names)
+
+
+@pytest.mark.parametrize("kind, seed", [("white", 3), ("steps", 1)])
+def test_the_search_with_the_state_on_the_head_of_a_long_record(monkeypatch, kind, seed):
+    # on a record longer than STATE_SEARCH_SAMPLES the search with the state runs on its head;
+    # its best trial, refined on the whole record, replaces the estimate only where it is
+    # cheaper there: never worse than no search, and better where the head finds the basin
+    from backlashid.identify import _fit
+
+    u, y, noise = _position_record(kind, seed)
+    u, y = u[:N_EST], y[:N_EST]
+
+    def fitted() -> bid.FitResult:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return bid.fit_cascade(u, y, 2, 2, degree=3, initial_state="estimate", valid=True, warmup=20)
+
+    monkeypatch.setattr(_fit, "STATE_SEARCH_SAMPLES", 1500)
+    with_head = fitted()
+    monkeypatch.setattr(_fit, "_searched_with_state", lambda *args: args[6])  # no search with the state
+    without = fitted()
+    assert with_head.simulation_rmse <= without.simulation_rmse * (1 + 1e-9)
+    if kind == "white":  # this record's head holds the right basin
+        assert with_head.simulation_rmse <= 1.3 * noise < without.simulation_rmse

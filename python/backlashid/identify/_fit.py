@@ -53,6 +53,9 @@ MAX_RESTARTS = 100  # more seeded restarts than this are refused (each costs a f
 COARSE_MIN = 5_000
 COARSE_PER_PARAMETER = 200
 COARSE_RECORDS = 10
+# The search with the state (pole restarts, starts made with the state) runs on at most this
+# many first samples of a longer record; its best result is then refined on the whole record.
+STATE_SEARCH_SAMPLES = 8000
 # Levenberg-Marquardt steps from each start of the data's x-scale (_starts.scale_starts) before
 # the candidates are compared; the cheapest is then searched to the end.
 SCALE_ITER = 20
@@ -1321,20 +1324,7 @@ def _refine_with_state(
         lo[:p0] = hi[:p0] = start[:p0]
         start = lm_holding_vanishing(prob, start, p0, lo, hi).theta
     fit = lm_holding_vanishing(prob, start, p0)  # y_prev's column vanishes when the first sample moves
-    # a record that starts mid-motion (a position that integrates) misleads the search from
-    # rest: the input block's poles searched again with the state, and the search's starts
-    # made with the state free from the beginning (_starts.py)
-    # (a trial replaces the estimate only where the record determines its parameters)
-    rank = functools.partial(_state_rank, with_state, prob)
-    trials = [*pole_restarts(with_state, prob, u, fit.theta, warmup), *output_pole_restarts(with_state, prob, fit.theta)]
-    for theta in state_starts(with_state, raw, u, y, warmup):
-        try:
-            trials.append(lm_holding_vanishing(prob, theta, p0))
-        except BacklashIdError:
-            continue
-    for trial in trials:
-        if rank(trial) < rank(fit) and _determined(trial, p0, names):
-            fit = trial
+    fit = _searched_with_state(with_state, prob, raw, u, y, warmup, fit, names)
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
     # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
     rng = np.random.default_rng(seed)
@@ -1386,6 +1376,59 @@ def _model_block(fit: OutputErrorFit, p0: int) -> tuple[NDArray[np.float64], int
     model_cols, state_cols = r[:, :p0], r[:, p0:]
     rank = int(np.linalg.matrix_rank(state_cols, tol=1e-10 * np.linalg.norm(state_cols, 2))) if state_cols.any() else 0
     return model_cols - state_cols @ (np.linalg.pinv(state_cols, rcond=1e-10) @ model_cols), rank
+
+
+def _searched_with_state(
+    with_state: Structure, prob: Any, raw: Any, u: Any, y: Any, warmup: int, fit: OutputErrorFit, names: list[str]
+) -> OutputErrorFit:
+    """A record that starts mid-motion (a position that integrates) misleads the search from
+    rest: the input block's poles searched again with the state, and the search's starts made
+    with the state free from the beginning (_starts.py), on the record's first
+    STATE_SEARCH_SAMPLES samples (the state is the start's either way); the best trial, refined
+    on the whole record, replaces ``fit`` where it ranks better and the record determines its
+    parameters."""
+    p0 = dataclasses.replace(with_state, initial_state=False).size
+    long = not isinstance(u, list) and len(u) > STATE_SEARCH_SAMPLES
+    if long:  # one record: its head
+        u, y = u[:STATE_SEARCH_SAMPLES], y[:STATE_SEARCH_SAMPLES]
+        raw = with_state.problem(u, y, warmup)
+        head = prob.on(raw, u) if isinstance(prob, ValidOnly) else raw
+    else:
+        head = prob
+    rank = functools.partial(_state_rank, with_state, head)
+    trials = [*pole_restarts(with_state, head, u, fit.theta, warmup), *output_pole_restarts(with_state, head, fit.theta)]
+    for theta in state_starts(with_state, raw, u, y, warmup):
+        try:
+            trials.append(lm_holding_vanishing(head, theta, p0))
+        except BacklashIdError:
+            continue
+    # the estimate's own rank on the searched samples
+    at_fit = (not _is_valid(with_state, head, fit.theta), _cost(head, fit.theta)) if long else rank(fit)
+    best = min((t for t in trials if rank(t) < at_fit), key=rank, default=None)
+    if best is None:
+        return fit
+    if long:
+        best = _refit_at(prob, best.theta, p0)
+        if best is None:
+            return fit
+    whole = functools.partial(_state_rank, with_state, prob)
+    return best if whole(best) < whole(fit) and _determined(best, p0, names) else fit
+
+
+def _refit_at(prob: Any, theta: NDArray[np.float64], p0: int) -> OutputErrorFit | None:
+    """LM on ``prob`` from ``theta`` (None where it cannot start there)."""
+    try:
+        return lm_holding_vanishing(prob, theta, p0)
+    except BacklashIdError:
+        return None
+
+
+def _cost(prob: Any, theta: NDArray[np.float64]) -> float:
+    """The cost at theta, inf where it cannot be simulated."""
+    try:
+        return float(prob.cost(theta))
+    except BacklashIdError:
+        return float("inf")
 
 
 def _state_rank(with_state: Structure, prob: Any, fit: OutputErrorFit) -> tuple[bool, float]:

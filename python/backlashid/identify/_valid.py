@@ -121,6 +121,10 @@ class ValidOnly:
     def __getattr__(self, name: str) -> Any:
         return getattr(self._prob, name)
 
+    def on(self, prob: Any, u: NDArray[np.float64] | list[NDArray[np.float64]]) -> ValidOnly:
+        """The same guard on another problem, of the record ``u`` (e.g. the record's head)."""
+        return ValidOnly(prob, self._structure, u, self._warmup, self._min_moving, self._branches)
+
     def feasible(self, theta: NDArray[np.float64]) -> bool:
         why = why_not_acceptable(self._structure, self._prob, theta, self._u, self._warmup, self._min_moving, self._branches)
         return why is None
