@@ -29,7 +29,7 @@ from . import _records
 from ._checks import warn_if_suspicious
 from ._coarse import refine_whole
 from ._refine import OutputErrorFit, budget_hit, levenberg_marquardt, out_of_time, spectral_radius, time_budget
-from ._starts import linear_start, output_pole_restarts, pole_restarts, scale_starts, state_starts
+from ._starts import cost_at, linear_start, output_pole_restarts, pole_restarts, scale_starts, state_starts
 from ._state import lm_holding_vanishing
 from ._structure import Structure
 from ._valid import ValidOnly, acceptable_motion, record_motion
@@ -1403,7 +1403,7 @@ def _searched_with_state(
         except BacklashIdError:
             continue
     # the estimate's own rank on the searched samples
-    at_fit = (not _is_valid(with_state, head, fit.theta), _cost(head, fit.theta)) if long else rank(fit)
+    at_fit = (not _is_valid(with_state, head, fit.theta), cost_at(head, fit.theta)) if long else rank(fit)
     best = min((t for t in trials if rank(t) < at_fit), key=rank, default=None)
     if best is None:
         return fit
@@ -1421,14 +1421,6 @@ def _refit_at(prob: Any, theta: NDArray[np.float64], p0: int) -> OutputErrorFit 
         return lm_holding_vanishing(prob, theta, p0)
     except BacklashIdError:
         return None
-
-
-def _cost(prob: Any, theta: NDArray[np.float64]) -> float:
-    """The cost at theta, inf where it cannot be simulated."""
-    try:
-        return float(prob.cost(theta))
-    except BacklashIdError:
-        return float("inf")
 
 
 def _state_rank(with_state: Structure, prob: Any, fit: OutputErrorFit) -> tuple[bool, float]:

@@ -130,7 +130,7 @@ def _held(prob: object, theta: NDArray[np.float64], free: NDArray[np.bool_]) -> 
     return lo, hi
 
 
-def _cost(prob: object, theta: NDArray[np.float64]) -> float:
+def cost_at(prob: object, theta: NDArray[np.float64]) -> float:
     """The cost at theta, inf where it is infeasible or diverges."""
     try:
         return float(prob.cost(theta)) if prob.feasible(theta) else np.inf  # type: ignore[attr-defined]
@@ -165,7 +165,7 @@ def linear_start(structure: Structure, prob: object, u: Signal | list[Signal], y
         theta[s.n_a : s.n_a + s.nb] = den
         starts.append(theta)
     # a cheap first pass (one cost each), then LM from the two best
-    costs = [_cost(prob, th) for th in starts]
+    costs = [cost_at(prob, th) for th in starts]
     order = [i for i in np.argsort(costs)[:2] if np.isfinite(costs[i])]
     fits = _search_linear(prob, [starts[i] for i in order], free, LINEAR_START_ITER)
     if not fits:
@@ -194,14 +194,7 @@ def output_pole_restarts(structure: Structure, prob: object, theta: NDArray[np.f
         start = theta.copy()
         start[out_den] = den
         starts.append(start)
-    starts = [starts[i] for i in np.argsort([_cost(prob, th) for th in starts])[:POLE_SCREEN]]
-    out = []
-    for fit in _search_linear(prob, starts, free, POLE_ITER)[:POLE_TOP]:
-        try:
-            out.append(levenberg_marquardt(prob, fit.theta))  # type: ignore[arg-type]
-        except BacklashIdError:
-            continue
-    return out
+    return _screened_and_refined(prob, starts, free)
 
 
 def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y: Signal | list[Signal], warmup: int) -> list[NDArray[np.float64]]:
@@ -228,7 +221,7 @@ def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y
         theta[: s.n_a] = _numerator(u, y, den, s.n_a, 2 if s.is_sandwich else 1, warmup)
         theta[s.n_a : s.n_a + s.nb] = den
         starts.append(theta)
-    costs = [_cost(prob, th) for th in starts]
+    costs = [cost_at(prob, th) for th in starts]
     order = [i for i in np.argsort(costs)[:4] if np.isfinite(costs[i])]
     out = []
     for linear in _search_linear(prob, [starts[i] for i in order], free, LINEAR_START_ITER)[:STATE_TOP]:
@@ -275,8 +268,15 @@ def pole_restarts(structure: Structure, prob: object, u: Signal | list[Signal], 
         start[sl_a] = _numerator(u, x_est, den, s.n_a, 1, warmup)
         start[sl_b] = den
         starts.append(start)
-    if POLE_SCREEN < len(starts):  # screened by the cost at the start (one simulation each)
-        starts = [starts[i] for i in np.argsort([_cost(prob, th) for th in starts])[:POLE_SCREEN]]
+    return _screened_and_refined(prob, starts, free)
+
+
+def _screened_and_refined(prob: object, starts: list[NDArray[np.float64]], free: NDArray[np.bool_]) -> list[OutputErrorFit]:
+    """The restarts' common end: the ``POLE_SCREEN`` starts of lowest cost (one simulation
+    each), a short search of the ``free`` parameters from each, and the ``POLE_TOP`` best
+    searched whole (the failures skipped)."""
+    if POLE_SCREEN < len(starts):
+        starts = [starts[i] for i in np.argsort([cost_at(prob, th) for th in starts])[:POLE_SCREEN]]
     out = []
     for fit in _search_linear(prob, starts, free, POLE_ITER)[:POLE_TOP]:
         try:
