@@ -149,10 +149,6 @@ def _member_detectable(x: dict[str, Any], verdict: str, thr: dict[str, float]) -
     return (False, False) if c is None else (c["z"] > thr["z"], c["R"] > thr["R"])
 
 
-def _pct(a: float) -> str:
-    return f"{100 * a:5.1f} %" if np.isfinite(a) else "  n/a"
-
-
 def thresholds(ok: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
     """T_f for z and R per family from its null cases (rule 2), and delta_f (rule 5)."""
     out: dict[str, dict[str, float]] = {}
@@ -170,7 +166,7 @@ def thresholds(ok: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
             print(f"  {fam:<12} {key}: median {np.median(vals):.3g}, T = {t:.3g} ({k} of {n}; 90 % interval [{lo:.3g}, {hi:.3g}])")
         out[fam]["delta"] = float(np.median([x["mse0"] / x["noise_energy"] - 1.0 for x in null]))
         said_none = np.mean([x["reported"] == "none" for x in null])
-        print(f"  {fam:<12} diagnoser says 'none' on {_pct(said_none)} of {len(null)}")
+        print(f"  {fam:<12} diagnoser says 'none' on {dc._pct(said_none)} of {len(null)}")
     return out
 
 
@@ -204,14 +200,14 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
             share = [float(np.mean([f[j] for f in flags])) for j in range(5)]
             res = float(np.median([x["residual_enr"] for x in sub]))
             summary["rows"][f"{name} {level:g}"] = dict(zip(("det_z", "det_R", "ideal", "told", "right"), share), n=len(sub), residual_enr=res)
-            print(f"{name:<36}{level:>4g}{len(sub):>4}{res:>8.2f}" + "".join(f"{_pct(s):>8}" for s in share))
+            print(f"{name:<36}{level:>4g}{len(sub):>4}{res:>8.2f}" + "".join(f"{dc._pct(s):>8}" for s in share))
             groups.setdefault(f"{spec.group} {level:g}", []).extend(flags)
     print("\n== per group and level")
     for key, flags in groups.items():
         share = [float(np.mean([f[j] for f in flags])) for j in range(5)]
         summary["groups"][key] = dict(zip(("det_z", "det_R", "ideal", "told", "right"), share), n=len(flags))
-        print(f"{key:<20} n {len(flags):>3}: det z {_pct(share[0])}, det R {_pct(share[1])}, ideal {_pct(share[2])}, "
-              f"told {_pct(share[3])}, diagnoser {_pct(share[4])}")  # fmt: skip
+        print(f"{key:<20} n {len(flags):>3}: det z {dc._pct(share[0])}, det R {dc._pct(share[1])}, ideal {dc._pct(share[2])}, "
+              f"told {dc._pct(share[3])}, diagnoser {dc._pct(share[4])}")  # fmt: skip
     return summary
 
 

@@ -157,17 +157,7 @@ def linear_start(structure: Structure, prob: object, u: Signal | list[Signal], y
     searched."""
     s = structure
     base, free = _identity(s)
-    delay = 2 if s.is_sandwich else 1
-    starts = []
-    for den in _denominators(s.nb) or [np.zeros(0)]:
-        theta = base.copy()
-        theta[: s.n_a] = _numerator(u, y, den, s.n_a, delay, warmup)
-        theta[s.n_a : s.n_a + s.nb] = den
-        starts.append(theta)
-    # a cheap first pass (one cost each), then LM from the two best
-    costs = [cost_at(prob, th) for th in starts]
-    order = [i for i in np.argsort(costs)[:2] if np.isfinite(costs[i])]
-    fits = _search_linear(prob, [starts[i] for i in order], free, LINEAR_START_ITER)
+    fits = _linear_fits(s, prob, base, free, _denominators(s.nb) or [np.zeros(0)], u, y, warmup, screened=2)
     if not fits:
         return None
     # a linear block the record does not determine (e.g. na = 3 on a pure sinusoid) is no start
@@ -215,6 +205,27 @@ def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y
     dens = _denominators(s.nb)
     if s.nb >= 2:  # a position that integrates: a pole at z = 1 (just inside) and another
         dens += [np.real(np.poly([_INTEGRATOR, p, *np.zeros(s.nb - 2)]))[1:] for p in _BESIDE_INTEGRATOR]
+    out = []
+    for linear in _linear_fits(s, prob, base, free, dens, u, y, warmup, screened=4)[:STATE_TOP]:
+        out += scale_starts(s, prob, linear)
+    return out
+
+
+def _linear_fits(
+    structure: Structure,
+    prob: object,
+    base: NDArray[np.float64],
+    free: NDArray[np.bool_],
+    dens: list[NDArray[np.float64]],
+    u: Signal | list[Signal],
+    y: Signal | list[Signal],
+    warmup: int,
+    screened: int,
+) -> list[OutputErrorFit]:
+    """Linear output-error fits of ``base``'s ``free`` parameters from each denominator of
+    ``dens`` (its numerator by least squares, the sandwich's at a delay of two samples): a cheap
+    first pass (one cost each), then LM from the ``screened`` cheapest; sorted by cost."""
+    s = structure
     starts = []
     for den in dens:
         theta = base.copy()
@@ -222,11 +233,8 @@ def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y
         theta[s.n_a : s.n_a + s.nb] = den
         starts.append(theta)
     costs = [cost_at(prob, th) for th in starts]
-    order = [i for i in np.argsort(costs)[:4] if np.isfinite(costs[i])]
-    out = []
-    for linear in _search_linear(prob, [starts[i] for i in order], free, LINEAR_START_ITER)[:STATE_TOP]:
-        out += scale_starts(s, prob, linear)
-    return out
+    order = [i for i in np.argsort(costs)[:screened] if np.isfinite(costs[i])]
+    return _search_linear(prob, [starts[i] for i in order], free, LINEAR_START_ITER)
 
 
 def scale_starts(structure: Structure, prob: object, linear: OutputErrorFit) -> list[NDArray[np.float64]]:
