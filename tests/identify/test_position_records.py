@@ -19,7 +19,7 @@ import pytest
 from scipy import signal
 
 import backlashid as bid
-from backlashid.identify import Structure, _starts
+from backlashid.identify import Structure, _starts, fit_hammerstein_backlash
 from backlashid.identify._valid import record_motion, why_not_acceptable
 from conftest import load_bench
 
@@ -157,3 +157,52 @@ def test_the_search_with_the_state_on_the_head_of_a_long_record(monkeypatch, kin
     assert with_head.simulation_rmse <= without.simulation_rmse * (1 + 1e-9)
     if kind == "white":  # this record's head holds the right basin
         assert with_head.simulation_rmse <= 1.3 * noise < without.simulation_rmse
+
+
+def _load_position_record(kind: str, seed: int, tau: float = 8.0, noise: float = 0.02) -> tuple[np.ndarray, np.ndarray, float]:
+    """A position-controlled motor x(t) = u(t-1) -> play -> a load whose velocity lags the
+    play's output (v' = (p - v) / tau, zero-order hold) and whose POSITION y is measured: the
+    integrator after the play (an input backlash before a load that integrates). The command
+    is centred, not the play's output, so the position also drifts with the play's asymmetry."""
+    rng = np.random.default_rng(seed)
+    n = PRE + N_EST + N_VAL
+    u = signal.lfilter([1.0], [1.0, -0.97], rng.standard_normal(n)) if kind == "lowpass" else _input(kind, rng, n)
+    u = 2.0 * (u - np.mean(u)) / np.std(u)
+    p = np.exp(-1.0 / tau)
+    # y(k) = y(k-1) + v(k-1), v(k) = p v(k-1) + (1 - p) P(k-1)
+    y = signal.lfilter([0.0, 1.0 - p], np.polymul([1.0, -1.0], [1.0, -p]), _play(np.r_[0.0, u[:-1]]))[PRE:]
+    return u[PRE:], y - np.mean(y) + noise * rng.standard_normal(y.size), noise
+
+
+@pytest.mark.parametrize("kind, seed", [("lowpass", 1), ("lowpass", 2), ("white", 3)])
+def test_a_load_position_after_an_input_backlash_is_fitted_to_the_noise(kind, seed):
+    # the integrator sits after the play: every start whose load block is a little off drifts
+    # over the record, and these fits ended 600-1900 noise stds off (or raised); the fit of the
+    # position's one-sample changes starts the search. Not every record is reached: of 12
+    # low-pass, white and step records, 9 fit the estimation record within 1.8 noise stds, and
+    # low-pass seed 0 and steps seed 3 still miss by 200-300
+    u, y, noise = _load_position_record(kind, seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = fit_hammerstein_backlash(u[:N_EST], y[:N_EST], 2, 2, 3, initial_state="estimate")
+    est = bid.evaluate(fit.model, u[:N_EST], y[:N_EST], init_samples=100).simulation_rmse
+    val = bid.evaluate(fit.model, u[N_EST:], y[N_EST:], init_samples=100).simulation_rmse
+    assert est <= 1.5 * noise and val <= 2.5 * noise, (est / noise, val / noise)
+
+
+def test_the_fit_of_the_output_changes_runs_once_per_record_searched(monkeypatch):
+    # the state's refinement may run twice or more in one fit (kept among the valid models,
+    # from the optimum): the velocity model is fitted once; a cascade has no output block
+    from backlashid.identify import _fit
+
+    calls = []
+    original = _fit._velocity_model
+    monkeypatch.setattr(_fit, "_velocity_model", lambda *args: calls.append(len(args[1])) or original(*args))
+    u, y, _ = _load_position_record("lowpass", 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit_hammerstein_backlash(u[:N_EST], y[:N_EST], 2, 2, 3, initial_state="estimate", valid=True)
+        assert calls == [N_EST]
+        calls.clear()
+        bid.fit_cascade(u[:N_EST], y[:N_EST], 2, 2, degree=3, initial_state="estimate")
+    assert calls == []

@@ -24,7 +24,7 @@ from .. import _core
 from .._docstrings import AXES, fill
 from .._validation import check_choice, check_flag, check_int, check_real, check_seed, identification_record, is_real, shown
 from ..errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
-from ..models import Model, ParameterCovariance, Prediction, sample_band
+from ..models import LinearBlock, Model, ParameterCovariance, Prediction, SandwichModel, sample_band
 from . import _records
 from ._checks import warn_if_suspicious
 from ._coarse import refine_whole
@@ -56,6 +56,9 @@ COARSE_RECORDS = 10
 # The search with the state (pole restarts, starts made with the state) runs on at most this
 # many first samples of a longer record; its best result is then refined on the whole record.
 STATE_SEARCH_SAMPLES = 8000
+# The integrator's pole (just inside z = 1: the guard keeps poles inside the unit circle) of
+# the start from the fit of the output's changes (_velocity_trial).
+AT_INTEGRATOR = 1.0 - 1e-6
 # Levenberg-Marquardt steps from each start of the data's x-scale (_starts.scale_starts) before
 # the candidates are compared; the cheapest is then searched to the end.
 SCALE_ITER = 20
@@ -936,6 +939,10 @@ class _Setup:
     valid: bool
     initial_state: str
     time_budget: float | None
+    velocity_start: bool
+    # the fits of the output's changes (_velocity_trial), by record length: one per record
+    # searched, however often the state's refinement runs
+    velocity_models: dict[tuple[int, ...], Model | None] = field(default_factory=dict)
 
     @property
     def guard(self) -> tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool]:
@@ -1030,19 +1037,19 @@ def _with_initial_state(
     s = setup
     if s.initial_state != "estimate" or refined is None:
         return refined, None
+    theta = refined.theta
     # the shifted record's first `shift` samples are zeros, right only from rest
     warmup = max(s.warmup, s.shift)
     with_state = functools.partial(
         _refine_with_state, s.structure, s.u, s.y, warmup, restarts=s.restarts, perturbation=s.perturbation, seed=s.seed,
-        check=(s.u, warmup, s.min_moving, s.valid),
+        check=(s.u, warmup, s.min_moving, s.valid), velocity=s if s.velocity_start and not s.shift else None,
     )  # fmt: skip
-    kept = refined
-    refined, state = with_state(kept, guard=guard)
+    refined, state = with_state(theta, guard=guard)
     if guard is None and refined.why is not None:
         # the state's refinement left the acceptable models (judged from the record's own
         # start): again, kept among them, where the start is one
         try:
-            refined, state = with_state(kept, guard=s.guard)
+            refined, state = with_state(theta, guard=s.guard)
         except BacklashIdError:
             pass
     state = [state] if s.several and isinstance(state, dict) else state  # one dict per record
@@ -1202,10 +1209,13 @@ def _fit(
     initial_state: str = "rest",
     time_budget: float | None = None,
     valid: bool = False,
+    velocity_start: bool = True,
 ) -> FitResult:
     """fit_cascade and fit_sandwich: the checked record and settings, the search (coarse to
     fine), the fallback to the lower degree, the initial state and the result, in stages; the
-    warnings are issued here, two frames below the caller's line."""
+    warnings are issued here, two frames below the caller's line. ``velocity_start`` (private)
+    lets the search with the state start from the fit of the output's changes
+    (:func:`_velocity_trial`); that fit itself does not."""
     arguments = dict(locals())  # the call, for a fit of lower degree (_lower_degree_fallback)
     _check_options(arguments)
     _check_settings(arguments)
@@ -1229,7 +1239,7 @@ def _fit(
         whole=structure.problem(u_arr, y_arr, warmup),  # the whole record's problem; a coarse stage compiles its segment's
         starts=starts, paper=paper, refine=refine, switching=switching, step=step, reflect=reflect, restarts=restarts,
         perturbation=perturbation, seed=seed, max_iter=max_iter, tol=tol, coarse=coarse, min_moving=min_moving, valid=valid,
-        initial_state=initial_state, time_budget=time_budget,
+        initial_state=initial_state, time_budget=time_budget, velocity_start=velocity_start,
     )
     run, k, refined, segment = _coarse_to_fine(setup)
     refined, why, checked, state = _acceptable_with_state(setup, refined, arguments)
@@ -1295,24 +1305,27 @@ def _refine_with_state(
     u: NDArray[np.float64] | list[NDArray[np.float64]],
     y: NDArray[np.float64] | list[NDArray[np.float64]],
     warmup: int,
-    refined: OutputErrorFit,
+    theta0: NDArray[np.float64],
     *,
     restarts: int,
     perturbation: float,
     seed: int,
     guard: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool] | None = None,
     check: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool] | None = None,
+    velocity: _Setup | None = None,
 ) -> tuple[_StateFit, dict[str, float] | list[dict[str, float]]]:
-    """The output-error refinement of the model's estimate with the record's initial state as
+    """The output-error refinement of the model's estimate ``theta0`` with the record's initial state as
     further parameters, from the state x0 = 0, w0 = 0 and (cascade) y_prev at the first
     measured output (y(1) = y_prev when the record starts holding). With ``check`` (u,
-    warm-up, min_moving, branches) the result says whether it is acceptable from that start."""
+    warm-up, min_moving, branches) the result says whether it is acceptable from that start;
+    with ``velocity`` (the fit's setup) the search also starts from the fit of the output's
+    changes (:func:`_velocity_trial`)."""
     with_state = dataclasses.replace(structure, initial_state=True)
     p0 = structure.size
     prob = raw = with_state.problem(u, y, warmup)
     names = prob.names  # several records: one state block per record (x0_1@1, ..)
     start = np.zeros(len(names))
-    start[:p0] = refined.theta
+    start[:p0] = theta0
     if not structure.is_sandwich:
         for k, first in _records.y_prev_starts(names, y, warmup):
             start[k] = first
@@ -1324,7 +1337,7 @@ def _refine_with_state(
         lo[:p0] = hi[:p0] = start[:p0]
         start = lm_holding_vanishing(prob, start, p0, lo, hi).theta
     fit = lm_holding_vanishing(prob, start, p0)  # y_prev's column vanishes when the first sample moves
-    fit = _searched_with_state(with_state, prob, raw, u, y, warmup, fit, names)
+    fit = _searched_with_state(with_state, prob, raw, u, y, warmup, fit, names, velocity)
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
     # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
     rng = np.random.default_rng(seed)
@@ -1379,14 +1392,16 @@ def _model_block(fit: OutputErrorFit, p0: int) -> tuple[NDArray[np.float64], int
 
 
 def _searched_with_state(
-    with_state: Structure, prob: Any, raw: Any, u: Any, y: Any, warmup: int, fit: OutputErrorFit, names: list[str]
+    with_state: Structure, prob: Any, raw: Any, u: Any, y: Any, warmup: int, fit: OutputErrorFit, names: list[str],
+    velocity: _Setup | None = None,
 ) -> OutputErrorFit:
     """A record that starts mid-motion (a position that integrates) misleads the search from
-    rest: the input block's poles searched again with the state, and the search's starts made
-    with the state free from the beginning (_starts.py), on the record's first
-    STATE_SEARCH_SAMPLES samples (the state is the start's either way); the best trial, refined
-    on the whole record, replaces ``fit`` where it ranks better and the record determines its
-    parameters."""
+    rest: the input block's poles searched again with the state, the search's starts made
+    with the state free from the beginning (_starts.py) and, with ``velocity`` (the fit's
+    setup), the start from the fit of the output's changes (:func:`_velocity_trial`), on the
+    record's first STATE_SEARCH_SAMPLES samples (the state is the start's either way); the
+    best trial, refined on the whole record, replaces ``fit`` where it ranks better and the
+    record determines its parameters."""
     p0 = dataclasses.replace(with_state, initial_state=False).size
     long = not isinstance(u, list) and len(u) > STATE_SEARCH_SAMPLES
     if long:  # one record: its head
@@ -1402,6 +1417,8 @@ def _searched_with_state(
             trials.append(lm_holding_vanishing(head, theta, p0))
         except BacklashIdError:
             continue
+    if velocity is not None:
+        trials += [t for t in [_velocity_trial(velocity, head, u, y, warmup, p0)] if t is not None]
     # the estimate's own rank on the searched samples
     at_fit = (not _is_valid(with_state, head, fit.theta), cost_at(head, fit.theta)) if long else rank(fit)
     best = min((t for t in trials if rank(t) < at_fit), key=rank, default=None)
@@ -1413,6 +1430,56 @@ def _searched_with_state(
             return fit
     whole = functools.partial(_state_rank, with_state, prob)
     return best if whole(best) < whole(fit) and _determined(best, p0, names) else fit
+
+
+def _velocity_trial(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: int) -> OutputErrorFit | None:
+    """A start for a position that integrates after the backlash (a sandwich whose output
+    block has a pole at z = 1, e.g. an input backlash before a load whose position is
+    measured): every start whose output block is a little off drifts over the record, and the
+    search from rest ends far from the optimum (4-100 noise stds on such drives). The output's
+    one-sample changes y(t) - y(t-1) (a velocity) do not drift: the structure with one output
+    pole fewer, fitted to them with its state, times (1 - AT_INTEGRATOR q^-1) in its output
+    block starts LM on ``prob`` (the model and the state of ``u``, ``y``), the state first
+    with the model held. None for a cascade, an output block without poles, or a failed fit."""
+    s = setup.structure
+    if not s.is_sandwich or s.ns < 1:
+        return None
+    key = tuple(len(ui) for ui in u) if isinstance(u, list) else (len(u),)
+    if key not in setup.velocity_models:
+        setup.velocity_models[key] = _velocity_model(setup, u, y, warmup)
+    model = setup.velocity_models[key]
+    if not isinstance(model, SandwichModel):
+        return None
+    try:
+        out = model.output_linear
+        den = np.polymul(np.r_[1.0, out.b], [1.0, -AT_INTEGRATOR])[1:]
+        start = np.zeros(len(prob.names))
+        start[:p0] = s.pack(SandwichModel(model.input_linear, model.backlash, LinearBlock(out.a, den, feedthrough=out.feedthrough)))
+        lo, hi = (np.asarray(b, dtype=np.float64).copy() for b in prob.bounds())
+        lo[:p0] = hi[:p0] = start[:p0]
+        at_state = lm_holding_vanishing(prob, start, p0, lo, hi)
+        return lm_holding_vanishing(prob, at_state.theta, p0)  # type: ignore[no-any-return]
+    except BacklashIdError:
+        return None
+
+
+def _velocity_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
+    """The fit's structure with one output pole fewer, fitted with its state to (u(t), y(t) -
+    y(t-1)), t >= 1, each record's (None where that fit fails)."""
+    s = setup.structure
+    several = isinstance(u, list)
+    du = [ui[1:] for ui in u] if several else u[1:]
+    dy = [np.diff(yi) for yi in y] if several else np.diff(y)
+    changes = dict(
+        initial=setup.starts[0], switching=setup.switching, step=setup.step, warmup=max(warmup - 1, 0), min_moving=setup.min_moving,
+        restarts=0, seed=setup.seed, initial_state="estimate", valid=setup.valid, velocity_start=False,
+    )  # fmt: skip
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            return _fit(dataclasses.replace(s, ns=s.ns - 1), du, dy, "y", **changes).model  # type: ignore[arg-type]
+    except BacklashIdError:
+        return None
 
 
 def _refit_at(prob: Any, theta: NDArray[np.float64], p0: int) -> OutputErrorFit | None:
