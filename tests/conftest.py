@@ -54,6 +54,18 @@ def load_bench(script: str, module: str | None = None):
         spec.loader.exec_module(mod)
     return sys.modules[name]
 
+
+def assert_final_seeds_refused(ceiling, generator, row: str, level: float) -> None:
+    """A ceiling script (``ceiling``, over the cases of ``generator``) refuses the final seeds
+    (``oracle_case(row, level, 0, "final")``) and draws its null cases from a seed set of its
+    own, disjoint from the tune and final sets."""
+    with pytest.raises(ValueError):
+        ceiling.oracle_case(row, level, 0, "final")
+    assert generator.SEED_SETS[ceiling.NULL_SET] not in (generator.SEED_SETS["tune"], generator.SEED_SETS["final"])
+    a = generator.case_rng(row, 0.0, 0, ceiling.NULL_SET).standard_normal(4)
+    b = generator.case_rng(row, 0.0, 0, "tune").standard_normal(4)
+    assert not np.allclose(a, b)
+
 X_MAX = 2.0  # inputs x of the backlash are drawn from [-X_MAX, X_MAX]
 
 
