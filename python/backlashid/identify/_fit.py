@@ -30,7 +30,7 @@ from ._checks import warn_if_suspicious
 from ._coarse import refine_whole
 from ._refine import OutputErrorFit, budget_hit, levenberg_marquardt, out_of_time, spectral_radius, time_budget
 from ._starts import cost_at, linear_start, output_pole_restarts, pole_restarts, scale_starts, state_starts
-from ._state import lm_holding_vanishing
+from ._state import lm_holding_vanishing, lm_state_first
 from ._structure import Structure
 from ._valid import ValidOnly, acceptable_motion, record_motion
 
@@ -1333,9 +1333,7 @@ def _refine_with_state(
         prob = ValidOnly(prob, with_state, *guard)  # type: ignore[assignment]
         # the state first, the model held: on the boundary of the valid models the joint
         # steps are rejected, and the state would stay at its start
-        lo, hi = (np.asarray(b, dtype=np.float64) for b in prob.bounds())
-        lo[:p0] = hi[:p0] = start[:p0]
-        start = lm_holding_vanishing(prob, start, p0, lo, hi).theta
+        start = lm_state_first(prob, start, p0).theta
     fit = lm_holding_vanishing(prob, start, p0)  # y_prev's column vanishes when the first sample moves
     fit = _searched_with_state(with_state, prob, raw, u, y, warmup, fit, names, velocity)
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
@@ -1436,7 +1434,8 @@ def _velocity_trial(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: i
     """A start for a position that integrates after the backlash (a sandwich whose output
     block has a pole at z = 1, e.g. an input backlash before a load whose position is
     measured): every start whose output block is a little off drifts over the record, and the
-    search from rest ends far from the optimum (4-100 noise stds on such drives). The output's
+    search from rest ends far from the optimum (on such drives from a few to about 2000 noise
+    stds off, where the true model fits to the noise). The output's
     one-sample changes y(t) - y(t-1) (a velocity) do not drift: the structure with one output
     pole fewer, fitted to them with its state, times (1 - AT_INTEGRATOR q^-1) in its output
     block starts LM on ``prob`` (the model and the state of ``u``, ``y``), the state first
@@ -1455,10 +1454,7 @@ def _velocity_trial(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: i
         den = np.polymul(np.r_[1.0, out.b], [1.0, -AT_INTEGRATOR])[1:]
         start = np.zeros(len(prob.names))
         start[:p0] = s.pack(SandwichModel(model.input_linear, model.backlash, LinearBlock(out.a, den, feedthrough=out.feedthrough)))
-        lo, hi = (np.asarray(b, dtype=np.float64).copy() for b in prob.bounds())
-        lo[:p0] = hi[:p0] = start[:p0]
-        at_state = lm_holding_vanishing(prob, start, p0, lo, hi)
-        return lm_holding_vanishing(prob, at_state.theta, p0)  # type: ignore[no-any-return]
+        return lm_holding_vanishing(prob, lm_state_first(prob, start, p0).theta, p0)  # type: ignore[no-any-return]
     except BacklashIdError:
         return None
 

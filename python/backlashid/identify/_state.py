@@ -512,6 +512,14 @@ def lm_holding_vanishing(prob: Any, theta: NDArray[np.float64], p0: int, lower: 
             lo[named[0]] = hi[named[0]] = theta[named[0]]
 
 
+def lm_state_first(prob: Any, theta: NDArray[np.float64], p0: int) -> Any:
+    """:func:`lm_holding_vanishing` over the state alone, the model's parameters (before
+    ``p0``) held at their values in ``theta``: a start's state fitted before the model moves."""
+    lo, hi = (np.asarray(b, dtype=np.float64).copy() for b in prob.bounds())
+    lo[:p0] = hi[:p0] = theta[:p0]
+    return lm_holding_vanishing(prob, theta, p0, lo, hi)
+
+
 def _dependent(prob: Any, theta: NDArray[np.float64], p0: int) -> list[int]:
     """Indices of the state's columns of the factor at theta that add nothing to the earlier
     state columns (zero, or a combination of them)."""
