@@ -206,3 +206,20 @@ def test_the_fit_of_the_output_changes_runs_once_per_record_searched(monkeypatch
         calls.clear()
         bid.fit_cascade(u[:N_EST], y[:N_EST], 2, 2, degree=3, initial_state="estimate")
     assert calls == []
+
+
+@pytest.mark.parametrize("kind, seed", [("lowpass", 1), ("white", 3)])
+def test_a_load_position_after_a_warm_up_is_fitted_to_the_noise(kind, seed):
+    # select_structure's setting warmup=20: the start from the output's changes had its state
+    # fitted where it reaches the cost through the play only (the white record ended 50 noise
+    # stds off), and on the low-pass record every LM from rest diverged and no search with the
+    # state ran (18936 noise stds, reason 'diverged')
+    u, y, noise = _load_position_record(kind, seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = fit_hammerstein_backlash(u[:N_EST], y[:N_EST], 2, 2, 3, initial_state="estimate", warmup=20)
+    assert fit.converged and fit.reason != "diverged", fit.reason
+    assert fit.simulation_rmse <= 1.3 * noise, fit.simulation_rmse / noise
+    val = bid.evaluate(fit.model, u[N_EST:], y[N_EST:], init_samples=100).simulation_rmse
+    assert val <= 1.5 * noise, val / noise
+
