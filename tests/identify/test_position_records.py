@@ -223,3 +223,20 @@ def test_a_load_position_after_a_warm_up_is_fitted_to_the_noise(kind, seed):
     val = bid.evaluate(fit.model, u[N_EST:], y[N_EST:], init_samples=100).simulation_rmse
     assert val <= 1.5 * noise, val / noise
 
+
+def test_the_selection_judges_its_tail_from_the_state_each_fit_estimated():
+    # the held-out tail simulated from the fit's own start (estimated over the whole head)
+    # continues the fit's simulation of the head exactly; from the first samples it would not
+    from backlashid.identify import _selection
+
+    u, y, noise = _load_position_record("white", 3)
+    u, y = u[:N_EST], y[:N_EST]
+    head = 2100
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = fit_hammerstein_backlash(u[:head], y[:head], 2, 2, 3, initial_state="estimate", warmup=20)
+    simulated = _selection._simulated(fit.model, u, y, 20, fit)
+    on_head = np.sqrt(np.mean((y - simulated)[20:head] ** 2))
+    assert on_head == pytest.approx(fit.simulation_rmse, rel=1e-6)
+    tail = np.sqrt(np.mean((y - simulated)[head:] ** 2))
+    assert tail <= 1.5 * noise, tail / noise

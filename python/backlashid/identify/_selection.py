@@ -26,7 +26,7 @@ from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ._checks import branch_problems
 from ._fit import FitResult, fit_cascade, fit_sandwich
 from ._hammerstein import fit_hammerstein_backlash
-from ._state import simulate_from_samples
+from ._state import model_state, simulate_from_samples
 from ._structure import Structure
 
 __all__ = ["StructureSelection", "select_structure"]
@@ -281,8 +281,9 @@ def select_structure(
     :func:`fit_cascade` / :func:`fit_sandwich` / :func:`fit_hammerstein_backlash` on the head of
     the record, the first ``1 - validation`` of it. Each fitted model is then simulated free-run
     from the start of the record (from rest, or with ``initial_state="estimate"`` among the
-    options from the state its first max(warmup, 20) samples imply, as a benchmark protocol
-    starts a model on a record that starts mid-motion) and its simulation RMSE on the held-out
+    options from the start its fit estimated over the head; where the model's orders cannot
+    hold that state, from the state the first max(warmup, 20) samples imply, as a benchmark
+    protocol starts a model on a record that starts mid-motion) and its simulation RMSE on the held-out
     tail is its validation error (the head serves as the tail's warm-up); its BIC is
     ``n log(s**2) + p log(n)`` with s the free-run simulation RMSE on the n estimation samples
     after ``warmup`` and p its number of parameters.
@@ -515,12 +516,12 @@ def _fit_and_validate(
     kind: str, structure: Structure, record: _Split, options: dict[str, Any]
 ) -> tuple[FitResult | None, float, BacklashIdError | None]:
     """The candidate's fit on the head and its validation RMSE on the tail (simulated from the
-    record's start), or (None, NaN, the error) if either fails."""
+    record's start: rest, or the state the fit estimated), or (None, NaN, the error) if either fails."""
     try:
         result = _fit_one(kind, record.u_est, record.y_est, structure, record.warmup, options)
         if result.model is None:
             raise NotConvergedError("the fit ended with no valid model", result)
-        simulated = _simulated(result.model, record.u, record.y, record.init)
+        simulated = _simulated(result.model, record.u, record.y, record.init, result)
         val = float(np.sqrt(np.mean((record.y[record.n_est :] - simulated[record.n_est :]) ** 2)))
         if not math.isfinite(val):
             raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
@@ -630,9 +631,18 @@ def _is_backlash(model: Any, u: NDArray[np.float64], warmup: int) -> bool:
         return False
 
 
-def _simulated(model: Any, u: NDArray[np.float64], y: NDArray[np.float64], init: int) -> NDArray[np.float64]:
+def _simulated(model: Any, u: NDArray[np.float64], y: NDArray[np.float64], init: int, fit: FitResult | None = None) -> NDArray[np.float64]:
     """The free run over the whole record from rest, or (``init`` > 0, an estimated start) from
-    the state its first ``init`` samples imply, as a benchmark protocol starts a model."""
+    the initial state ``fit`` estimated with the model on the record's head, else from the
+    state the record's first ``init`` samples imply, as a benchmark protocol starts a model.
+    The fit's state is the better start: estimated over the whole head, not its first samples
+    (a position that integrates holds a wrong start's offset for good; under steps the first
+    samples may not determine the play's memory)."""
+    if init and fit is not None and isinstance(fit.initial_state, dict):
+        try:
+            return np.asarray(model.simulate(u, initial_state=model_state(model, fit.initial_state)), dtype=np.float64)
+        except BacklashIdError:  # orders that cannot hold the state's free response: from the first samples
+            pass
     return np.asarray(simulate_from_samples(model, u, y, init) if init else model.simulate(u), dtype=np.float64)
 
 
@@ -654,7 +664,7 @@ def _refit_whole(
         return None, f"the refit on the whole record did not converge (reason {whole.reason!r})"
     assert head.model is not None
     skip = max(warmup, init)
-    errors = [float(np.sqrt(np.mean((y - _simulated(m, u, y, init))[skip:] ** 2))) for m in (whole.model, head.model)]
+    errors = [float(np.sqrt(np.mean((y - _simulated(f.model, u, y, init, f))[skip:] ** 2))) for f in (whole, head)]
     if not (math.isfinite(errors[0]) and errors[0] <= (1.0 + tolerance) * errors[1]):
         return None, (
             f"the refit on the whole record simulates it worse (RMSE {errors[0]:.4g}) than the fit on its head does "
