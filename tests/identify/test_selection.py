@@ -120,15 +120,15 @@ def test_bad_records_are_data_errors():
 
 
 def _whole_record_refit_of(degree: int, n: int, broken, monkeypatch):
-    """fit_cascade whose refit of degree ``degree`` on the whole record (``n`` samples) is
-    replaced by ``broken(result)``: a refit that diverged, as seen on a real positioning record."""
-    real = _selection.fit_cascade
+    """The refit of degree ``degree`` on the whole record (``n`` samples) replaced by
+    ``broken(result)``: a refit that diverged, as seen on a real positioning record."""
+    real = _selection.refit_with_estimate
 
-    def fit(u, y, na, nb, d, **kw):
-        result = real(u, y, na, nb, d, **kw)
-        return broken(result) if d == degree and len(u) == n else result
+    def refit(head, u, y, **kw):
+        result = real(head, u, y, **kw)
+        return broken(result) if head.structure.degree == degree and len(u) == n else result
 
-    monkeypatch.setattr(_selection, "fit_cascade", fit)
+    monkeypatch.setattr(_selection, "refit_with_estimate", refit)
 
 
 def test_a_refit_that_diverged_gives_way_to_the_next_candidate_with_the_reason(example1_data, monkeypatch):
@@ -155,13 +155,12 @@ def test_when_no_refit_holds_the_estimation_fit_is_returned_and_says_why(example
     def not_converged(result):
         return dataclasses.replace(result, converged=False, reason="iteration limit")
 
-    real = _selection.fit_cascade
+    real = _selection.refit_with_estimate
 
-    def fit(u, y, *args, **kw):  # every whole-record refit stops short
-        result = real(u, y, *args, **kw)
-        return not_converged(result) if len(u) == example1_data.u.size else result
+    def refit(head, u, y, **kw):  # every whole-record refit stops short
+        return not_converged(real(head, u, y, **kw))
 
-    monkeypatch.setattr(_selection, "fit_cascade", fit)
+    monkeypatch.setattr(_selection, "refit_with_estimate", refit)
     sel = select_structure(example1_data.u, example1_data.noisy, na=2, nb=2, degree=(2, 3))
     assert not sel.refitted and sel.fit.structure.degree == 3 and sel.structure.degree == 3
     assert sel.refit_error == "the refit on the whole record did not converge (reason 'iteration limit')"

@@ -34,7 +34,7 @@ from ._state import lm_holding_vanishing, lm_state_first
 from ._structure import Structure
 from ._valid import ValidOnly, acceptable_motion, record_motion
 
-__all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
+__all__ = ["FitResult", "fit_cascade", "fit_sandwich", "refit_with_estimate"]
 
 Switching = Literal["measured", "simulated"]
 
@@ -943,6 +943,9 @@ class _Setup:
     initial_state: str
     time_budget: float | None
     velocity_start: bool
+    # an estimate of the same structure (model and initial state, the with-state layout) the
+    # search with the state also starts from (refit)
+    head_start: NDArray[np.float64] | None
     # the fits of the output's changes (_velocity_trials), by record length: one per record
     # searched, however often the state's refinement runs
     velocity_models: dict[tuple[int, ...], Model | None] = field(default_factory=dict)
@@ -1050,7 +1053,7 @@ def _with_initial_state(
     warmup = max(s.warmup, s.shift)
     with_state = functools.partial(
         _refine_with_state, s.structure, s.u, s.y, warmup, restarts=s.restarts, perturbation=s.perturbation, seed=s.seed,
-        check=(s.u, warmup, s.min_moving, s.valid), velocity=s if s.velocity_start and not s.shift else None,
+        check=(s.u, warmup, s.min_moving, s.valid), velocity=s if s.velocity_start and not s.shift else None, estimate=s.head_start,
     )  # fmt: skip
     try:
         found, state = with_state(theta, guard=guard)
@@ -1222,6 +1225,7 @@ def _fit(
     time_budget: float | None = None,
     valid: bool = False,
     velocity_start: bool = True,
+    head_start: NDArray[np.float64] | None = None,
 ) -> FitResult:
     """fit_cascade and fit_sandwich: the checked record and settings, the search (coarse to
     fine), the fallback to the lower degree, the initial state and the result, in stages; the
@@ -1251,7 +1255,7 @@ def _fit(
         whole=structure.problem(u_arr, y_arr, warmup),  # the whole record's problem; a coarse stage compiles its segment's
         starts=starts, paper=paper, refine=refine, switching=switching, step=step, reflect=reflect, restarts=restarts,
         perturbation=perturbation, seed=seed, max_iter=max_iter, tol=tol, coarse=coarse, min_moving=min_moving, valid=valid,
-        initial_state=initial_state, time_budget=time_budget, velocity_start=velocity_start,
+        initial_state=initial_state, time_budget=time_budget, velocity_start=velocity_start, head_start=head_start,
     )
     run, k, refined, segment = _coarse_to_fine(setup)
     refined, why, checked, state = _acceptable_with_state(setup, refined, arguments, run.history[k])
@@ -1325,13 +1329,14 @@ def _refine_with_state(
     guard: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool] | None = None,
     check: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool] | None = None,
     velocity: _Setup | None = None,
+    estimate: NDArray[np.float64] | None = None,
 ) -> tuple[_StateFit, dict[str, float] | list[dict[str, float]]]:
     """The output-error refinement of the model's estimate ``theta0`` with the record's initial state as
     further parameters, from the state x0 = 0, w0 = 0 and (cascade) y_prev at the first
     measured output (y(1) = y_prev when the record starts holding). With ``check`` (u,
     warm-up, min_moving, branches) the result says whether it is acceptable from that start;
     with ``velocity`` (the fit's setup) the search also starts from the fit of the output's
-    changes (:func:`_velocity_trials`)."""
+    changes (:func:`_velocity_trials`), and with ``estimate`` (model and state) from it."""
     with_state = dataclasses.replace(structure, initial_state=True)
     p0 = structure.size
     prob = raw = with_state.problem(u, y, warmup)
@@ -1350,10 +1355,10 @@ def _refine_with_state(
         fit = lm_holding_vanishing(prob, start, p0)  # y_prev's column vanishes when the first sample moves
     except BacklashIdError:
         # no LM from this estimate (a start of a fit whose iterations diverged): the searches with the state only
-        fit = _searched_with_state(with_state, prob, raw, u, y, warmup, None, names, velocity)
+        fit = _searched_with_state(with_state, prob, raw, u, y, warmup, None, names, velocity, estimate)
         if fit is None:
             raise
-    fit = _searched_with_state(with_state, prob, raw, u, y, warmup, fit, names, velocity)
+    fit = _searched_with_state(with_state, prob, raw, u, y, warmup, fit, names, velocity, estimate)
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
     # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
     rng = np.random.default_rng(seed)
@@ -1410,21 +1415,22 @@ def _model_block(fit: OutputErrorFit, p0: int) -> tuple[NDArray[np.float64], int
 @overload
 def _searched_with_state(
     with_state: Structure, prob: Any, raw: Any, u: Any, y: Any, warmup: int, fit: OutputErrorFit, names: list[str],
-    velocity: _Setup | None = None,
+    velocity: _Setup | None = None, estimate: NDArray[np.float64] | None = None,
 ) -> OutputErrorFit: ...
 @overload
 def _searched_with_state(
     with_state: Structure, prob: Any, raw: Any, u: Any, y: Any, warmup: int, fit: None, names: list[str],
-    velocity: _Setup | None = None,
+    velocity: _Setup | None = None, estimate: NDArray[np.float64] | None = None,
 ) -> OutputErrorFit | None: ...
 def _searched_with_state(
     with_state: Structure, prob: Any, raw: Any, u: Any, y: Any, warmup: int, fit: OutputErrorFit | None, names: list[str],
-    velocity: _Setup | None = None,
+    velocity: _Setup | None = None, estimate: NDArray[np.float64] | None = None,
 ) -> OutputErrorFit | None:
     """A record that starts mid-motion (a position that integrates) misleads the search from
     rest: the input block's poles searched again with the state, the search's starts made
     with the state free from the beginning (_starts.py) and, with ``velocity`` (the fit's
-    setup), the start from the fit of the output's changes (:func:`_velocity_trials`), on the
+    setup), the start from the fit of the output's changes (:func:`_velocity_trials`) and LM from
+    ``estimate`` (model and state, e.g. the fit of the record's head), on the
     record's first STATE_SEARCH_SAMPLES samples (the state is the start's either way); the
     best trial, refined on the whole record, replaces ``fit`` where it ranks better and the
     record determines its parameters (without ``fit``: the best such trial, or None)."""
@@ -1433,27 +1439,29 @@ def _searched_with_state(
     if long:  # one record: its head
         u, y = u[:STATE_SEARCH_SAMPLES], y[:STATE_SEARCH_SAMPLES]
         raw = with_state.problem(u, y, warmup)
-        head = prob.on(raw, u) if isinstance(prob, ValidOnly) else raw
+        searched = prob.on(raw, u) if isinstance(prob, ValidOnly) else raw
     else:
-        head = prob
-    rank = functools.partial(_state_rank, with_state, head)
-    trials = [] if fit is None else [*pole_restarts(with_state, head, u, fit.theta, warmup), *output_pole_restarts(with_state, head, fit.theta)]
+        searched = prob
+    rank = functools.partial(_state_rank, with_state, searched)
+    trials = [] if fit is None else [*pole_restarts(with_state, searched, u, fit.theta, warmup), *output_pole_restarts(with_state, searched, fit.theta)]
     for theta in state_starts(with_state, raw, u, y, warmup):
         try:
-            trials.append(lm_holding_vanishing(head, theta, p0))
+            trials.append(lm_holding_vanishing(searched, theta, p0))
         except BacklashIdError:
             continue
     if velocity is not None:
-        trials += _velocity_trials(velocity, head, u, y, warmup, p0)
+        trials += _velocity_trials(velocity, searched, u, y, warmup, p0)
+    if estimate is not None:  # an estimate of the structure (a refit on a longer record): LM from it
+        trials += [t for t in [_from_estimate(searched, estimate, p0)] if t is not None]
     # the estimate's own rank on the searched samples
     if fit is None:
         at_fit = (True, np.inf)
     else:
-        at_fit = (not _is_valid(with_state, head, fit.theta), cost_at(head, fit.theta)) if long else rank(fit)
+        at_fit = (not _is_valid(with_state, searched, fit.theta), cost_at(searched, fit.theta)) if long else rank(fit)
     best = min((t for t in trials if rank(t) < at_fit), key=rank, default=None)
     if best is None:
         return fit
-    if long:
+    if long or not best.converged:  # a trial on the head, or one the iteration limit stopped: LM again from it
         best = _refit_at(prob, best.theta, p0)
         if best is None:
             return fit
@@ -1537,6 +1545,17 @@ def _velocity_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
             return _fit(dataclasses.replace(s, ns=s.ns - 1), du, dy, "y", **changes).model  # type: ignore[arg-type]
+    except BacklashIdError:
+        return None
+
+
+def _from_estimate(prob: Any, theta: NDArray[np.float64], p0: int) -> OutputErrorFit | None:
+    """LM on ``prob`` from an estimate (model and state), the state first with the model held
+    (None where it cannot start there)."""
+    if len(theta) != len(prob.names):
+        return None
+    try:
+        return lm_holding_vanishing(prob, lm_state_first(prob, theta, p0).theta, p0)  # type: ignore[no-any-return]
     except BacklashIdError:
         return None
 
@@ -1811,3 +1830,26 @@ def fit_sandwich(
     structure = Structure(na, nb, degree, nr, ns, feedthrough=feedthrough, output_feedthrough=output_feedthrough)
     with time_budget(options.get("time_budget")):  # as in fit_cascade
         return _fit(structure, u, w, "w", initial=initial, switching="simulated", step=step, **options)
+
+
+def refit_with_estimate(fit: FitResult, u: ArrayLike, y: ArrayLike, **options: Any) -> FitResult:
+    """``fit``'s structure fitted again, on the record ``u``, ``y`` (e.g. the whole record
+    after a fit on its head), as :func:`fit_cascade` / :func:`fit_sandwich` fit it with
+    ``options`` (their shared options; the structure's own are ``fit``'s). With
+    ``initial_state="estimate"`` and a fit that estimated its state on a record starting at
+    the same sample, the search with the state also starts from ``fit``'s estimate (model and
+    state) and keeps it where it ranks better: a fit from scratch on the longer record can land
+    in another basin (on position records of benches/structure_classes.py the head's basin,
+    refined, validated at 1.0 noise stds where the fit from scratch reached 2.8)."""
+    s = fit.structure
+    head = None
+    if options.get("initial_state") == "estimate" and isinstance(fit.initial_state, dict) and fit.model is not None:
+        names = dataclasses.replace(s, initial_state=True).names
+        if all(name in fit.initial_state for name in names[s.size :]):
+            head = np.r_[fit.theta, [fit.initial_state[name] for name in names[s.size :]]]
+    # the kind's own defaults, as its function has them (a sandwich's iterations simulate x)
+    own = inspect.signature(fit_sandwich if s.is_sandwich else fit_cascade).parameters
+    kind = {"switching": "simulated"} | {k: own[k].default for k in ("initial", "step", "switching") if k in own}
+    with time_budget(options.get("time_budget")):
+        return _fit(s, u, y, "w" if s.is_sandwich else "y", **kind, **options, head_start=head)
+

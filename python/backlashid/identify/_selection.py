@@ -24,7 +24,7 @@ from .._json import jsonable
 from .._validation import check_finite, check_flag, check_int, check_warmup, one_record, shown
 from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ._checks import branch_problems
-from ._fit import FitResult, fit_cascade, fit_sandwich
+from ._fit import FitResult, fit_cascade, fit_sandwich, refit_with_estimate
 from ._hammerstein import fit_hammerstein_backlash
 from ._state import model_state, simulate_from_samples
 from ._structure import Structure
@@ -563,7 +563,7 @@ def _first_refit_that_holds(
     for i in order:
         head = fits[i]
         assert head is not None
-        whole, why = _refit_whole(rows[i]["kind"], head, record.u, record.y, record.warmup, record.init, tolerance, options)
+        whole, why = _refit_whole(head, record.u, record.y, record.warmup, record.init, tolerance, options)
         rows[i]["refit_error"] = why
         if why is None:
             return i, whole, None
@@ -647,17 +647,19 @@ def _simulated(model: Any, u: NDArray[np.float64], y: NDArray[np.float64], init:
 
 
 def _refit_whole(
-    kind: str, head: FitResult, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, init: int, tolerance: float,
+    head: FitResult, u: NDArray[np.float64], y: NDArray[np.float64], warmup: int, init: int, tolerance: float,
     options: dict[str, Any],
 ) -> tuple[FitResult | None, str | None]:
-    """The refit of a candidate on the whole record and None, or None and why it is not kept:
-    it raised, did not converge, or simulates the whole record (free run from the validation's
-    start, after the warm-up) worse than the candidate's estimation fit, which it was meant to
-    improve (a refit that diverged into a pole at 1 is far worse)."""
+    """The refit of a candidate on the whole record (with an estimated state, its search also
+    from the candidate's estimate: :func:`refit_with_estimate`) and None, or None and why it is
+    not kept: it raised, did not converge, or simulates the whole record (free run from each
+    fit's start, after the warm-up) worse than the candidate's estimation fit, which it was
+    meant to improve (a refit that diverged into a pole at 1 is far worse)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)  # the candidate's own fit has shown its warnings
-            whole = _fit_one(kind, u, y, head.structure, warmup, options)
+            structural = ("feedthrough", "output_feedthrough")  # the head's structure has them
+            whole = refit_with_estimate(head, u, y, warmup=warmup, **{k: v for k, v in options.items() if k not in structural})
     except BacklashIdError as exc:
         return None, f"the refit on the whole record raised {_error_text(exc)}"
     if not whole.converged or whole.model is None:
