@@ -34,7 +34,7 @@ from ._state import lm_holding_vanishing, lm_state_first
 from ._structure import Structure
 from ._valid import ValidOnly, acceptable_motion, record_motion
 
-__all__ = ["FitResult", "fit_cascade", "fit_sandwich", "refit_with_estimate"]
+__all__ = ["FitResult", "fit_cascade", "fit_sandwich"]
 
 Switching = Literal["measured", "simulated"]
 
