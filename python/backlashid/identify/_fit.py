@@ -1452,7 +1452,7 @@ def _searched_with_state(
     if velocity is not None:
         trials += _velocity_trials(velocity, searched, u, y, warmup, p0)
     if estimate is not None:  # an estimate of the structure (a refit on a longer record): LM from it
-        trials += [t for t in [_from_estimate(searched, estimate, p0)] if t is not None]
+        trials += [t for t in [_state_first_then_all(searched, estimate, p0)] if t is not None]
     # the estimate's own rank on the searched samples
     if fit is None:
         at_fit = (True, np.inf)
@@ -1494,18 +1494,17 @@ def _velocity_trials(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: 
     den = np.polymul(np.r_[1.0, out.b], [1.0, -AT_INTEGRATOR])[1:]
     start = np.zeros(len(prob.names))
     start[:p0] = s.pack(SandwichModel(model.input_linear, model.backlash, LinearBlock(out.a, den, feedthrough=out.feedthrough)))
-    trials = []
-    try:
-        if warmup:  # the state first where it acts most, from the record's first sample: after a
-            # warm-up the integrator's state reaches the cost through the play only, and LM from
-            # the zero state stopped in a local minimum (a fit 38 noise stds off, 1.4 from 0)
+    if warmup:  # the state first where it acts most, from the record's first sample: after a
+        # warm-up the integrator's state reaches the cost through the play only, and LM from
+        # the zero state stopped in a local minimum (a fit 38 noise stds off, 1.4 from 0)
+        try:
             start = lm_state_first(with_state.problem(u, y, 0), start, p0).theta
-        trials.append(lm_holding_vanishing(prob, lm_state_first(prob, start, p0).theta, p0))
-    except BacklashIdError:
-        pass
+        except BacklashIdError:
+            pass  # the trials from the zero state
+    trials = [_state_first_then_all(prob, start, p0)]
     if not isinstance(u, list):
-        trials += [t for t in [_lengthened(with_state, prob, u, y, warmup, p0, start)] if t is not None]
-    return trials
+        trials.append(_lengthened(with_state, prob, u, y, warmup, p0, start))
+    return [t for t in trials if t is not None]
 
 
 def _lengthened(with_state: Structure, prob: Any, u: Any, y: Any, warmup: int, p0: int, theta: NDArray[np.float64]) -> OutputErrorFit | None:
@@ -1516,18 +1515,15 @@ def _lengthened(with_state: Structure, prob: Any, u: Any, y: Any, warmup: int, p
     tests/identify/test_position_records.py, fits 1.5-9 noise stds off reached 1.0-1.4). None
     where a stage fails."""
     n = FIRST_HEAD
-    try:
-        while True:
-            whole = n >= len(u)
-            head = prob if whole else with_state.problem(u[:n], y[:n], warmup)
-            if not whole and isinstance(prob, ValidOnly):
-                head = prob.on(head, u[:n])
-            fit = lm_holding_vanishing(head, lm_state_first(head, theta, p0).theta, p0)
-            if whole:
-                return fit  # type: ignore[no-any-return]
-            theta, n = fit.theta, 2 * n
-    except BacklashIdError:
-        return None
+    while True:
+        whole = n >= len(u)
+        head = prob if whole else with_state.problem(u[:n], y[:n], warmup)
+        if not whole and isinstance(prob, ValidOnly):
+            head = prob.on(head, u[:n])
+        fit = _state_first_then_all(head, theta, p0)
+        if whole or fit is None:
+            return fit
+        theta, n = fit.theta, 2 * n
 
 
 def _velocity_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
@@ -1549,9 +1545,10 @@ def _velocity_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
         return None
 
 
-def _from_estimate(prob: Any, theta: NDArray[np.float64], p0: int) -> OutputErrorFit | None:
-    """LM on ``prob`` from an estimate (model and state), the state first with the model held
-    (None where it cannot start there)."""
+def _state_first_then_all(prob: Any, theta: NDArray[np.float64], p0: int) -> OutputErrorFit | None:
+    """LM on ``prob`` from ``theta`` (model and state): the state first with the model held,
+    then all of them (None where it cannot start there): a start's state fitted before the
+    model moves (the velocity start, its lengthening heads, a refit's estimate)."""
     if len(theta) != len(prob.names):
         return None
     try:
