@@ -24,7 +24,7 @@ from .. import _core
 from .._docstrings import AXES, fill
 from .._validation import check_choice, check_flag, check_int, check_real, check_seed, identification_record, is_real, shown
 from ..errors import BacklashIdError, DataError, FitWarning, ModelError, NotConvergedError, NotIdentifiableError
-from ..models import LinearBlock, Model, ParameterCovariance, Prediction, SandwichModel, sample_band
+from ..models import CascadeModel, LinearBlock, Model, ParameterCovariance, Prediction, SandwichModel, sample_band
 from . import _records
 from ._checks import warn_if_suspicious
 from ._coarse import refine_whole
@@ -57,11 +57,15 @@ COARSE_RECORDS = 10
 # many first samples of a longer record; its best result is then refined on the whole record.
 STATE_SEARCH_SAMPLES = 8000
 # The integrator's pole (just inside z = 1: the guard keeps poles inside the unit circle) of
-# the start from the fit of the output's changes (_velocity_trials).
+# the starts from the fits of derived records (_derived_trials).
 AT_INTEGRATOR = 1.0 - 1e-6
 # The first window of that start's search on lengthening heads of the record (doubled to the
 # whole record): a model a little off drifts less over a short head (_lengthened).
 FIRST_HEAD = 300
+# A derived start's trial is kept where its integrator's time constant is at least this many
+# records (_integrates): the integrating drives of benches/structure_classes.py end with 1 - |z|
+# of 1e-12 to 1e-6 on 4000 samples (<= 2.5e-5 here), a slow mode on a short record 1.2e-3 on 400.
+INTEGRATOR_RECORDS = 10
 # Levenberg-Marquardt steps from each start of the data's x-scale (_starts.scale_starts) before
 # the candidates are compared; the cheapest is then searched to the end.
 SCALE_ITER = 20
@@ -942,13 +946,13 @@ class _Setup:
     valid: bool
     initial_state: str
     time_budget: float | None
-    velocity_start: bool
+    derived_starts: bool
     # an estimate of the same structure (model and initial state, the with-state layout) the
     # search with the state also starts from (refit)
     head_start: NDArray[np.float64] | None
-    # the fits of the output's changes (_velocity_trials), by record length: one per record
+    # the fits of derived records (_derived_trials), by kind and record length: one per record
     # searched, however often the state's refinement runs
-    velocity_models: dict[tuple[int, ...], Model | None] = field(default_factory=dict)
+    derived_models: dict[tuple[Callable[..., Model | None], tuple[int, ...]], Model | None] = field(default_factory=dict)
 
     @property
     def guard(self) -> tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool]:
@@ -1053,7 +1057,7 @@ def _with_initial_state(
     warmup = max(s.warmup, s.shift)
     with_state = functools.partial(
         _refine_with_state, s.structure, s.u, s.y, warmup, restarts=s.restarts, perturbation=s.perturbation, seed=s.seed,
-        check=(s.u, warmup, s.min_moving, s.valid), velocity=s if s.velocity_start and not s.shift else None, estimate=s.head_start,
+        check=(s.u, warmup, s.min_moving, s.valid), derived=s if s.derived_starts and not s.shift else None, estimate=s.head_start,
     )  # fmt: skip
     try:
         found, state = with_state(theta, guard=guard)
@@ -1224,14 +1228,14 @@ def _fit(
     initial_state: str = "rest",
     time_budget: float | None = None,
     valid: bool = False,
-    velocity_start: bool = True,
+    derived_starts: bool = True,
     head_start: NDArray[np.float64] | None = None,
 ) -> FitResult:
     """fit_cascade and fit_sandwich: the checked record and settings, the search (coarse to
     fine), the fallback to the lower degree, the initial state and the result, in stages; the
-    warnings are issued here, two frames below the caller's line. ``velocity_start`` (private)
-    lets the search with the state start from the fit of the output's changes
-    (:func:`_velocity_trials`); that fit itself does not."""
+    warnings are issued here, two frames below the caller's line. ``derived_starts`` (private)
+    lets the search with the state start from the fits of derived records
+    (:func:`_derived_trials`); those fits themselves do not."""
     arguments = dict(locals())  # the call, for a fit of lower degree (_lower_degree_fallback)
     _check_options(arguments)
     _check_settings(arguments)
@@ -1255,7 +1259,7 @@ def _fit(
         whole=structure.problem(u_arr, y_arr, warmup),  # the whole record's problem; a coarse stage compiles its segment's
         starts=starts, paper=paper, refine=refine, switching=switching, step=step, reflect=reflect, restarts=restarts,
         perturbation=perturbation, seed=seed, max_iter=max_iter, tol=tol, coarse=coarse, min_moving=min_moving, valid=valid,
-        initial_state=initial_state, time_budget=time_budget, velocity_start=velocity_start, head_start=head_start,
+        initial_state=initial_state, time_budget=time_budget, derived_starts=derived_starts, head_start=head_start,
     )
     run, k, refined, segment = _coarse_to_fine(setup)
     refined, why, checked, state = _acceptable_with_state(setup, refined, arguments, run.history[k])
@@ -1328,15 +1332,15 @@ def _refine_with_state(
     seed: int,
     guard: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool] | None = None,
     check: tuple[NDArray[np.float64] | list[NDArray[np.float64]], int, float, bool] | None = None,
-    velocity: _Setup | None = None,
+    derived: _Setup | None = None,
     estimate: NDArray[np.float64] | None = None,
 ) -> tuple[_StateFit, dict[str, float] | list[dict[str, float]]]:
     """The output-error refinement of the model's estimate ``theta0`` with the record's initial state as
     further parameters, from the state x0 = 0, w0 = 0 and (cascade) y_prev at the first
     measured output (y(1) = y_prev when the record starts holding). With ``check`` (u,
     warm-up, min_moving, branches) the result says whether it is acceptable from that start;
-    with ``velocity`` (the fit's setup) the search also starts from the fit of the output's
-    changes (:func:`_velocity_trials`), and with ``estimate`` (model and state) from it."""
+    with ``derived`` (the fit's setup) the search also starts from the fits of derived
+    records (:func:`_derived_trials`), and with ``estimate`` (model and state) from it."""
     with_state = dataclasses.replace(structure, initial_state=True)
     p0 = structure.size
     prob = raw = with_state.problem(u, y, warmup)
@@ -1355,10 +1359,10 @@ def _refine_with_state(
         fit = lm_holding_vanishing(prob, start, p0)  # y_prev's column vanishes when the first sample moves
     except BacklashIdError:
         # no LM from this estimate (a start of a fit whose iterations diverged): the searches with the state only
-        fit = _searched_with_state(with_state, prob, raw, u, y, warmup, None, names, velocity, estimate)
+        fit = _searched_with_state(with_state, prob, raw, u, y, warmup, None, names, derived, estimate)
         if fit is None:
             raise
-    fit = _searched_with_state(with_state, prob, raw, u, y, warmup, fit, names, velocity, estimate)
+    fit = _searched_with_state(with_state, prob, raw, u, y, warmup, fit, names, derived, estimate)
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
     # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
     rng = np.random.default_rng(seed)
@@ -1415,21 +1419,21 @@ def _model_block(fit: OutputErrorFit, p0: int) -> tuple[NDArray[np.float64], int
 @overload
 def _searched_with_state(
     with_state: Structure, prob: Any, raw: Any, u: Any, y: Any, warmup: int, fit: OutputErrorFit, names: list[str],
-    velocity: _Setup | None = None, estimate: NDArray[np.float64] | None = None,
+    derived: _Setup | None = None, estimate: NDArray[np.float64] | None = None,
 ) -> OutputErrorFit: ...
 @overload
 def _searched_with_state(
     with_state: Structure, prob: Any, raw: Any, u: Any, y: Any, warmup: int, fit: None, names: list[str],
-    velocity: _Setup | None = None, estimate: NDArray[np.float64] | None = None,
+    derived: _Setup | None = None, estimate: NDArray[np.float64] | None = None,
 ) -> OutputErrorFit | None: ...
 def _searched_with_state(
     with_state: Structure, prob: Any, raw: Any, u: Any, y: Any, warmup: int, fit: OutputErrorFit | None, names: list[str],
-    velocity: _Setup | None = None, estimate: NDArray[np.float64] | None = None,
+    derived: _Setup | None = None, estimate: NDArray[np.float64] | None = None,
 ) -> OutputErrorFit | None:
     """A record that starts mid-motion (a position that integrates) misleads the search from
     rest: the input block's poles searched again with the state, the search's starts made
-    with the state free from the beginning (_starts.py) and, with ``velocity`` (the fit's
-    setup), the start from the fit of the output's changes (:func:`_velocity_trials`) and LM from
+    with the state free from the beginning (_starts.py) and, with ``derived`` (the fit's
+    setup), the starts from the fits of derived records (:func:`_derived_trials`) and LM from
     ``estimate`` (model and state, e.g. the fit of the record's head), on the
     record's first STATE_SEARCH_SAMPLES samples (the state is the start's either way); the
     best trial, refined on the whole record, replaces ``fit`` where it ranks better and the
@@ -1449,8 +1453,8 @@ def _searched_with_state(
             trials.append(lm_holding_vanishing(searched, theta, p0))
         except BacklashIdError:
             continue
-    if velocity is not None:
-        trials += _velocity_trials(velocity, searched, u, y, warmup, p0)
+    if derived is not None:
+        trials += _derived_trials(derived, searched, u, y, warmup, p0)
     if estimate is not None:  # an estimate of the structure (a refit on a longer record): LM from it
         trials += [t for t in [_state_first_then_all(searched, estimate, p0)] if t is not None]
     # the estimate's own rank on the searched samples
@@ -1469,42 +1473,60 @@ def _searched_with_state(
     return best if (fit is None or whole(best) < whole(fit)) and _determined(best, p0, names) else fit
 
 
-def _velocity_trials(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: int) -> list[OutputErrorFit]:
-    """Starts for a position that integrates after the backlash (a sandwich whose output
-    block has a pole at z = 1, e.g. an input backlash before a load whose position is
-    measured): every start whose output block is a little off drifts over the record, and the
-    search from rest ends far from the optimum (on such drives from a few to about 2000 noise
-    stds off, where the true model fits to the noise). The output's
-    one-sample changes y(t) - y(t-1) (a velocity) do not drift: the structure with one output
-    pole fewer, fitted to them with its state, times (1 - AT_INTEGRATOR q^-1) in its output
-    block starts LM on ``prob`` (the model and the state of ``u``, ``y``), the state first
-    with the model held, directly and (one record) on lengthening heads of the record
-    (:func:`_lengthened`). None of them for a cascade, an output block without poles, or failed fits."""
+def _derived_trials(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: int) -> list[OutputErrorFit]:
+    """Starts for a position that integrates (an integrator in a block of the chain): every
+    start whose blocks are a little off drifts over the record, and the search from rest ends
+    far from the optimum (on such drives from a few to about 2000 noise stds off, where the
+    true model fits to the noise). The fits of derived records that do not drift give the
+    start, the integrator put back into the block it came from: the output's changes
+    (:func:`_velocity_model`, an integrator in the sandwich's output block) and the input's
+    sums (:func:`_summed_input_model`, one in the input block). Each starts LM on ``prob``
+    (the model and the state of ``u``, ``y``), the state first with the model held, directly
+    and (one record) on lengthening heads of the record (:func:`_lengthened`); a trial from
+    the input's sums is kept only where the record confirms the integrator (:func:`_integrates`)."""
     s = setup.structure
-    if not s.is_sandwich or s.ns < 1:
-        return []
-    key = tuple(len(ui) for ui in u) if isinstance(u, list) else (len(u),)
-    if key not in setup.velocity_models:
-        setup.velocity_models[key] = _velocity_model(setup, u, y, warmup)
-    model = setup.velocity_models[key]
-    if not isinstance(model, SandwichModel):
-        return []
     with_state = dataclasses.replace(s, initial_state=True)
-    out = model.output_linear
-    den = np.polymul(np.r_[1.0, out.b], [1.0, -AT_INTEGRATOR])[1:]
-    start = np.zeros(len(prob.names))
-    start[:p0] = s.pack(SandwichModel(model.input_linear, model.backlash, LinearBlock(out.a, den, feedthrough=out.feedthrough)))
-    if warmup:  # the state first where it acts most, from the record's first sample: after a
-        # warm-up the integrator's state reaches the cost through the play only, and LM from
-        # the zero state stopped in a local minimum (a fit 38 noise stds off, 1.4 from 0)
-        try:
-            start = lm_state_first(with_state.problem(u, y, 0), start, p0).theta
-        except BacklashIdError:
-            pass  # the trials from the zero state
-    trials = [_state_first_then_all(prob, start, p0)]
-    if not isinstance(u, list):
-        trials.append(_lengthened(with_state, prob, u, y, warmup, p0, start))
-    return [t for t in trials if t is not None]
+    lengths = tuple(len(ui) for ui in u) if isinstance(u, list) else (len(u),)
+    kept: list[OutputErrorFit] = []
+    # the output's changes are kept whatever the pole: their start also leaves the local minimum of
+    # sandwiches that do not integrate (structure_classes' sandwich #6, first seeds: 4.96 -> 1.01 noise stds)
+    for derive, denominator in ((_velocity_model, None), (_summed_input_model, "b")):
+        if (derive, lengths) not in setup.derived_models:  # one fit per record searched
+            setup.derived_models[derive, lengths] = derive(setup, u, y, warmup)
+        model = setup.derived_models[derive, lengths]
+        if model is None:
+            continue
+        start = np.zeros(len(prob.names))
+        start[:p0] = s.pack(model)
+        if warmup:  # the state first where it acts most, from the record's first sample: after a
+            # warm-up the integrator's state reaches the cost through the play only, and LM from
+            # the zero state stopped in a local minimum (a fit 38 noise stds off, 1.4 from 0)
+            try:
+                start = lm_state_first(with_state.problem(u, y, 0), start, p0).theta
+            except BacklashIdError:
+                pass  # the trials from the zero state
+        trials = [_state_first_then_all(prob, start, p0)]
+        if not isinstance(u, list):
+            trials.append(_lengthened(with_state, prob, u, y, warmup, p0, start))
+        kept += [t for t in trials if t is not None and (denominator is None or _integrates(s, t.theta, denominator, max(lengths)))]
+    return kept
+
+
+def _integrates(structure: Structure, theta: NDArray[np.float64], denominator: str, samples: int) -> bool:
+    """Whether the block's slowest pole (denominator "b": the input block's, "s": the output
+    block's) is still an integrator over a record of ``samples``: a time constant of at least
+    INTEGRATOR_RECORDS records. A derived start assumes one; where LM moved it inside, the
+    record has a slow mode at most, which a short record fits to its drift (the coupled drives'
+    400 samples: a pole at 0.9988, a test record 15 times the published ARX's error)."""
+    coefficients = getattr(structure.unpack(theta[: structure.size]), denominator)
+    slowest = float(np.max(np.abs(np.roots(np.r_[1.0, coefficients])))) if coefficients else 0.0
+    return 1.0 - slowest <= 1.0 / (INTEGRATOR_RECORDS * samples)
+
+
+def _with_integrator(block: LinearBlock) -> LinearBlock:
+    """``block`` times 1 / (1 - AT_INTEGRATOR q^-1): one pole more, just inside z = 1."""
+    den = np.polymul(np.r_[1.0, block.b], [1.0, -AT_INTEGRATOR])[1:]
+    return LinearBlock(block.a, den, feedthrough=block.feedthrough)
 
 
 def _lengthened(with_state: Structure, prob: Any, u: Any, y: Any, warmup: int, p0: int, theta: NDArray[np.float64]) -> OutputErrorFit | None:
@@ -1526,29 +1548,62 @@ def _lengthened(with_state: Structure, prob: Any, u: Any, y: Any, warmup: int, p
         theta, n = fit.theta, 2 * n
 
 
-def _velocity_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
-    """The fit's structure with one output pole fewer, fitted with its state to (u(t), y(t) -
-    y(t-1)), t >= 1, each record's (None where that fit fails)."""
-    s = setup.structure
-    several = isinstance(u, list)
-    du = [ui[1:] for ui in u] if several else u[1:]
-    dy = [np.diff(yi) for yi in y] if several else np.diff(y)
+def _derived_fit(setup: _Setup, structure: Structure, u: Any, y: Any, warmup: int) -> Model | None:
+    """``structure`` fitted with its state to a derived record (u, y) with the fit's settings,
+    without derived starts of its own (None where that fit fails)."""
+    s = setup
     changes = dict(
-        initial=setup.starts[0], switching=setup.switching, step=setup.step, warmup=max(warmup - 1, 0), min_moving=setup.min_moving,
-        restarts=0, seed=setup.seed, initial_state="estimate", valid=setup.valid, velocity_start=False,
+        initial=s.starts[0], switching=s.switching, step=s.step, warmup=warmup, min_moving=s.min_moving,
+        restarts=0, seed=s.seed, initial_state="estimate", valid=s.valid, derived_starts=False,
     )  # fmt: skip
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
-            return _fit(dataclasses.replace(s, ns=s.ns - 1), du, dy, "y", **changes).model  # type: ignore[arg-type]
+            return _fit(structure, u, y, "y", **changes).model  # type: ignore[arg-type]
     except BacklashIdError:
         return None
+
+
+def _velocity_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
+    """An integrator in the sandwich's output block (a load whose position is measured): the
+    structure with one output pole fewer, fitted to (u(t), y(t) - y(t-1)), t >= 1, each
+    record's (a velocity does not drift), times (1 - AT_INTEGRATOR q^-1) in its output block.
+    None for a cascade, an output block without poles, or a failed fit."""
+    s = setup.structure
+    if not s.is_sandwich or s.ns < 1:
+        return None
+    several = isinstance(u, list)
+    du = [ui[1:] for ui in u] if several else u[1:]
+    dy = [np.diff(yi) for yi in y] if several else np.diff(y)
+    model = _derived_fit(setup, dataclasses.replace(s, ns=s.ns - 1), du, dy, max(warmup - 1, 0))
+    if not isinstance(model, SandwichModel):
+        return None
+    return SandwichModel(model.input_linear, model.backlash, _with_integrator(model.output_linear))
+
+
+def _summed_input_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
+    """An integrator in the input block (a velocity-commanded motor whose position drives the
+    play): the structure with one input pole fewer, fitted to (U(t), y(t)), U(t) = u(0) + ..
+    + u(t) less its mean over the record (each record's; the motor's offset is the branches'
+    to absorb), times (1 - AT_INTEGRATOR q^-1) in its input block. None for an input block
+    without poles or a failed fit."""
+    s = setup.structure
+    if s.nb < 1:
+        return None
+    several = isinstance(u, list)
+    summed = [np.cumsum(ui) - np.mean(np.cumsum(ui)) for ui in (u if several else [u])]
+    model = _derived_fit(setup, dataclasses.replace(s, nb=s.nb - 1), summed if several else summed[0], y, warmup)
+    if isinstance(model, SandwichModel):
+        return SandwichModel(_with_integrator(model.input_linear), model.backlash, model.output_linear)
+    if isinstance(model, CascadeModel):
+        return CascadeModel(_with_integrator(model.linear), model.backlash)
+    return None
 
 
 def _state_first_then_all(prob: Any, theta: NDArray[np.float64], p0: int) -> OutputErrorFit | None:
     """LM on ``prob`` from ``theta`` (model and state): the state first with the model held,
     then all of them (None where it cannot start there): a start's state fitted before the
-    model moves (the velocity start, its lengthening heads, a refit's estimate)."""
+    model moves (the derived starts, their lengthening heads, a refit's estimate)."""
     if len(theta) != len(prob.names):
         return None
     try:
