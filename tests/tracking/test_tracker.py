@@ -205,3 +205,21 @@ def test_plot_draws_every_parameter_with_its_band(tmp_path, start: bid.FitResult
     assert values.shape == se.shape == (1000,)
     with pytest.raises(DataError):
         r.parameter("c_X")
+
+
+def test_plot_draws_the_batch_fits_value_as_a_reference(start: bid.FitResult) -> None:  # type: ignore[no-untyped-def]
+    # the batch fit beside the tracked values: a fit (by name), a mapping or p values give the
+    # same dotted line at the fit's value in every panel, inside the panel's y range
+    u, y = stepped(6000, 5999, seed=3)  # the step at the last sample: constant before it
+    r = track(u, y, start, forgetting=0.999, every=20)
+    for reference in (start, dict(start.parameters), list(start.parameters.values())):
+        fig = r.plot(reference=reference)
+        for ax, name in zip(fig.axes, r.names):
+            (line,) = [line for line in ax.lines if line.get_label() == "batch fit"]
+            assert line.get_ydata()[0] == pytest.approx(start.parameters[name], rel=1e-12)
+            lo, hi = ax.get_ylim()
+            assert lo < start.parameters[name] < hi
+    with pytest.raises(DataError, match="c_L"):
+        r.plot(reference={k: v for k, v in start.parameters.items() if k != "c_L"})
+    with pytest.raises(DataError, match="11 values"):
+        r.plot(reference=[1.0, 2.0])

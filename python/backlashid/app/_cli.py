@@ -288,7 +288,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     The tracker (backlashid.track) starts from --model, or from a cascade fitted on the first
     --fit-samples samples, and updates every parameter with each sample; its detector raises
     an alarm when the dead-band width c_L + c_R changes. Parameters are in model units (the
-    start's scaling applied to the signals).
+    start's scaling applied to the signals); the figure draws the start's batch fit dotted.
     """
     from ..identify import Scaling, fit_cascade
     from ..tracking import Tracker
@@ -321,6 +321,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     if drift is not None:
         options["drift"] = drift
     tracker = Tracker(start, **options)
+    batch = tracker.parameters  # the start's: a batch fit (here or in --model), the figure's reference
     result = tracker.update(u, y, every=every)
     columns: dict[str, Any] = {"sample": result.samples}
     for k, name in enumerate(result.names):
@@ -348,7 +349,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
 
         plt = pyplot()
         plots.mkdir(parents=True, exist_ok=True)
-        fig = result.plot()
+        fig = result.plot(reference=batch)
         click.echo(f"wrote {_save(plt, fig, plots / 'parameters.png')}")
 
 

@@ -116,7 +116,9 @@ class TrackResult:
         k = self.names.index(name)
         return self.theta[:, k], self.standard_errors[:, k]
 
-    def plot(self, *, truth: ArrayLike | None = None, path: str | None = None, columns: int = 3) -> Any:
+    def plot(
+        self, *, truth: ArrayLike | None = None, reference: Any = None, path: str | None = None, columns: int = 3
+    ) -> Any:
         """Every parameter over time with its +-2 standard-error band, and the alarms.
 
         Parameters
@@ -124,6 +126,11 @@ class TrackResult:
         truth : array_like, optional
             The true parameters, drawn dashed: p values (constant) or one row of p per row
             of :attr:`theta`.
+        reference : FitResult or mapping or array_like, optional
+            A batch fit's parameters, drawn dotted as a constant: a fit of the tracked
+            structure (its ``parameters``), a mapping from every name in :attr:`names` to its
+            value, or p values in that order. A tracked value far from it over a long stretch
+            is a change, or a model that does not fit the record.
         path : str, optional
             Save the figure there (any format matplotlib writes, e.g. ``params.png``).
         columns : int, default 3
@@ -137,7 +144,8 @@ class TrackResult:
         Raises
         ------
         DataError
-            If ``truth`` has the wrong shape.
+            If ``truth`` has the wrong shape, or ``reference`` misses a parameter or has
+            another number of values.
         BacklashIdError
             If matplotlib is not installed.
 
@@ -148,6 +156,10 @@ class TrackResult:
         >>> fig = bid.track(d.u, d.noisy, bid.example1(), noise_std=d.noise_std).plot()
         >>> len(fig.axes)
         11
+        >>> batch = bid.fit_cascade(d.u, d.noisy, 2, 2, degree=3)
+        >>> fig = bid.track(d.u, d.noisy, batch).plot(reference=batch)
+        >>> fig.axes[0].get_lines()[-1].get_label()
+        'batch fit'
         """
         plt = pyplot()
         p = len(self.names)
@@ -158,6 +170,7 @@ class TrackResult:
                 true = np.broadcast_to(true, self.theta.shape)
             if true.shape != self.theta.shape:
                 raise DataError(f"truth has shape {true.shape}: give {p} values or an array of shape {self.theta.shape}")
+        batch = None if reference is None else _reference_values(reference, self.names)
         cols = max(1, min(int(columns), p))
         rows = -(-p // cols)
         fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.4 * rows), sharex=True, squeeze=False)
@@ -169,9 +182,12 @@ class TrackResult:
             ax.plot(t, v, color="C0", linewidth=0.9, label="tracked")
             if true is not None:
                 ax.plot(t, true[:, k], color="k", linestyle="--", linewidth=0.9, label="true")
+            if batch is not None:
+                ax.axhline(batch[k], color="C2", linestyle=":", linewidth=1.2, label="batch fit")
             for alarm in self.alarms:
                 ax.axvline(alarm.sample, color="C3", linewidth=0.8, alpha=0.7)
-            ax.set_ylim(*_settled_limits(v, s, None if true is None else true[:, k]))
+            shown = [x for x in (None if true is None else true[:, k], None if batch is None else batch[k : k + 1]) if x is not None]
+            ax.set_ylim(*_settled_limits(v, s, np.concatenate(shown) if shown else None))
             ax.set_title(name, fontsize=10)
             ax.tick_params(labelsize=8)
             ax.locator_params(axis="x", nbins=5)
@@ -191,6 +207,21 @@ class TrackResult:
         if path is not None:
             fig.savefig(path, dpi=120)
         return fig
+
+
+def _reference_values(reference: Any, names: list[str]) -> NDArray[np.float64]:
+    """The p values of a plot's ``reference``: a fit's or a mapping's parameters by name, or p
+    values in the order of ``names``."""
+    values = getattr(reference, "parameters", reference)  # a FitResult: its parameters by name
+    if isinstance(values, dict):
+        missing = [name for name in names if name not in values]
+        if missing:
+            raise DataError(f"reference has no {', '.join(missing)}: give a fit of the tracked structure or every one of {names}")
+        return np.array([float(values[name]) for name in names])
+    arr = as_signal(values, "reference")
+    if arr.shape != (len(names),):
+        raise DataError(f"reference has shape {arr.shape}: give {len(names)} values, one per parameter of {names}")
+    return arr
 
 
 SETTLING = 0.05  # the first share of the samples whose wide start does not set a panel's y range
