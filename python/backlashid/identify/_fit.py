@@ -62,7 +62,7 @@ AT_INTEGRATOR = 1.0 - 1e-6
 # The first window of that start's search on lengthening heads of the record (doubled to the
 # whole record): a model a little off drifts less over a short head (_lengthened).
 FIRST_HEAD = 300
-# A derived start's trial is kept where its integrator's time constant is at least this many
+# A trial from the input's sums is kept where its integrator's time constant is at least this many
 # records (_integrates): the integrating drives of benches/structure_classes.py end with 1 - |z|
 # of 1e-12 to 1e-6 on 4000 samples (<= 2.5e-5 here), a slow mode on a short record 1.2e-3 on 400.
 INTEGRATOR_RECORDS = 10
