@@ -63,7 +63,7 @@ AT_INTEGRATOR = 1.0 - 1e-6
 # whole record): a model a little off drifts less over a short head (_lengthened).
 FIRST_HEAD = 300
 # A trial from the input's sums is kept where its integrator's time constant is at least this many
-# records (_integrates): the integrating drives of benches/structure_classes.py end with 1 - |z|
+# records (_input_integrates): the integrating drives of benches/structure_classes.py end with 1 - |z|
 # of 1e-12 to 1e-6 on 4000 samples (<= 2.5e-5 here), a slow mode on a short record 1.2e-3 on 400.
 INTEGRATOR_RECORDS = 10
 # Levenberg-Marquardt steps from each start of the data's x-scale (_starts.scale_starts) before
@@ -1483,14 +1483,14 @@ def _derived_trials(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: i
     sums (:func:`_summed_input_model`, one in the input block). Each starts LM on ``prob``
     (the model and the state of ``u``, ``y``), the state first with the model held, directly
     and (one record) on lengthening heads of the record (:func:`_lengthened`); a trial from
-    the input's sums is kept only where the record confirms the integrator (:func:`_integrates`)."""
+    the input's sums is kept only where the record confirms the integrator (:func:`_input_integrates`)."""
     s = setup.structure
     with_state = dataclasses.replace(s, initial_state=True)
     lengths = tuple(len(ui) for ui in u) if isinstance(u, list) else (len(u),)
     kept: list[OutputErrorFit] = []
     # the output's changes are kept whatever the pole: their start also leaves the local minimum of
     # sandwiches that do not integrate (structure_classes' sandwich #6, first seeds: 4.96 -> 1.01 noise stds)
-    for derive, denominator in ((_velocity_model, None), (_summed_input_model, "b")):
+    for derive, confirmed in ((_velocity_model, False), (_summed_input_model, True)):
         if (derive, lengths) not in setup.derived_models:  # one fit per record searched
             setup.derived_models[derive, lengths] = derive(setup, u, y, warmup)
         model = setup.derived_models[derive, lengths]
@@ -1508,18 +1508,18 @@ def _derived_trials(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: i
         trials = [_state_first_then_all(prob, start, p0)]
         if not isinstance(u, list):
             trials.append(_lengthened(with_state, prob, u, y, warmup, p0, start))
-        kept += [t for t in trials if t is not None and (denominator is None or _integrates(s, t.theta, denominator, max(lengths)))]
+        kept += [t for t in trials if t is not None and (not confirmed or _input_integrates(s, t.theta, max(lengths)))]
     return kept
 
 
-def _integrates(structure: Structure, theta: NDArray[np.float64], denominator: str, samples: int) -> bool:
-    """Whether the block's slowest pole (denominator "b": the input block's, "s": the output
-    block's) is still an integrator over a record of ``samples``: a time constant of at least
-    INTEGRATOR_RECORDS records. A derived start assumes one; where LM moved it inside, the
-    record has a slow mode at most, which a short record fits to its drift (the coupled drives'
-    400 samples: a pole at 0.9988, a test record 15 times the published ARX's error)."""
-    coefficients = getattr(structure.unpack(theta[: structure.size]), denominator)
-    slowest = float(np.max(np.abs(np.roots(np.r_[1.0, coefficients])))) if coefficients else 0.0
+def _input_integrates(structure: Structure, theta: NDArray[np.float64], samples: int) -> bool:
+    """Whether the input block's slowest pole is still an integrator over a record of
+    ``samples``: a time constant of at least INTEGRATOR_RECORDS records. The start from the
+    input's sums assumes one; where LM moved it inside, the record has a slow mode at most,
+    which a short record fits to its drift (the coupled drives' 400 samples: a pole at 0.9988,
+    a test record 15 times the published ARX's error)."""
+    b = structure.unpack(theta[: structure.size]).b
+    slowest = float(np.max(np.abs(np.roots(np.r_[1.0, b])))) if b else 0.0
     return 1.0 - slowest <= 1.0 / (INTEGRATOR_RECORDS * samples)
 
 
@@ -1591,7 +1591,7 @@ def _summed_input_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | N
     if s.nb < 1:
         return None
     several = isinstance(u, list)
-    summed = [np.cumsum(ui) - np.mean(np.cumsum(ui)) for ui in (u if several else [u])]
+    summed = [c - c.mean() for c in (np.cumsum(ui) for ui in (u if several else [u]))]
     model = _derived_fit(setup, dataclasses.replace(s, nb=s.nb - 1), summed if several else summed[0], y, warmup)
     if isinstance(model, SandwichModel):
         return SandwichModel(_with_integrator(model.input_linear), model.backlash, model.output_linear)
