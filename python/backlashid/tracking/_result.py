@@ -180,13 +180,15 @@ class TrackResult:
             v, s = self.theta[:, k], self.standard_errors[:, k]
             ax.fill_between(t, v - 2 * s, v + 2 * s, color="C0", alpha=0.25, linewidth=0, label="+-2 s.e.")
             ax.plot(t, v, color="C0", linewidth=0.9, label="tracked")
+            shown = []  # the lines beside the estimate, inside the panel's y range
             if true is not None:
                 ax.plot(t, true[:, k], color="k", linestyle="--", linewidth=0.9, label="true")
+                shown.append(true[:, k])
             if batch is not None:
                 ax.axhline(batch[k], color="C2", linestyle=":", linewidth=1.2, label="batch fit")
+                shown.append(batch[k : k + 1])
             for alarm in self.alarms:
                 ax.axvline(alarm.sample, color="C3", linewidth=0.8, alpha=0.7)
-            shown = [x for x in (None if true is None else true[:, k], None if batch is None else batch[k : k + 1]) if x is not None]
             ax.set_ylim(*_settled_limits(v, s, np.concatenate(shown) if shown else None))
             ax.set_title(name, fontsize=10)
             ax.tick_params(labelsize=8)
