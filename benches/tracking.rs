@@ -10,7 +10,7 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use backlashid_core::tracking::{DetectorOptions, Method, Options, Sink, Tracker};
+use backlashid_core::tracking::{DetectorOptions, Method, Options, Orders, Sink, Tracker};
 use backlashid_core::CascadeModel;
 use criterion::{BenchmarkId, Criterion, SamplingMode, Throughput};
 use rand::rngs::StdRng;
@@ -97,7 +97,16 @@ fn tracker(method: Method, forgetting: f64, drift: f64) -> Tracker {
         noise_memory: 1e4,
     };
     let det = DetectorOptions::for_forgetting(0.9999);
-    Tracker::new(2, 2, 3, &THETA, &cov, 1e-3, 100.0, &options, Some(det)).unwrap()
+    Tracker::new(
+        Orders::cascade(2, 2, 3),
+        &THETA,
+        &cov,
+        1e-3,
+        100.0,
+        &options,
+        Some(det),
+    )
+    .unwrap()
 }
 
 /// Track the record from the start; the trajectory buffers are allocated outside the timing.

@@ -282,7 +282,7 @@ class Tracker:
     def __new__(
         cls, na: int, nb: int, degree: int, theta0: list[float], covariance: _F, noise_var: float,
         noise_count: float, method: str, forgetting: float, drift: list[float], noise_memory: float,
-        detector: tuple[int, int, float, float, int] | None,
+        detector: tuple[int, int, float, float, int] | None, nr: int = 0, ns: int = 0,
     ) -> Self: ...
     @property
     def size(self) -> int: ...

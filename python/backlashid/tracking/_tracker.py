@@ -1,4 +1,5 @@
-"""The streaming tracker of a cascade (rust/core/src/tracking) and ``track`` for a record."""
+"""The streaming tracker of a cascade, sandwich or input backlash (rust/core/src/tracking) and
+``track`` for a record."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from .._threads import Serialised
 from .._validation import as_signal, check_choice, check_flag, check_int, check_noise_std, check_real
 from ..errors import DataError, ModelError
 from ..identify import FitResult, Structure
-from ..models import CascadeModel
+from ..models import CascadeModel, SandwichModel
 from ._result import Alarm, TrackResult
 
 __all__ = ["Tracker", "track"]
@@ -25,10 +26,23 @@ _MOST = 2**62  # every / spacing: whole sample counts the core holds (u64)
 
 
 def _structure(value: Any) -> Structure:
-    """The tracked structure: a cascade without feedthrough or initial state."""
-    if value.is_sandwich or value.feedthrough:
-        raise ModelError(f"tracking takes a cascade without feedthrough, got {value}")
-    return Structure(value.na, value.nb, value.degree)
+    """The tracked structure: a cascade or sandwich without feedthroughs or initial state."""
+    if value.feedthrough or value.output_feedthrough:
+        raise ModelError(
+            f"tracking takes blocks without feedthrough, got {value}: fit the structure without feedthrough to track it"
+        )
+    return Structure(value.na, value.nb, value.degree, value.nr, value.ns)
+
+
+def _model_structure(model: CascadeModel | SandwichModel) -> Structure:
+    if isinstance(model, SandwichModel):
+        lin, out = model.input_linear, model.output_linear
+        if lin.feedthrough or out.feedthrough:
+            raise ModelError("tracking takes a sandwich without feedthroughs")
+        return Structure(lin.na, lin.nb, model.backlash.degree, out.na, out.nb)
+    if model.linear.feedthrough:
+        raise ModelError("tracking takes a cascade without feedthrough")
+    return Structure(model.linear.na, model.linear.nb, model.backlash.degree)
 
 
 def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDArray[np.float64] | None, float | None]:
@@ -41,11 +55,8 @@ def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDA
         p = structure.size
         cov = np.asarray(fit.covariance, dtype=np.float64)[:p, :p]
         return structure, structure.pack(fit.model), cov if np.all(np.isfinite(cov)) else None, float(fit.noise_std)
-    if isinstance(model_or_structure, CascadeModel):
-        lin, bl = model_or_structure.linear, model_or_structure.backlash
-        if lin.feedthrough:
-            raise ModelError("tracking takes a cascade without feedthrough")
-        structure = Structure(lin.na, lin.nb, bl.degree)
+    if isinstance(model_or_structure, (CascadeModel, SandwichModel)):
+        structure = _model_structure(model_or_structure)
         cov = None
         pc = getattr(model_or_structure, "covariance", None)
         if pc is not None and list(pc.names) == structure.names:
@@ -56,9 +67,12 @@ def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDA
         names = structure.names
         theta = np.zeros(structure.size)
         theta[: structure.na] = 1.0 / structure.na  # a, b: unit static gain, no poles
-        theta[names.index("m_R1")] = 1.0
+        theta[names.index("m_R1")] = 1.0  # r, s: w(t) = y(t-1)
         return structure, theta, None, None
-    raise ModelError(f"model_or_structure must be a FitResult, CascadeModel or Structure, got {type(model_or_structure).__name__}")
+    raise ModelError(
+        "model_or_structure must be a FitResult, CascadeModel, SandwichModel or Structure, "
+        f"got {type(model_or_structure).__name__}"
+    )
 
 
 def _drift(drift: Any, names: list[str]) -> list[float]:
@@ -83,19 +97,23 @@ def _drift(drift: Any, names: list[str]) -> list[float]:
 
 
 class Tracker:
-    """A recursive estimator that follows a cascade's parameters sample by sample.
+    """A recursive estimator that follows the parameters of a cascade, a sandwich or an input
+    backlash (the sandwich of :func:`~backlashid.fit_hammerstein_backlash`) sample by sample.
 
     Each sample updates the estimate by Ljung's recursive prediction-error method on the
     output error (``method="prediction_error"``: the simulated output of the current
-    estimate and its derivatives by the sensitivity recursions of the batch refinement) or
-    by recursive least squares on the paper's quasi-linear regression (``"regression"``:
-    eq 17-21, the row of eq 18 with x and the switching from the current estimate; an
-    equation-error method, biased under output noise). Old samples are forgotten
+    estimate and its derivatives by the sensitivity recursions of the batch refinement, for
+    the sandwich filtered by its output block) or by recursive least squares on the paper's
+    quasi-linear regression (``"regression"``: the cascade's eq 17-21, the row of eq 18 with
+    x and the switching from the current estimate; the sandwich's eq 30-34, the row of eq 33
+    with the measured output's lags; an equation-error method, biased under output noise).
+    Both blocks of a sandwich start at rest: start from a fit of the record's first samples
+    and track the samples after them. Old samples are forgotten
     exponentially (``forgetting`` = lambda, a window of about 1 / (1 - lambda) samples),
     and/or the parameters are modelled as random walks with the given ``drift`` rates (the
     Kalman filter's P + Q). The covariance is kept as a square root (Potter), so it stays
     positive semi-definite; standard errors are its diagonal scaled by a running estimate of
-    the noise variance. A step that would make the linear block unstable or m_R1 <= 0 is
+    the noise variance. A step that would make a linear block unstable or m_R1 <= 0 is
     rejected and a negative width projected to 0; forgetting pauses while the covariance is
     very large (anti-windup, for stretches without excitation). The state is a fixed set of p x p numbers:
     memory does not grow with the record, and a pickled tracker continues with the same bits.
@@ -112,9 +130,11 @@ class Tracker:
 
     Parameters
     ----------
-    model_or_structure : FitResult or CascadeModel or Structure
+    model_or_structure : FitResult or CascadeModel or SandwichModel or Structure
         The start: a batch fit (its model, covariance and noise level: the recommended start,
-        e.g. :func:`~backlashid.fit_cascade` on the first samples), a model (with its fit's
+        e.g. :func:`~backlashid.fit_cascade`, :func:`~backlashid.fit_sandwich` or
+        :func:`~backlashid.fit_hammerstein_backlash` on the first samples, without
+        feedthrough), a model (with its fit's
         covariance if it carries one), or a structure (a neutral start with a wide prior;
         the prediction-error method needs a good start, so prefer a fit).
     forgetting : float, optional
@@ -149,7 +169,7 @@ class Tracker:
     Raises
     ------
     ModelError
-        If the start is not a cascade without feedthrough, is unstable or has m_R1 <= 0.
+        If the start has a feedthrough, is unstable or has m_R1 <= 0.
     DataError
         If an option is out of range or the covariance has the wrong shape.
 
@@ -168,7 +188,7 @@ class Tracker:
 
     def __init__(
         self,
-        model_or_structure: FitResult | CascadeModel | Structure,
+        model_or_structure: FitResult | CascadeModel | SandwichModel | Structure,
         *,
         forgetting: float | None = None,
         drift: float | Mapping[str, float] | ArrayLike | None = None,
@@ -236,13 +256,16 @@ class Tracker:
             rates,
             float(memory),
             det,
+            structure.nr,
+            structure.ns,
         )
         self._native = Serialised(self._build(self._args))  # shared across threads: one call at a time
 
     @staticmethod
     def _build(args: tuple[Any, ...]) -> Any:
-        na, nb, degree, theta0, cov, var, count, method, lam, rates, memory, det = args
-        return _core.Tracker(na, nb, degree, theta0, np.asarray(cov), var, count, method, lam, rates, memory, det)
+        na, nb, degree, theta0, cov, var, count, method, lam, rates, memory, det, *output = args
+        nr, ns = output or (0, 0)  # a cascade pickled before sandwiches could be tracked
+        return _core.Tracker(na, nb, degree, theta0, np.asarray(cov), var, count, method, lam, rates, memory, det, nr, ns)
 
     @property
     def names(self) -> list[str]:
@@ -315,7 +338,7 @@ class Tracker:
         return None if state is None else bool(state[2])
 
     @property
-    def model(self) -> CascadeModel:
+    def model(self) -> CascadeModel | SandwichModel:
         """The current estimate as a model."""
         return self._structure.model(self.theta)  # type: ignore[return-value]
 
@@ -396,9 +419,14 @@ def _restore(args: tuple[Any, ...], structure: Structure, state: list[float]) ->
 
 
 def track(
-    u: ArrayLike, y: ArrayLike, model_or_structure: FitResult | CascadeModel | Structure, *, every: int = 1, **options: Any
+    u: ArrayLike,
+    y: ArrayLike,
+    model_or_structure: FitResult | CascadeModel | SandwichModel | Structure,
+    *,
+    every: int = 1,
+    **options: Any,
 ) -> TrackResult:
-    """Track a cascade's parameters over a whole record (a :class:`Tracker` run once).
+    """Track a model's parameters over a whole record (a :class:`Tracker` run once).
 
     Parameters
     ----------
@@ -406,7 +434,7 @@ def track(
         Input u(t), 1-D, finite.
     y : array_like
         Measured output y(t), the same length, finite.
-    model_or_structure : FitResult or CascadeModel or Structure
+    model_or_structure : FitResult or CascadeModel or SandwichModel or Structure
         The start (:class:`Tracker`).
     every : int, default 1
         Record the estimate after every ``every``-th sample only.
@@ -425,7 +453,7 @@ def track(
     DataError
         If the record or an option is invalid.
     ModelError
-        If the start is not a stable cascade without feedthrough.
+        If the start is unstable or has a feedthrough.
 
     Examples
     --------

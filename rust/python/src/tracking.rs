@@ -1,9 +1,9 @@
 //! The online identification of `backlashid._core` (rust/core/src/tracking): the recursive
-//! estimator of a cascade with its change detector. A block's trajectory crosses as two
+//! estimator of a cascade or sandwich with its change detector. A block's trajectory crosses as two
 //! (rows, p) arrays, the alarms as tuples; the state as a flat list of numbers (`save`).
 
 use backlashid_core::guard;
-use backlashid_core::tracking::{DetectorOptions, Method, Options, Sink, Tracker};
+use backlashid_core::tracking::{DetectorOptions, Method, Options, Orders, Sink, Tracker};
 use numpy::PyArrayMethods;
 use pyo3::prelude::*;
 
@@ -22,7 +22,7 @@ pub(crate) struct PyTracker(Tracker);
 impl PyTracker {
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (na, nb, degree, theta0, covariance, noise_var, noise_count, method, forgetting, drift, noise_memory, detector))]
+    #[pyo3(signature = (na, nb, degree, theta0, covariance, noise_var, noise_count, method, forgetting, drift, noise_memory, detector, nr=0, ns=0))]
     fn new(
         na: usize,
         nb: usize,
@@ -36,6 +36,8 @@ impl PyTracker {
         drift: Vec<f64>,
         noise_memory: f64,
         detector: Option<DetectorIn>,
+        nr: usize,
+        ns: usize,
     ) -> PyResult<Self> {
         let method = match method {
             "regression" => Method::Regression,
@@ -66,10 +68,15 @@ impl PyTracker {
                     holdoff,
                 },
             );
-        let tracker = Tracker::new(
+        let orders = Orders {
             na,
             nb,
             degree,
+            nr,
+            ns,
+        };
+        let tracker = Tracker::new(
+            orders,
             &theta0,
             &cov,
             noise_var,

@@ -7,17 +7,24 @@ use super::detector::{Alarm, Detector, DETECTOR_SAVED};
 use super::{Method, Options};
 use crate::error::{Error, Result};
 
-/// theta's positions (`identify::problem::Layout`, the cascade without feedthrough).
+/// theta's positions (`identify::problem::Layout`, without feedthroughs): a, b, c_L,
+/// m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn, then for the sandwich r_2..r_nr, s_1..s_ns (r_1 = 1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Dims {
     pub na: usize,
     pub nb: usize,
     pub n: usize,
+    /// The output block's r_1..r_nr (eq 29); 0 for a cascade.
+    pub nr: usize,
+    pub ns: usize,
 }
 
 impl Dims {
     pub fn p(&self) -> usize {
-        self.na + self.nb + 2 * self.n + 1
+        self.r() + self.nr.saturating_sub(1) + self.ns
+    }
+    pub fn sandwich(&self) -> bool {
+        self.nr > 0
     }
     fn c_l(&self) -> usize {
         self.na + self.nb
@@ -28,7 +35,20 @@ impl Dims {
     fn c_r(&self) -> usize {
         self.m_r1() + 1
     }
+    /// r_2's position (after m_Rn).
+    fn r(&self) -> usize {
+        self.c_r() + self.n
+    }
+    /// s_1's position.
+    fn s(&self) -> usize {
+        self.r() + self.nr.saturating_sub(1)
+    }
 }
+
+/// Lags of the sandwich's output block a tracker keeps: nr, ns <= `MAX_OUTPUT_ORDER` (one
+/// more y lag for the held target of eq 34).
+pub const MAX_OUTPUT_ORDER: usize = 7;
+const OUT_LAGS: usize = MAX_OUTPUT_ORDER + 1;
 
 /// Where a sample's output goes: the trajectory (theta and standard errors of recorded
 /// samples, p values each) and the alarms.
@@ -82,6 +102,18 @@ pub(crate) struct Engine<const W: usize> {
     psi: [f64; W],
     /// y_hat(t-1): the simulated backlash memory of the current estimate.
     y_hat: f64,
+    /// The sandwich's output block (eq 29, r_1 = 1): y_hat(t-1), y_hat(t-2), .. the
+    /// backlash's simulated output; w(t-1), .. (the simulated output for the prediction
+    /// error, the measured one in the regression's row of eq 33); for the prediction error
+    /// their sensitivities d y_hat / d theta, d w_hat / d theta at those lags.
+    y_out: [f64; OUT_LAGS],
+    w_out: [f64; OUT_LAGS],
+    psi_y: [[f64; W]; OUT_LAGS],
+    psi_w: [[f64; W]; OUT_LAGS],
+    /// The regression: the input block's and backlash's part of eq (33)'s row at t - 1 (the
+    /// cascade row of eq 18 one sample back) and whether the backlash moved then.
+    phi_prev: [f64; W],
+    moved_prev: bool,
     /// Held samples not yet folded into P (regression: their rows are zero).
     pending: f64,
     t: u64,
@@ -271,6 +303,12 @@ impl<const W: usize> Engine<W> {
             wx: [0.0; W],
             psi: [0.0; W],
             y_hat: 0.0,
+            y_out: [0.0; OUT_LAGS],
+            w_out: [0.0; OUT_LAGS],
+            psi_y: [[0.0; W]; OUT_LAGS],
+            psi_w: [[0.0; W]; OUT_LAGS],
+            phi_prev: [0.0; W],
+            moved_prev: false,
             pending: 0.0,
             t: 0,
             rejected: 0,
@@ -419,9 +457,11 @@ impl<const W: usize> Engine<W> {
             .map_or(u64::MAX, |d| d.options.spacing);
         let mut to_reading = spacing - self.t % spacing;
         for (&ut, &yt) in u.iter().zip(y) {
-            match self.method {
-                Method::PredictionError => self.step_pe(ut, yt)?,
-                Method::Regression => self.step_regression(ut, yt)?,
+            match (self.method, self.dims.sandwich()) {
+                (Method::PredictionError, false) => self.step_pe(ut, yt)?,
+                (Method::Regression, false) => self.step_regression(ut, yt)?,
+                (Method::PredictionError, true) => self.step_pe_sandwich(ut, yt)?,
+                (Method::Regression, true) => self.step_regression_sandwich(ut, yt)?,
             }
             self.t += 1;
             to_record -= 1;
@@ -494,6 +534,58 @@ impl<const W: usize> Engine<W> {
     /// the update with e(t) = y(t) - y_hat(t).
     #[inline(always)]
     fn step_pe(&mut self, ut: f64, yt: f64) -> Result<()> {
+        let xt = self.inner_pe(ut)?;
+        let psi = self.psi;
+        self.update(&psi, yt - self.y_hat, xt)
+    }
+
+    /// The sandwich's prediction-error sample: the cascade part's y_hat(t), psi_y(t)
+    /// (`inner_pe`), then w_hat(t) = y_hat(t-1) + sum_i>=2 r_i y_hat(t-i) - sum_j s_j
+    /// w_hat(t-j) (eq 29, r_1 = 1) and its sensitivities by the same recursion: d w_hat / d
+    /// theta = sum_i r_i psi_y(t-i) - sum_j s_j psi_w(t-j), plus y_hat(t-i) in r_i's column
+    /// and -w_hat(t-j) in s_j's; the update with e(t) = w(t) - w_hat(t).
+    #[inline(always)]
+    fn step_pe_sandwich(&mut self, ut: f64, wt: f64) -> Result<()> {
+        let xt = self.inner_pe(ut)?;
+        let Dims { nr, ns, .. } = self.dims;
+        let (r0, s0) = (self.dims.r(), self.dims.s());
+        let mut w = self.y_out[0];
+        let mut psi = self.psi_y[0];
+        for i in 1..nr {
+            let (ri, yl) = (self.theta[r0 + i - 1], self.y_out[i]);
+            w += ri * yl;
+            for k in 0..W {
+                psi[k] += ri * self.psi_y[i][k];
+            }
+            psi[r0 + i - 1] += yl;
+        }
+        for j in 0..ns {
+            let (sj, wl) = (self.theta[s0 + j], self.w_out[j]);
+            w -= sj * wl;
+            for k in 0..W {
+                psi[k] -= sj * self.psi_w[j][k];
+            }
+            psi[s0 + j] -= wl;
+        }
+        if !w.is_finite() {
+            return Err(diverged(self.t));
+        }
+        self.y_out.copy_within(..OUT_LAGS - 1, 1);
+        self.y_out[0] = self.y_hat;
+        self.psi_y.copy_within(..OUT_LAGS - 1, 1);
+        self.psi_y[0] = self.psi;
+        self.w_out.copy_within(..OUT_LAGS - 1, 1);
+        self.w_out[0] = w;
+        self.psi_w.copy_within(..OUT_LAGS - 1, 1);
+        self.psi_w[0] = psi;
+        self.update(&psi, wt - w, xt)
+    }
+
+    /// The cascade part of a prediction-error sample: x(t), y_hat(t) and psi(t) = d y_hat(t)
+    /// / d theta (the input block's and backlash's columns; psi held while the backlash
+    /// holds) with the current estimate, the lags moved on; returns x(t).
+    #[inline(always)]
+    fn inner_pe(&mut self, ut: f64) -> Result<f64> {
         let d = self.dims;
         let (na, nb, n) = (d.na, d.nb, d.n);
         let (c_l, m_r1, c_r) = (d.c_l(), d.m_r1(), d.c_r());
@@ -563,8 +655,7 @@ impl<const W: usize> Engine<W> {
         self.wu[0] = fu;
         self.wx[0] = fx;
         self.push_lags(ut, xt);
-        let psi = self.psi;
-        self.update(&psi, yt - self.y_hat, xt)
+        Ok(xt)
     }
 
     /// One sample of the paper's quasi-linear form: x(t) and the switching of eq (25)-(26)
@@ -573,6 +664,69 @@ impl<const W: usize> Engine<W> {
     /// forgetting and drift act on P (folded in at the next moving sample).
     #[inline(always)]
     fn step_regression(&mut self, ut: f64, yt: f64) -> Result<()> {
+        let (moving, phi, xt) = self.inner_regression(ut)?;
+        if moving {
+            self.fold_pending();
+            self.update(&phi, yt - self.y_hat, xt)
+        } else {
+            self.hold();
+            Ok(())
+        }
+    }
+
+    /// The sandwich's regression sample (eq 33-34): the row Phi(t) is the cascade part's row
+    /// at t - 1 (zero if the backlash held then), y_hat(t-2..t-nr) in r's columns and
+    /// -w(t-1..t-ns) (measured) in s's; the target w(t) - y_hat(t-2) [1 - f_1(t-1)] [1 -
+    /// f_2(t-1)]; the error against the current estimate, e = target - Phi' theta. A zero row
+    /// (nr = 1, ns = 0 and a hold) is a held sample as in the cascade.
+    #[inline(always)]
+    fn step_regression_sandwich(&mut self, ut: f64, wt: f64) -> Result<()> {
+        let (moving, phi_now, xt) = self.inner_regression(ut)?;
+        let Dims { nr, ns, .. } = self.dims;
+        let (r0, s0) = (self.dims.r(), self.dims.s());
+        let (mut phi, mut target) = if self.moved_prev {
+            (self.phi_prev, wt)
+        } else {
+            ([0.0; W], wt - self.y_out[1])
+        };
+        for i in 1..nr {
+            phi[r0 + i - 1] = self.y_out[i];
+        }
+        for j in 0..ns {
+            phi[s0 + j] = -self.w_out[j];
+        }
+        for k in 0..W {
+            target -= phi[k] * self.theta[k];
+        }
+        self.y_out.copy_within(..OUT_LAGS - 1, 1);
+        self.y_out[0] = self.y_hat;
+        self.w_out.copy_within(..OUT_LAGS - 1, 1);
+        self.w_out[0] = wt;
+        self.phi_prev = phi_now;
+        self.moved_prev = moving;
+        if phi.iter().any(|v| *v != 0.0) {
+            self.fold_pending();
+            self.update(&phi, target, xt)
+        } else {
+            self.hold();
+            Ok(())
+        }
+    }
+
+    /// A held sample's row is zero: only forgetting and drift act (folded into P at the next
+    /// update, `fold_pending`).
+    #[inline(always)]
+    fn hold(&mut self) {
+        self.pending += 1.0;
+        self.s1 *= self.lambda;
+        self.s2 *= self.lambda * self.lambda;
+    }
+
+    /// The cascade part of a regression sample: x(t) and the switching of eq (25)-(26) from
+    /// the current estimate, y_hat(t) and the row phi(t) of eq (18) (zero while the backlash
+    /// holds), the lags moved on; returns (moving, phi(t), x(t)).
+    #[inline(always)]
+    fn inner_regression(&mut self, ut: f64) -> Result<(bool, [f64; W], f64)> {
         let d = self.dims;
         let (na, nb, n) = (d.na, d.nb, d.n);
         let (c_l, m_r1, c_r) = (d.c_l(), d.m_r1(), d.c_r());
@@ -618,15 +772,7 @@ impl<const W: usize> Engine<W> {
             return Err(diverged(self.t));
         }
         self.push_lags(ut, xt);
-        if moving {
-            self.fold_pending();
-            self.update(&phi, yt - self.y_hat, xt)?;
-        } else {
-            self.pending += 1.0;
-            self.s1 *= self.lambda;
-            self.s2 *= self.lambda * self.lambda;
-        }
-        Ok(())
+        Ok((moving, phi, xt))
     }
 
     /// P of the held samples: P lambda^-h (S lambda^(-h/2)); their drift joins `q_wait`.
@@ -726,9 +872,11 @@ impl<const W: usize> Engine<W> {
         };
         let rising = slope(1.0, &cand[c_l + 1..c_l + n], xt + cand[c_l]) > 0.0
             && slope(cand[m_r1], &cand[c_r + 1..c_r + n], xt - c_right) > 0.0;
+        let (s0, ns) = (self.dims.s(), self.dims.ns);
         if cand[m_r1] > 0.0
             && rising
             && stable::<W>(&cand[na..na + nb])
+            && stable::<W>(&cand[s0..s0 + ns])
             && cand[..p].iter().all(|v| v.is_finite())
         {
             self.theta = cand;
@@ -790,6 +938,15 @@ impl<const W: usize> Engine<W> {
             self.t as f64,
             self.rejected as f64,
         ]);
+        if self.dims.sandwich() {
+            out.extend_from_slice(&self.y_out);
+            out.extend_from_slice(&self.w_out);
+            for row in self.psi_y.iter().chain(&self.psi_w) {
+                out.extend_from_slice(&row[..p]);
+            }
+            out.extend_from_slice(&self.phi_prev[..p]);
+            out.push(f64::from(u8::from(self.moved_prev)));
+        }
         if let Some(d) = &self.detector {
             d.save(&mut out);
         }
@@ -798,7 +955,11 @@ impl<const W: usize> Engine<W> {
 
     pub(crate) fn saved_len(&self) -> usize {
         let p = self.dims.p();
-        p * p + 7 * p + 10 + self.detector.as_ref().map_or(0, |_| DETECTOR_SAVED)
+        let sandwich = match self.dims.sandwich() {
+            true => 2 * OUT_LAGS * (1 + p) + p + 1,
+            false => 0,
+        };
+        p * p + 7 * p + 10 + sandwich + self.detector.as_ref().map_or(0, |_| DETECTOR_SAVED)
     }
 
     pub(crate) fn load(&mut self, s: &[f64]) -> Result<()> {
@@ -839,6 +1000,17 @@ impl<const W: usize> Engine<W> {
         self.trace = rest[7];
         self.t = rest[8] as u64;
         self.rejected = rest[9] as u64;
+        if self.dims.sandwich() {
+            take(&mut self.y_out);
+            take(&mut self.w_out);
+            for row in self.psi_y.iter_mut().chain(self.psi_w.iter_mut()) {
+                take(&mut row[..p]);
+            }
+            take(&mut self.phi_prev[..p]);
+            let mut moved = [0.0];
+            take(&mut moved);
+            self.moved_prev = moved[0] != 0.0;
+        }
         if let Some(d) = &mut self.detector {
             let mut ds = [0.0; DETECTOR_SAVED];
             take(&mut ds);
@@ -882,7 +1054,13 @@ mod tests {
         let cov: Vec<f64> = (0..121)
             .map(|k| if k % 12 == 0 { 1e-3 } else { 0.0 })
             .collect();
-        let dims = Dims { na: 2, nb: 2, n: 3 };
+        let dims = Dims {
+            na: 2,
+            nb: 2,
+            n: 3,
+            nr: 0,
+            ns: 0,
+        };
         for method in [Method::Regression, Method::PredictionError] {
             let options = Options {
                 method,
