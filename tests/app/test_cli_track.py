@@ -60,3 +60,26 @@ def test_refusals_end_with_one_error_line(log: Path, tmp_path: Path) -> None:
     missing = run("track", log, "-i", "u", "-o", "speed", "--out", tmp_path / "p.csv")
     assert missing.exit_code == 1 and "no column 'speed'" in missing.output
     assert not (tmp_path / "p.csv").exists()
+
+
+def test_track_fits_and_tracks_each_structure(tmp_path: Path) -> None:
+    """--structure sandwich / hammerstein: the start is that fit on the first samples and the
+    columns are its parameters; the values are backlashid.track's from the same start."""
+    from backlashid.identify import Scaling, Structure, fit_hammerstein_backlash, fit_sandwich
+
+    d = bx.example_data(bx.example2(), 8000, snr=25, seed=9)
+    path = tmp_path / "log.csv"
+    np.savetxt(path, np.column_stack([d.u, d.noisy]), delimiter=",", header="u,y", comments="")
+    scaling = Scaling.auto(d.u[:3000], d.noisy[:3000])
+    u, y = scaling.input_to_model(d.u), scaling.output_to_model(d.noisy)
+    for structure, names, fit in (
+        ("sandwich", Structure(2, 2, 3, 2, 2).names, lambda: fit_sandwich(u[:3000], y[:3000], 2, 2, 2, 2, 3)),
+        ("hammerstein", Structure(1, 0, 3, 2, 2).names, lambda: fit_hammerstein_backlash(u[:3000], y[:3000], 2, 2, 3)),
+    ):
+        out = tmp_path / f"{structure}_parameters.csv"
+        res = run("track", path, "-i", "u", "-o", "y", "--structure", structure, "--fit-samples", "3000", "--every", "500", "--out", out)
+        assert res.exit_code == 0, res.output
+        cols = np.genfromtxt(out, delimiter=",", names=True)
+        assert list(cols.dtype.names) == ["sample"] + [v for n in names for v in (n, f"{n}_se")]
+        want = bx.track(u, y, fit(), every=500)
+        assert np.array_equal(cols["c_R"], want.theta[:, names.index("c_R")])

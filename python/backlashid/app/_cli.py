@@ -268,10 +268,15 @@ def _model_options(command: F) -> F:
 @click.option("--model", "model_file", type=click.Path(dir_okay=False, path_type=Path),
               help="Start from this model (JSON from fit --json: its scaling, decimation and covariance are used).")
 @click.option("--fit-samples", default=5000, show_default=True, type=click.IntRange(min=100),
-              help="Without --model: fit a cascade on this many first samples (--scale auto) and start from it.")
+              help="Without --model: fit the --structure on this many first samples (--scale auto) and start from it.")
+@click.option("--structure", type=click.Choice(["cascade", "sandwich", "hammerstein"]), default="cascade", show_default=True,
+              help="Without --model: the start's structure: linear -> backlash, linear -> backlash -> linear, or backlash -> "
+                   "linear (input backlash: motor -> play -> load).")
 @click.option("--na", default=2, show_default=True, type=ORDER, help="Without --model: a coefficients of the start's fit.")
 @click.option("--nb", default=2, show_default=True, type=ORDER, help="Without --model: b coefficients.")
 @click.option("--degree", default=3, show_default=True, type=DEGREE, help="Without --model: branch degree.")
+@click.option("--nr", default=2, show_default=True, type=ORDER, help="Without --model, sandwich / hammerstein: r coefficients of the output block (r1 = 1).")
+@click.option("--ns", default=2, show_default=True, type=ORDER, help="Without --model, sandwich / hammerstein: s coefficients of the output block.")
 @click.option("--forgetting", type=float, help="Forgetting factor lambda in (0, 1] [default 0.999: a window of about 1000 samples].")
 @click.option("--drift", type=float, help="Random-walk rate of every parameter (standard deviation of its change per sample).")
 @click.option("--method", type=click.Choice(["prediction_error", "regression"]), default="prediction_error", show_default=True,
@@ -281,16 +286,18 @@ def _model_options(command: F) -> F:
               help="CSV to write: sample, then each parameter and its standard error (model units).")
 @click.option("--plots", "plots", type=click.Path(file_okay=False, path_type=Path), help="Write parameters.png (every parameter with its +-2 s.e. band and the alarms) here.")
 @_clean_errors
-def track(data: Path, input_: str, output: str, range_: str | None, model_file: Path | None, fit_samples: int, na: int, nb: int,
-          degree: int, forgetting: float | None, drift: float | None, method: str, every: int, out: Path, plots: Path | None) -> None:
-    """Track a cascade's parameters sample by sample (a backlash that wears), with a detector of dead-band changes.
+def track(data: Path, input_: str, output: str, range_: str | None, model_file: Path | None, fit_samples: int, structure: str,
+          na: int, nb: int, degree: int, nr: int, ns: int, forgetting: float | None, drift: float | None, method: str, every: int,
+          out: Path, plots: Path | None) -> None:
+    """Track a model's parameters sample by sample (a backlash that wears), with a detector of dead-band changes.
 
-    The tracker (backlashid.track) starts from --model, or from a cascade fitted on the first
-    --fit-samples samples, and updates every parameter with each sample; its detector raises
+    The tracker (backlashid.track) starts from --model (a cascade, sandwich or input backlash),
+    or from the --structure fitted on the first --fit-samples samples, and updates every
+    parameter with each sample; its detector raises
     an alarm when the dead-band width c_L + c_R changes. Parameters are in model units (the
     start's scaling applied to the signals); the figure draws the start's batch fit dotted.
     """
-    from ..identify import Scaling, fit_cascade
+    from ..identify import Scaling, fit_cascade, fit_hammerstein_backlash, fit_sandwich
     from ..tracking import Tracker
     from ._io import Record, _finite_record, _read_signals, decimate_piece, parse_range
 
@@ -311,9 +318,17 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
         if len(record) <= fit_samples:
             raise DataError(f"{record.source} has {len(record)} samples: give more than --fit-samples {fit_samples}, or a --model to start from")
         scaling = Scaling.auto(record.u[:fit_samples], record.y[:fit_samples])
-        start = fit_cascade(scaling.input_to_model(record.u[:fit_samples]), scaling.output_to_model(record.y[:fit_samples]),
-                            na=na, nb=nb, degree=degree)
-        started = f"a cascade {na}/{nb} of degree {degree} fitted on the first {fit_samples} samples"
+        head = scaling.input_to_model(record.u[:fit_samples]), scaling.output_to_model(record.y[:fit_samples])
+        if structure == "sandwich":
+            start = fit_sandwich(*head, na=na, nb=nb, nr=nr, ns=ns, degree=degree)
+            shape = f"a sandwich {na}/{nb}-{nr}/{ns}"
+        elif structure == "hammerstein":
+            start = fit_hammerstein_backlash(*head, nr=nr, ns=ns, degree=degree)
+            shape = f"an input backlash with a {nr}/{ns} load block"
+        else:
+            start = fit_cascade(*head, na=na, nb=nb, degree=degree)
+            shape = f"a cascade {na}/{nb}"
+        started = f"{shape} of degree {degree} fitted on the first {fit_samples} samples"
     u, y = scaling.input_to_model(record.u), scaling.output_to_model(record.y)
     options: dict[str, Any] = {"method": method}
     if forgetting is not None:
