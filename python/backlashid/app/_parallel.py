@@ -446,7 +446,7 @@ def _tracked(start: Any) -> Callable[[Any, int], tuple[Any, Any, Any]]:
                 raise DataError(f"datasets[{index}] has no start: give start= or the record's key start")
             return item["u"], item["y"], own
         if start is None:
-            raise DataError("track_many needs a start: give start= (a FitResult, CascadeModel or Structure) or each record's key start")
+            raise DataError("track_many needs a start: give start= (a FitResult, CascadeModel, SandwichModel or Structure) or each record's key start")
         u, y = _record(item, index)
         return u, y, start
 
@@ -479,7 +479,7 @@ def track_many(
     datasets : sequence
         The records: (u, y) pairs, or dicts with keys ``u``, ``y`` and optionally ``start``
         (that record's own start).
-    start : FitResult or CascadeModel or Structure, optional
+    start : FitResult or CascadeModel or SandwichModel or Structure, optional
         The start of every record without its own (:class:`~backlashid.Tracker`).
     {cluster}
     **track_options
