@@ -105,6 +105,7 @@ fn tracker(method: Method, forgetting: f64, drift: f64) -> Tracker {
         100.0,
         &options,
         Some(det),
+        None,
     )
     .unwrap()
 }
@@ -126,12 +127,13 @@ impl Run {
     fn track(&mut self, subject: usize, u: &[f64], y: &[f64]) -> f64 {
         let (_, method, forgetting, drift, every) = SUBJECTS[subject];
         let mut t = tracker(method, forgetting, drift);
-        let mut alarms = Vec::new();
+        let (mut alarms, mut windows) = (Vec::new(), Vec::new());
         let mut sink = Sink {
             theta: &mut self.theta,
             se: &mut self.se,
             every,
             alarms: &mut alarms,
+            windows: &mut windows,
         };
         t.update(u, y, &mut sink).unwrap();
         assert!(alarms.is_empty(), "{alarms:?}");

@@ -288,3 +288,60 @@ def test_a_pickled_sandwich_tracker_continues_with_the_same_bits() -> None:
         first = tracker.update(d.u[:4321], d.noisy[:4321])
         rest = pickle.loads(pickle.dumps(tracker)).update(d.u[4321:], d.noisy[4321:])
         assert np.array_equal(np.concatenate([first.theta, rest.theta]), whole.theta)
+
+
+def _input_backlash_record(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Motor -> play (half-widths 0.3 / 0.25, curved contacts) -> load lag, SNR 25."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-1, 1, n)
+    play = GeneralBacklash(0.3, 0.25, [1.0, 0.15], [1.05, -0.1])
+    w = bid.identify.hammerstein_backlash(play, LinearBlock([0.08, 0.04], [-1.3, 0.42])).simulate(u)
+    return u, w + w.std() / 25 * rng.standard_normal(n)
+
+
+def test_a_wrong_structure_is_reported_and_raises_no_wear_alarm() -> None:
+    """A cascade tracking a motor -> play -> load drive: the monitor's windows fail from the
+    first (Q in the thousands against a threshold near 68), the verdict holds from the second
+    window, the standard errors are flagged and the detector stays silent; the right structure
+    (the input backlash) passes every window on the same record (benches/tracking_structures.py:
+    20 seeds each way)."""
+    u, w = _input_backlash_record(60_000, 8)
+    wrong = track(u, w, bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3), every=100, spacing=1000)
+    assert wrong.mismatch and wrong.alarms == []
+    test = wrong.monitor
+    assert test is not None and test.window == 2000 and test.degrees == 15
+    assert np.all(test.statistics > 10 * test.threshold)
+    assert test.periods()[0][0] <= 4000 and test.mismatch[1:].all()
+    bare = track(u, w, bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3), every=100, spacing=1000, monitor=False)
+    assert bare.monitor is None and not bare.mismatch
+    right = track(u, w, bid.fit_hammerstein_backlash(u[:5000], w[:5000], 2, 2, 2), every=100, spacing=1000)
+    assert not right.mismatch and right.alarms == []
+    assert right.monitor is not None and np.all(right.monitor.statistics < right.monitor.threshold)
+    tracker = Tracker(bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3))
+    assert tracker.mismatch is False
+    tracker.update(u[:10_000], w[:10_000])
+    assert tracker.mismatch is True and Tracker(E1, monitor=False).mismatch is None
+
+
+def test_the_monitor_continues_across_blocks_and_pickles() -> None:
+    u, w = _input_backlash_record(12_000, 9)
+    start = bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3)
+    whole = track(u, w, start, monitor_window=1500)
+    tracker = Tracker(start, monitor_window=1500)
+    first = tracker.update(u[:4444], w[:4444])
+    rest = pickle.loads(pickle.dumps(tracker)).update(u[4444:], w[4444:])
+    assert whole.monitor is not None and first.monitor is not None and rest.monitor is not None
+    assert np.array_equal(np.concatenate([first.monitor.samples, rest.monitor.samples]), whole.monitor.samples)
+    assert np.array_equal(np.concatenate([first.monitor.statistics, rest.monitor.statistics]), whole.monitor.statistics)
+    for bad in ({"monitor_window": 49}, {"monitor_level": 0.0}, {"monitor_level": 0.7}, {"monitor": "on"}):
+        with pytest.raises(DataError, match="monitor"):
+            Tracker(start, **bad)
+
+
+def test_plot_shades_the_mismatch_periods() -> None:  # type: ignore[no-untyped-def]
+    pytest.importorskip("matplotlib")
+    u, w = _input_backlash_record(10_000, 10)
+    r = track(u, w, bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3), every=50)
+    fig = r.plot()
+    assert "does not fit the data where shaded" in fig._suptitle.get_text()
+    assert len(fig.axes[0].patches) >= 1  # the shaded stretch (axvspan) in each panel

@@ -12,7 +12,7 @@ from .._optional import pyplot
 from .._validation import as_signal
 from ..errors import DataError
 
-__all__ = ["Alarm", "TrackResult"]
+__all__ = ["Alarm", "MismatchTest", "TrackResult"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,71 @@ class Alarm:
 
 
 @dataclass(frozen=True)
+class MismatchTest:
+    """The tracker's model-mismatch monitor over a block or record: one portmanteau test of
+    its own innovations per window of samples (whiteness, correlation with the past input and
+    with the model's past internal x; rust/core/src/tracking/monitor.rs).
+
+    Attributes
+    ----------
+    samples : numpy.ndarray
+        The last sample of each window closed (int64), counted from the tracker's first sample.
+    statistics : numpy.ndarray
+        Each window's statistic Q, about chi-square with ``degrees`` degrees of freedom when the
+        tracked structure is right.
+    mismatch : numpy.ndarray
+        Whether the mismatch verdict held after each window (bool): set by a window above
+        ``threshold``, cleared by consecutive windows below it.
+    threshold : float
+        The chi-square quantile a window's Q is compared with.
+    degrees : int
+        Q's degrees of freedom under the right structure.
+    window : int
+        Samples per window.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.tracking import MismatchTest
+    >>> test = MismatchTest(np.array([1999, 3999]), np.array([12.0, 900.0]), np.array([False, True]), 68.0, 15, 2000)
+    >>> test.periods()
+    [(2000, 3999)]
+    """
+
+    samples: NDArray[np.int64] = field(repr=False)
+    statistics: NDArray[np.float64] = field(repr=False)
+    mismatch: NDArray[np.bool_] = field(repr=False)
+    threshold: float
+    degrees: int
+    window: int
+
+    @property
+    def any(self) -> bool:
+        """Whether any window said "mismatch"."""
+        return bool(self.mismatch.any())
+
+    def periods(self) -> list[tuple[int, int]]:
+        """The stretches of samples (first, last) whose windows ended under the mismatch
+        verdict.
+
+        Returns
+        -------
+        list of tuple of int
+            Each stretch's first and last sample.
+        """
+        out: list[tuple[int, int]] = []
+        for end, flagged in zip(self.samples.tolist(), self.mismatch.tolist()):
+            first = end - self.window + 1
+            if not flagged:
+                continue
+            if out and out[-1][1] == first - 1:
+                out[-1] = (out[-1][0], end)
+            else:
+                out.append((first, end))
+        return out
+
+
+@dataclass(frozen=True)
 class TrackResult:
     """The tracked parameters of a block or a record, after every recorded sample.
 
@@ -65,6 +130,10 @@ class TrackResult:
         The detector's alarms in this block or record.
     noise_std : float
         The running estimate of the output noise's standard deviation at the end.
+    monitor : MismatchTest or None
+        The model-mismatch monitor's windows closed in this block or record (None without a
+        monitor). Where it says "mismatch" the tracked structure does not explain the data:
+        the standard errors there are not trustworthy and the wear detector took no readings.
 
     Examples
     --------
@@ -81,6 +150,21 @@ class TrackResult:
     standard_errors: NDArray[np.float64] = field(repr=False)
     alarms: list[Alarm]
     noise_std: float
+    monitor: MismatchTest | None = None
+
+    @property
+    def mismatch(self) -> bool:
+        """Whether the monitor said the tracked structure does not explain the data (in any
+        window of this block or record).
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> d = bid.example_data(bid.example1(), 6000, snr=25, seed=1)
+        >>> bid.track(d.u, d.noisy, bid.example1(), noise_std=d.noise_std).mismatch
+        False
+        """
+        return self.monitor is not None and self.monitor.any
 
     def __len__(self) -> int:
         return int(self.samples.size)
@@ -175,6 +259,7 @@ class TrackResult:
         rows = -(-p // cols)
         fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.4 * rows), sharex=True, squeeze=False)
         t = self.samples
+        periods = self.monitor.periods() if self.monitor is not None else []
         for k, name in enumerate(self.names):
             ax = axes[k // cols][k % cols]
             v, s = self.theta[:, k], self.standard_errors[:, k]
@@ -189,6 +274,8 @@ class TrackResult:
                 shown.append(batch[k : k + 1])
             for alarm in self.alarms:
                 ax.axvline(alarm.sample, color="C3", linewidth=0.8, alpha=0.7)
+            for first, last in periods:
+                ax.axvspan(first, last, color="C1", alpha=0.15, linewidth=0)
             ax.set_ylim(*_settled_limits(v, s, np.concatenate(shown) if shown else None))
             ax.set_title(name, fontsize=10)
             ax.tick_params(labelsize=8)
@@ -204,6 +291,8 @@ class TrackResult:
                 ax.set_xlabel("sample", fontsize=9)
         fig.axes[0].legend(fontsize=7, loc="best")
         suffix = f", {len(self.alarms)} alarm(s) (red)" if self.alarms else ""
+        if periods:
+            suffix += "; the structure does not fit the data where shaded (standard errors not trustworthy)"
         fig.suptitle(f"tracked parameters with +-2 standard errors{suffix}", fontsize=11)
         fig.tight_layout()
         if path is not None:

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.special import chdtri
 
 from .. import _core
 from .._threads import Serialised
@@ -15,7 +16,7 @@ from .._validation import as_signal, check_choice, check_flag, check_int, check_
 from ..errors import DataError, ModelError
 from ..identify import FitResult, Structure
 from ..models import CascadeModel, SandwichModel
-from ._result import Alarm, TrackResult
+from ._result import Alarm, MismatchTest, TrackResult
 
 __all__ = ["Tracker", "track"]
 
@@ -23,6 +24,9 @@ _METHODS = ("prediction_error", "regression")
 _DEFAULT_FORGETTING = 0.999  # a window of about 1000 samples (benches/tracking.py)
 _PRIOR_NOISE_COUNT = 100.0  # samples the start's noise estimate counts for
 _MOST = 2**62  # every / spacing: whole sample counts the core holds (u64)
+_MONITOR_LAGS = 5  # K: lags of each correlation the monitor tests
+_MONITOR_CONFIRM = 2  # failing windows that set its verdict (one may be a start settling)
+_MONITOR_CLEAR = 3  # passing windows that clear it
 
 
 def _structure(value: Any) -> Structure:
@@ -126,7 +130,10 @@ class Tracker:
     3 / (1 - lambda): readings that share under 5 % of their data) it reads the tracked
     width and its standard error, and a two-sided CUSUM of the standardised deviations from
     a reference (the mean of the first ``reference`` readings) raises an :class:`Alarm`
-    when it exceeds ``threshold``; it then waits ``holdoff`` readings and re-arms.
+    when it exceeds ``threshold``; it then waits ``holdoff`` readings and re-arms. A
+    model-mismatch monitor (``monitor``) tells a wrong structure from wear: when the tracker's
+    innovations are coloured or correlated with the past input or the model's x, the result
+    says so (:attr:`TrackResult.mismatch`, :attr:`mismatch`) and the detector pauses.
 
     Parameters
     ----------
@@ -165,6 +172,18 @@ class Tracker:
         Readings averaged into the reference width after (re)arming.
     holdoff : int, default 2
         Readings skipped after an alarm.
+    monitor : bool, default True
+        Test the tracker's own innovations for a wrong structure (the model-mismatch monitor):
+        every ``monitor_window`` samples a portmanteau statistic of the innovation's
+        correlations at lags 1-5 with its own past (prediction-error rule only), the past
+        input and the model's past internal x, about chi-square when the structure is right.
+        Two consecutive windows above the ``monitor_level`` quantile set the mismatch verdict
+        (3 passing windows clear it); while it holds the detector takes no readings.
+    monitor_window : int, default 2000
+        Samples per window of the monitor.
+    monitor_level : float, default 1e-8
+        The chi-square tail probability of a window's threshold (the false-mismatch rate per
+        window under the right structure and white noise).
 
     Raises
     ------
@@ -202,6 +221,9 @@ class Tracker:
         slack: float = 1.0,
         reference: int = 8,
         holdoff: int = 2,
+        monitor: bool = True,
+        monitor_window: int = 2000,
+        monitor_level: float = 1e-8,
     ) -> None:
         structure, theta0, cov, fit_noise = _start(model_or_structure)
         names = structure.names
@@ -241,6 +263,13 @@ class Tracker:
                 check_real(threshold, "threshold", low=0.0, low_open=True),
                 check_int(holdoff, "holdoff", 0, 2**31),
             )
+        mon = None
+        if check_flag(monitor, "monitor"):
+            window = check_int(monitor_window, "monitor_window", 10 * _MONITOR_LAGS, _MOST)
+            level = check_real(monitor_level, "monitor_level", low=0.0, high=0.5, low_open=True)
+            whiteness = method == "prediction_error"  # the sandwich's equation error is coloured
+            degrees = _MONITOR_LAGS * (3 if whiteness else 2)
+            mon = (window, _MONITOR_LAGS, float(chdtri(degrees, level)), _MONITOR_CONFIRM, _MONITOR_CLEAR, whiteness)
         self._names = names
         self._structure = structure
         self._args = (
@@ -258,14 +287,15 @@ class Tracker:
             det,
             structure.nr,
             structure.ns,
+            mon,
         )
         self._native = Serialised(self._build(self._args))  # shared across threads: one call at a time
 
     @staticmethod
     def _build(args: tuple[Any, ...]) -> Any:
-        na, nb, degree, theta0, cov, var, count, method, lam, rates, memory, det, *output = args
-        nr, ns = output or (0, 0)  # a cascade pickled before sandwiches could be tracked
-        return _core.Tracker(na, nb, degree, theta0, np.asarray(cov), var, count, method, lam, rates, memory, det, nr, ns)
+        na, nb, degree, theta0, cov, var, count, method, lam, rates, memory, det, *later = args
+        nr, ns, mon = (*later, None, None, None)[:3] if later else (0, 0, None)  # pickled by an older version
+        return _core.Tracker(na, nb, degree, theta0, np.asarray(cov), var, count, method, lam, rates, memory, det, nr, ns, mon)
 
     @property
     def names(self) -> list[str]:
@@ -385,7 +415,7 @@ class Tracker:
             raise DataError(f"u_block and y_block must be 1-D of one length, got shapes {u.shape} and {y.shape}")
         step = check_int(every, "every", 1, _MOST)
         first = self.samples
-        theta, se, alarms = self._native.update(u, y, step)
+        theta, se, alarms, windows = self._native.update(u, y, step)
         start = (first // step + 1) * step - 1
         samples = np.arange(start, first + u.size, step, dtype=np.int64)
         return TrackResult(
@@ -395,7 +425,42 @@ class Tracker:
             standard_errors=np.asarray(se),
             alarms=[Alarm(int(s), int(d), float(w), float(r), float(z)) for s, d, w, r, z in alarms],
             noise_std=self.noise_std,
+            monitor=self._mismatch_test(windows),
         )
+
+    def _mismatch_test(self, windows: list[tuple[int, float, bool]]) -> MismatchTest | None:
+        mon = self._args[14] if len(self._args) > 14 else None
+        if mon is None:
+            return None
+        window, lags, threshold, _, _, whiteness = mon
+        return MismatchTest(
+            samples=np.array([w[0] for w in windows], dtype=np.int64),
+            statistics=np.array([w[1] for w in windows], dtype=np.float64),
+            mismatch=np.array([w[2] for w in windows], dtype=bool),
+            threshold=float(threshold),
+            degrees=int(lags * (3 if whiteness else 2)),
+            window=int(window),
+        )
+
+    @property
+    def mismatch(self) -> bool | None:
+        """Whether the model-mismatch monitor's verdict holds now: the tracked structure does
+        not explain the latest windows of data (None without a monitor). While it holds the
+        standard errors are not trustworthy and the wear detector takes no readings.
+
+        Returns
+        -------
+        bool or None
+            The verdict.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> bid.Tracker(bid.example1()).mismatch
+        False
+        """
+        verdict = self._native.mismatch()
+        return None if verdict is None else bool(verdict)
 
     def __reduce__(self) -> tuple[Any, ...]:
         return (_restore, (self._args, self._structure, self._native.save()))
@@ -440,7 +505,8 @@ def track(
         Record the estimate after every ``every``-th sample only.
     **options
         The options of :class:`Tracker` (forgetting, drift, method, covariance, noise_std,
-        noise_memory, detector, spacing, threshold, slack, reference, holdoff).
+        noise_memory, detector, spacing, threshold, slack, reference, holdoff, monitor,
+        monitor_window, monitor_level).
 
     Returns
     -------
@@ -476,6 +542,9 @@ def track(
         "slack",
         "reference",
         "holdoff",
+        "monitor",
+        "monitor_window",
+        "monitor_level",
     }
     if unknown:
         raise DataError(f"track() got unknown options {sorted(unknown)}: see Tracker for the options")

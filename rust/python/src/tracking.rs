@@ -3,7 +3,9 @@
 //! (rows, p) arrays, the alarms as tuples; the state as a flat list of numbers (`save`).
 
 use backlashid_core::guard;
-use backlashid_core::tracking::{DetectorOptions, Method, Options, Orders, Sink, Tracker};
+use backlashid_core::tracking::{
+    DetectorOptions, Method, MonitorOptions, Options, Orders, Sink, Tracker,
+};
 use numpy::PyArrayMethods;
 use pyo3::prelude::*;
 
@@ -14,6 +16,10 @@ use crate::errors::{run, CoreError, DataError};
 type AlarmOut = (u64, i8, f64, f64, f64);
 /// (spacing, reference, slack, threshold, holdoff).
 type DetectorIn = (u64, u32, f64, f64, u32);
+/// (window, lags, threshold, confirm, clear, whiteness).
+type MonitorIn = (u64, usize, f64, u32, u32, bool);
+/// A monitor window: (last sample, Q, mismatch verdict after it).
+type WindowOut = (u64, f64, bool);
 
 #[pyclass(module = "backlashid._core", name = "Tracker")]
 pub(crate) struct PyTracker(Tracker);
@@ -22,7 +28,7 @@ pub(crate) struct PyTracker(Tracker);
 impl PyTracker {
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (na, nb, degree, theta0, covariance, noise_var, noise_count, method, forgetting, drift, noise_memory, detector, nr=0, ns=0))]
+    #[pyo3(signature = (na, nb, degree, theta0, covariance, noise_var, noise_count, method, forgetting, drift, noise_memory, detector, nr=0, ns=0, monitor=None))]
     fn new(
         na: usize,
         nb: usize,
@@ -38,6 +44,7 @@ impl PyTracker {
         detector: Option<DetectorIn>,
         nr: usize,
         ns: usize,
+        monitor: Option<MonitorIn>,
     ) -> PyResult<Self> {
         let method = match method {
             "regression" => Method::Regression,
@@ -83,6 +90,16 @@ impl PyTracker {
             noise_count,
             &options,
             detector,
+            monitor.map(
+                |(window, lags, threshold, confirm, clear, whiteness)| MonitorOptions {
+                    window,
+                    lags,
+                    threshold,
+                    confirm,
+                    clear,
+                    whiteness,
+                },
+            ),
         )
         .map_err(CoreError)?;
         Ok(Self(tracker))
@@ -120,6 +137,11 @@ impl PyTracker {
         })
     }
 
+    /// Whether the mismatch monitor's verdict holds; None without a monitor.
+    fn mismatch(&self) -> Option<bool> {
+        self.0.monitor().map(|m| m.mismatch())
+    }
+
     /// The current physical estimate and its covariance.
     fn estimate<'py>(&self, py: Python<'py>) -> PyResult<(SignalOut<'py>, MatrixOut<'py>)> {
         let p = self.0.size();
@@ -128,7 +150,7 @@ impl PyTracker {
     }
 
     /// Track a block: (theta, standard errors) of every `every`-th sample as (rows, p)
-    /// arrays, and the alarms raised.
+    /// arrays, the alarms raised and the monitor's windows closed.
     #[allow(clippy::type_complexity)]
     fn update<'py>(
         &mut self,
@@ -136,7 +158,12 @@ impl PyTracker {
         u: SignalIn<'py>,
         y: SignalIn<'py>,
         every: u64,
-    ) -> PyResult<(MatrixOut<'py>, MatrixOut<'py>, Vec<AlarmOut>)> {
+    ) -> PyResult<(
+        MatrixOut<'py>,
+        MatrixOut<'py>,
+        Vec<AlarmOut>,
+        Vec<WindowOut>,
+    )> {
         let (u, y) = (signal("u", &u)?, signal("y", &y)?);
         if every == 0 {
             return Err(DataError::new_err("every must be a whole number >= 1"));
@@ -144,27 +171,33 @@ impl PyTracker {
         let p = self.0.size();
         let rows = self.0.recorded(u.len(), every);
         let tracker = &mut self.0;
-        let (theta, se, alarms) = run(py, || {
+        let (theta, se, alarms, windows) = run(py, || {
             let mut theta = guard::filled(rows * p, 0.0, "the tracked parameters")?;
             let mut se = guard::filled(rows * p, 0.0, "the standard errors")?;
-            let mut alarms = Vec::new();
+            let (mut alarms, mut windows) = (Vec::new(), Vec::new());
             let mut sink = Sink {
                 theta: &mut theta,
                 se: &mut se,
                 every,
                 alarms: &mut alarms,
+                windows: &mut windows,
             };
             tracker.update(&u, &y, &mut sink)?;
-            Ok((theta, se, alarms))
+            Ok((theta, se, alarms, windows))
         })?;
         let alarms = alarms
             .into_iter()
             .map(|a| (a.sample, a.direction, a.width, a.reference, a.statistic))
             .collect();
+        let windows = windows
+            .into_iter()
+            .map(|w| (w.sample, w.statistic, w.mismatch))
+            .collect();
         Ok((
             vec_f64(py, theta).reshape([rows, p])?,
             vec_f64(py, se).reshape([rows, p])?,
             alarms,
+            windows,
         ))
     }
 

@@ -4,6 +4,7 @@
 //! allocates nothing and the compiler unrolls the p x p loops for the common orders.
 
 use super::detector::{Alarm, Detector, DETECTOR_SAVED};
+use super::monitor::{monitor_saved, Monitor, Window};
 use super::{Method, Options};
 use crate::error::{Error, Result};
 
@@ -59,6 +60,8 @@ pub struct Sink<'a> {
     /// over the tracker's life).
     pub every: u64,
     pub alarms: &'a mut Vec<Alarm>,
+    /// The mismatch monitor's windows.
+    pub windows: &'a mut Vec<Window>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -119,6 +122,11 @@ pub(crate) struct Engine<const W: usize> {
     t: u64,
     rejected: u64,
     detector: Option<Detector>,
+    monitor: Option<Monitor>,
+    /// The last update's innovation and x, for the monitor (`innovated`: taken this sample).
+    innovation: f64,
+    innovation_x: f64,
+    innovated: bool,
 }
 
 /// Horner: sum_{i>=1} m_i xi^i with m_1 = `m1` and m_2.. = `rest`.
@@ -228,6 +236,7 @@ fn product<const W: usize>(s: &[[f64; W]; W], p: usize) -> [[f64; W]; W] {
 impl<const W: usize> Engine<W> {
     /// From a physical theta0 and its absolute covariance `cov0` (p x p row-major), the noise
     /// variance `sigma2` (> 0) standing for `noise_count` samples.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
         dims: Dims,
         options: &Options,
@@ -236,6 +245,7 @@ impl<const W: usize> Engine<W> {
         sigma2: f64,
         noise_count: f64,
         detector: Option<Detector>,
+        monitor: Option<Monitor>,
     ) -> Result<Self> {
         let p = dims.p();
         debug_assert!(p <= W);
@@ -313,6 +323,10 @@ impl<const W: usize> Engine<W> {
             t: 0,
             rejected: 0,
             detector,
+            monitor,
+            innovation: 0.0,
+            innovation_x: 0.0,
+            innovated: false,
         })
     }
 
@@ -330,6 +344,10 @@ impl<const W: usize> Engine<W> {
 
     pub(crate) fn detector(&self) -> Option<&Detector> {
         self.detector.as_ref()
+    }
+
+    pub(crate) fn monitor(&self) -> Option<&Monitor> {
+        self.monitor.as_ref()
     }
 
     /// The covariance factor of forgetting: with weights lambda^k the estimate's covariance
@@ -473,17 +491,29 @@ impl<const W: usize> Engine<W> {
                 );
                 k += 1;
             }
+            if self.innovated {
+                self.innovated = false;
+                if let Some(m) = self.monitor.as_mut() {
+                    if let Some(w) = m.observe(self.t - 1, self.innovation, ut, self.innovation_x) {
+                        sink.windows.push(w);
+                    }
+                }
+            }
             to_reading -= 1;
             if to_reading == 0 {
                 to_reading = spacing;
-                let (w, var) = self.width();
-                let sample = self.t - 1;
-                if let Some(alarm) = self
-                    .detector
-                    .as_mut()
-                    .and_then(|d| d.observe(sample, w, var))
-                {
-                    sink.alarms.push(alarm);
+                // no reading while the monitor says the structure is wrong: a wandering
+                // estimate of a wrong structure is not wear
+                if !self.monitor.as_ref().is_some_and(Monitor::mismatch) {
+                    let (w, var) = self.width();
+                    let sample = self.t - 1;
+                    if let Some(alarm) = self
+                        .detector
+                        .as_mut()
+                        .and_then(|d| d.observe(sample, w, var))
+                    {
+                        sink.alarms.push(alarm);
+                    }
                 }
             }
         }
@@ -822,6 +852,9 @@ impl<const W: usize> Engine<W> {
     #[inline(always)]
     fn update(&mut self, phi: &[f64; W], e: f64, xt: f64) -> Result<()> {
         let p = self.dims.p();
+        self.innovation = e;
+        self.innovation_x = xt;
+        self.innovated = true;
         if self.q_wait >= DRIFT_BATCH {
             self.add_drift();
         }
@@ -950,6 +983,9 @@ impl<const W: usize> Engine<W> {
         if let Some(d) = &self.detector {
             d.save(&mut out);
         }
+        if let Some(m) = &self.monitor {
+            m.save(&mut out);
+        }
         out
     }
 
@@ -959,7 +995,15 @@ impl<const W: usize> Engine<W> {
             true => 2 * OUT_LAGS * (1 + p) + p + 1,
             false => 0,
         };
-        p * p + 7 * p + 10 + sandwich + self.detector.as_ref().map_or(0, |_| DETECTOR_SAVED)
+        p * p
+            + 7 * p
+            + 10
+            + sandwich
+            + self.detector.as_ref().map_or(0, |_| DETECTOR_SAVED)
+            + self
+                .monitor
+                .as_ref()
+                .map_or(0, |m| monitor_saved(m.options.lags))
     }
 
     pub(crate) fn load(&mut self, s: &[f64]) -> Result<()> {
@@ -1016,6 +1060,11 @@ impl<const W: usize> Engine<W> {
             take(&mut ds);
             d.load(&ds);
         }
+        if let Some(m) = &mut self.monitor {
+            let mut ms = vec![0.0; monitor_saved(m.options.lags)];
+            take(&mut ms);
+            m.load(&ms);
+        }
         Ok(())
     }
 }
@@ -1069,7 +1118,8 @@ mod tests {
                 noise_memory: 1e4,
             };
             let det = Detector::new(super::super::DetectorOptions::for_forgetting(0.99)).ok();
-            let new = || Engine::<12>::new(dims, &options, &theta0, &cov, 1e-3, 10.0, det.clone());
+            let new =
+                || Engine::<12>::new(dims, &options, &theta0, &cov, 1e-3, 10.0, det.clone(), None);
             let (mut a, mut b) = (new().unwrap(), new().unwrap());
             let (mut ta, mut sa, mut aa) = (vec![0.0; 11 * 20_000], vec![0.0; 11 * 20_000], vec![]);
             let (mut tb, mut sb, mut ab) = (ta.clone(), sa.clone(), vec![]);
@@ -1078,6 +1128,7 @@ mod tests {
                 se: &mut sa,
                 every: 1,
                 alarms: &mut aa,
+                windows: &mut vec![],
             };
             a.run(&u, &y, &mut sink_a).unwrap();
             let mut sink_b = Sink {
@@ -1085,6 +1136,7 @@ mod tests {
                 se: &mut sb,
                 every: 1,
                 alarms: &mut ab,
+                windows: &mut vec![],
             };
             b.run_plain(&u, &y, &mut sink_b).unwrap();
             assert!(

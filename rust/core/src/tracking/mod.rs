@@ -36,10 +36,12 @@
 
 pub mod detector;
 mod engine;
+pub mod monitor;
 
 pub use detector::{Alarm, Detector, DetectorOptions};
 pub use engine::Sink;
 pub use engine::MAX_OUTPUT_ORDER;
+pub use monitor::{Monitor, MonitorOptions, Window};
 
 use crate::error::{Error, Result};
 use engine::{Dims, Engine};
@@ -133,6 +135,7 @@ impl Tracker {
         noise_count: f64,
         options: &Options,
         detector: Option<DetectorOptions>,
+        monitor: Option<MonitorOptions>,
     ) -> Result<Self> {
         let Orders {
             na,
@@ -232,6 +235,7 @@ impl Tracker {
             )));
         }
         let det = detector.map(Detector::new).transpose()?;
+        let mon = monitor.map(Monitor::new).transpose()?;
         macro_rules! build {
             ($v:ident) => {
                 Sized_::$v(Box::new(Engine::new(
@@ -242,6 +246,7 @@ impl Tracker {
                     noise_var,
                     noise_count,
                     det,
+                    mon,
                 )?))
             };
         }
@@ -277,6 +282,11 @@ impl Tracker {
     /// The detector, if any.
     pub fn detector(&self) -> Option<&Detector> {
         each!(&self.engine, e => e.detector())
+    }
+
+    /// The mismatch monitor, if any.
+    pub fn monitor(&self) -> Option<&Monitor> {
+        each!(&self.engine, e => e.monitor())
     }
 
     /// The current physical estimate and its covariance (p x p row-major).
@@ -334,6 +344,7 @@ impl Tracker {
                 se: &mut sink.se[start..],
                 every,
                 alarms: sink.alarms,
+                windows: sink.windows,
             };
             each!(&mut self.engine, e => e.run(cu, cy, &mut part))?;
         }
@@ -394,6 +405,7 @@ mod tests {
             10.0,
             &options(method, 0.999),
             det,
+            None,
         )
         .unwrap()
     }
@@ -407,6 +419,7 @@ mod tests {
             se: &mut se,
             every: 1,
             alarms: &mut alarms,
+            windows: &mut vec![],
         };
         t.update(u, y, &mut sink).unwrap();
         (theta, se, alarms)
@@ -520,6 +533,7 @@ mod tests {
                 100.0,
                 &o,
                 Some(det),
+                None,
             )
             .unwrap();
             let (theta, se, alarms) = run(&mut t, &u, &y);
@@ -593,6 +607,7 @@ mod tests {
                 se: &mut se,
                 every: 7,
                 alarms: &mut al,
+                windows: &mut vec![],
             };
             some.update(cu, cy, &mut sink).unwrap();
             let firsts: Vec<u64> = (before..some.samples())
@@ -613,7 +628,16 @@ mod tests {
         let cov = vec![0.0; 121];
         let o = options(Method::Regression, 1.0);
         let new = |theta: &[f64], cov: &[f64], var: f64, o: &Options| {
-            Tracker::new(Orders::cascade(2, 2, 3), theta, cov, var, 0.0, o, None)
+            Tracker::new(
+                Orders::cascade(2, 2, 3),
+                theta,
+                cov,
+                var,
+                0.0,
+                o,
+                None,
+                None,
+            )
         };
         assert!(new(&TRUE, &cov, 1.0, &o).is_ok());
         assert!(matches!(
@@ -645,6 +669,7 @@ mod tests {
             se: &mut se,
             every: 1,
             alarms: &mut al,
+            windows: &mut vec![],
         };
         assert!(t.update(&[0.0, 1.0], &[0.0], &mut sink).is_err());
         assert!(t.update(&[0.0, 1.0], &[0.0, 0.0], &mut sink).is_err()); // buffers too short
@@ -658,6 +683,7 @@ mod tests {
             1.0,
             0.0,
             &o,
+            None,
             None
         )
         .is_err());
@@ -695,8 +721,17 @@ mod tests {
                 .map(|k| if k % 12 == 0 { 1e-4 } else { 0.0 })
                 .collect();
             let o = options(method, 0.5);
-            let mut t =
-                Tracker::new(Orders::cascade(2, 2, 3), &TRUE, &cov, 1e-4, 0.0, &o, None).unwrap();
+            let mut t = Tracker::new(
+                Orders::cascade(2, 2, 3),
+                &TRUE,
+                &cov,
+                1e-4,
+                0.0,
+                &o,
+                None,
+                None,
+            )
+            .unwrap();
             let zeros = vec![0.0; 5000];
             let (_, se, _) = run(&mut t, &zeros, &zeros);
             assert!(se.iter().all(|v| v.is_finite()), "{method:?}");
@@ -710,6 +745,7 @@ mod tests {
                 0.0,
                 &o,
                 None,
+                None,
             );
             let mut lin = lin.unwrap();
             let (mut th, mut s, mut al) = (vec![0.0; 12], vec![0.0; 12], vec![]);
@@ -718,6 +754,7 @@ mod tests {
                 se: &mut s,
                 every: 1,
                 alarms: &mut al,
+                windows: &mut vec![],
             };
             let err = lin
                 .update(&[1e300, 0.0], &[0.0, 0.0], &mut sink)
@@ -773,6 +810,7 @@ mod tests {
             10.0,
             &options(method, 0.999),
             det,
+            None,
         )
         .unwrap()
     }
@@ -872,7 +910,7 @@ mod tests {
             let mut theta = vec![0.0; p];
             theta[0] = 1.0;
             theta[2] = 1.0;
-            Tracker::new(orders, &theta, &vec![0.0; p * p], 1.0, 0.0, &o, None)
+            Tracker::new(orders, &theta, &vec![0.0; p * p], 1.0, 0.0, &o, None, None)
         };
         assert!(make(1, 1, 5).is_ok());
         assert!(matches!(make(0, 1, 5), Err(Error::Data(_))));
@@ -892,6 +930,7 @@ mod tests {
             1.0,
             0.0,
             &o,
+            None,
             None,
         );
         assert!(matches!(err, Err(Error::Model(_))), "{err:?}");
