@@ -83,3 +83,21 @@ def test_track_fits_and_tracks_each_structure(tmp_path: Path) -> None:
         assert list(cols.dtype.names) == ["sample"] + [v for n in names for v in (n, f"{n}_se")]
         want = bx.track(u, y, fit(), every=500)
         assert np.array_equal(cols["c_R"], want.theta[:, names.index("c_R")])
+
+
+def test_track_says_when_the_structure_does_not_fit(tmp_path: Path) -> None:
+    """A cascade started on a motor -> play -> load log: the command names the mismatch, says
+    the standard errors are not trustworthy and points at --structure."""
+    rng = np.random.default_rng(3)
+    u = rng.uniform(-1, 1, 30_000)
+    play = bx.GeneralBacklash(0.3, 0.25, [1.0, 0.15], [1.05, -0.1])
+    w = bx.identify.hammerstein_backlash(play, bx.LinearBlock([0.08, 0.04], [-1.3, 0.42])).simulate(u)
+    path = tmp_path / "drive.csv"
+    np.savetxt(path, np.column_stack([u, w + w.std() / 25 * rng.standard_normal(u.size)]), delimiter=",", header="u,y", comments="")
+    res = run("track", path, "-i", "u", "-o", "y", "--fit-samples", "5000", "--every", "1000", "--out", tmp_path / "p.csv")
+    assert res.exit_code == 0, res.output
+    assert "mismatch: the tracked CascadeModel does not explain the record" in res.output
+    assert "not trustworthy" in res.output and "--structure" in res.output
+    fine = run("track", path, "-i", "u", "-o", "y", "--structure", "hammerstein", "--degree", "2", "--fit-samples", "5000",
+               "--every", "1000", "--out", tmp_path / "q.csv")
+    assert fine.exit_code == 0 and "mismatch" not in fine.output, fine.output

@@ -260,6 +260,43 @@ def _model_options(command: F) -> F:
     return command
 
 
+def _tracking_start(head: tuple[Any, Any], structure: str, na: int, nb: int, nr: int, ns: int, degree: int) -> tuple[Any, str]:
+    """``track``'s start without --model: the --structure fitted on the record's first samples,
+    and its description."""
+    from ..identify import fit_cascade, fit_hammerstein_backlash, fit_sandwich
+
+    if structure == "sandwich":
+        return fit_sandwich(*head, na=na, nb=nb, nr=nr, ns=ns, degree=degree), f"a sandwich {na}/{nb}-{nr}/{ns}"
+    if structure == "hammerstein":
+        return fit_hammerstein_backlash(*head, nr=nr, ns=ns, degree=degree), f"an input backlash with a {nr}/{ns} load block"
+    return fit_cascade(*head, na=na, nb=nb, degree=degree), f"a cascade {na}/{nb}"
+
+
+def _report_tracking(result: Any, tracker: Any) -> None:
+    """``track``'s lines on the monitor's verdict and the detector's alarms."""
+    if result.mismatch and result.monitor is not None:
+        stretches = ", ".join(f"{a}-{b}" for a, b in result.monitor.periods())
+        worst = float(result.monitor.statistics.max())
+        click.echo(
+            f"mismatch: the tracked {tracker.model.__class__.__name__} does not explain the record over samples {stretches} "
+            f"(its innovations are coloured or follow the input: window statistic up to {worst:.4g}, threshold "
+            f"{result.monitor.threshold:.4g}); the standard errors there are not trustworthy and the wear detector paused. "
+            "A wandering estimate is then the model, not wear: try another --structure (sandwich, hammerstein) or orders"
+        )
+    if result.alarms:
+        for alarm in result.alarms:
+            change = "wider" if alarm.direction > 0 else "narrower"
+            click.echo(f"alarm at sample {alarm.sample}: dead band {change}, c_L + c_R = {alarm.width:.6g} (reference {alarm.reference:.6g})")
+    elif result.mismatch:
+        return
+    elif tracker.detector_armed:
+        click.echo("no alarm: the detector saw no change of the dead-band width c_L + c_R")
+    else:
+        click.echo("no alarm, but the detector never armed: it reads the width every 3 / (1 - forgetting) samples and "
+                   "needs 8 readings for its reference (24,000 samples at the default forgetting 0.999); "
+                   "give a longer record or a lower --forgetting")
+
+
 @main.command()
 @click.argument("data", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--input", "-i", "input_", required=True, help="Input signal (NAME, NAME[K] or a column number).")
@@ -297,7 +334,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     an alarm when the dead-band width c_L + c_R changes. Parameters are in model units (the
     start's scaling applied to the signals); the figure draws the start's batch fit dotted.
     """
-    from ..identify import Scaling, fit_cascade, fit_hammerstein_backlash, fit_sandwich
+    from ..identify import Scaling
     from ..tracking import Tracker
     from ._io import Record, _finite_record, _read_signals, decimate_piece, parse_range
 
@@ -319,15 +356,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
             raise DataError(f"{record.source} has {len(record)} samples: give more than --fit-samples {fit_samples}, or a --model to start from")
         scaling = Scaling.auto(record.u[:fit_samples], record.y[:fit_samples])
         head = scaling.input_to_model(record.u[:fit_samples]), scaling.output_to_model(record.y[:fit_samples])
-        if structure == "sandwich":
-            start = fit_sandwich(*head, na=na, nb=nb, nr=nr, ns=ns, degree=degree)
-            shape = f"a sandwich {na}/{nb}-{nr}/{ns}"
-        elif structure == "hammerstein":
-            start = fit_hammerstein_backlash(*head, nr=nr, ns=ns, degree=degree)
-            shape = f"an input backlash with a {nr}/{ns} load block"
-        else:
-            start = fit_cascade(*head, na=na, nb=nb, degree=degree)
-            shape = f"a cascade {na}/{nb}"
+        start, shape = _tracking_start(head, structure, na, nb, nr, ns, degree)
         started = f"{shape} of degree {degree} fitted on the first {fit_samples} samples"
     u, y = scaling.input_to_model(record.u), scaling.output_to_model(record.y)
     options: dict[str, Any] = {"method": method}
@@ -348,16 +377,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     click.echo(f"tracked {len(record)} samples of {record.source} from {started}")
     last = {name: (result.theta[-1, k], result.standard_errors[-1, k]) for k, name in enumerate(result.names)}
     click.echo("at the end (model units): " + ", ".join(f"{name} = {v:.6g} +- {se:.2g}" for name, (v, se) in last.items()))
-    if result.alarms:
-        for alarm in result.alarms:
-            change = "wider" if alarm.direction > 0 else "narrower"
-            click.echo(f"alarm at sample {alarm.sample}: dead band {change}, c_L + c_R = {alarm.width:.6g} (reference {alarm.reference:.6g})")
-    elif tracker.detector_armed:
-        click.echo("no alarm: the detector saw no change of the dead-band width c_L + c_R")
-    else:
-        click.echo("no alarm, but the detector never armed: it reads the width every 3 / (1 - forgetting) samples and "
-                   "needs 8 readings for its reference (24,000 samples at the default forgetting 0.999); "
-                   "give a longer record or a lower --forgetting")
+    _report_tracking(result, tracker)
     click.echo(f"wrote {out}")
     if plots is not None:
         from .._optional import pyplot
