@@ -4,6 +4,8 @@
 //! uncorrelated with its own past (whiteness; prediction-error rule only: the regression's
 //! equation error of a sandwich is coloured by its output block even for the right model),
 //! with the past input u(t-k) and with the model's past internal signal x(t-k), k = 1..K.
+//! It takes the samples that update the estimate (a held sample of the cascade's regression
+//! has no innovation: it is skipped, and the lags are those of the updating samples).
 //!
 //! With the sample correlations over the window (means of u and x removed)
 //!     r_ee(k) = sum e(t) e(t-k) / sum e^2,
