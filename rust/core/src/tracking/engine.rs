@@ -5,40 +5,30 @@
 
 use super::detector::{Alarm, Detector, DETECTOR_SAVED};
 use super::monitor::{monitor_saved, Monitor, Window};
-use super::{Method, Options};
+use super::{shift_in, Method, Options, Orders};
 use crate::error::{Error, Result};
 
 /// theta's positions (`identify::problem::Layout`, without feedthroughs): a, b, c_L,
 /// m_L2..m_Ln, m_R1, c_R, m_R2..m_Rn, then for the sandwich r_2..r_nr, s_1..s_ns (r_1 = 1).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Dims {
-    pub na: usize,
-    pub nb: usize,
-    pub n: usize,
-    /// The output block's r_1..r_nr (eq 29); 0 for a cascade.
-    pub nr: usize,
-    pub ns: usize,
-}
-
-impl Dims {
-    pub fn p(&self) -> usize {
+impl Orders {
+    pub(crate) fn p(&self) -> usize {
         self.r() + self.nr.saturating_sub(1) + self.ns
     }
-    pub fn sandwich(&self) -> bool {
+    pub(crate) fn sandwich(&self) -> bool {
         self.nr > 0
     }
     fn c_l(&self) -> usize {
         self.na + self.nb
     }
     fn m_r1(&self) -> usize {
-        self.na + self.nb + self.n
+        self.na + self.nb + self.degree
     }
     fn c_r(&self) -> usize {
         self.m_r1() + 1
     }
     /// r_2's position (after m_Rn).
     fn r(&self) -> usize {
-        self.c_r() + self.n
+        self.c_r() + self.degree
     }
     /// s_1's position.
     fn s(&self) -> usize {
@@ -66,7 +56,7 @@ pub struct Sink<'a> {
 
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Engine<const W: usize> {
-    dims: Dims,
+    dims: Orders,
     method: Method,
     lambda: f64,
     /// 1 / lambda and its square root.
@@ -123,10 +113,6 @@ pub(crate) struct Engine<const W: usize> {
     rejected: u64,
     detector: Option<Detector>,
     monitor: Option<Monitor>,
-    /// The last update's innovation and x, for the monitor (`innovated`: taken this sample).
-    innovation: f64,
-    innovation_x: f64,
-    innovated: bool,
 }
 
 /// Horner: sum_{i>=1} m_i xi^i with m_1 = `m1` and m_2.. = `rest`.
@@ -238,7 +224,7 @@ impl<const W: usize> Engine<W> {
     /// variance `sigma2` (> 0) standing for `noise_count` samples.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
-        dims: Dims,
+        dims: Orders,
         options: &Options,
         theta0: &[f64],
         cov0: &[f64],
@@ -324,9 +310,6 @@ impl<const W: usize> Engine<W> {
             rejected: 0,
             detector,
             monitor,
-            innovation: 0.0,
-            innovation_x: 0.0,
-            innovated: false,
         })
     }
 
@@ -475,12 +458,12 @@ impl<const W: usize> Engine<W> {
             .map_or(u64::MAX, |d| d.options.spacing);
         let mut to_reading = spacing - self.t % spacing;
         for (&ut, &yt) in u.iter().zip(y) {
-            match (self.method, self.dims.sandwich()) {
+            let innovation = match (self.method, self.dims.sandwich()) {
                 (Method::PredictionError, false) => self.step_pe(ut, yt)?,
                 (Method::Regression, false) => self.step_regression(ut, yt)?,
                 (Method::PredictionError, true) => self.step_pe_sandwich(ut, yt)?,
                 (Method::Regression, true) => self.step_regression_sandwich(ut, yt)?,
-            }
+            };
             self.t += 1;
             to_record -= 1;
             if to_record == 0 {
@@ -491,12 +474,9 @@ impl<const W: usize> Engine<W> {
                 );
                 k += 1;
             }
-            if self.innovated {
-                self.innovated = false;
-                if let Some(m) = self.monitor.as_mut() {
-                    if let Some(w) = m.observe(self.t - 1, self.innovation, ut, self.innovation_x) {
-                        sink.windows.push(w);
-                    }
+            if let (Some(m), Some((e, xt))) = (self.monitor.as_mut(), innovation) {
+                if let Some(w) = m.observe(self.t - 1, e, ut, xt) {
+                    sink.windows.push(w);
                 }
             }
             to_reading -= 1;
@@ -523,7 +503,7 @@ impl<const W: usize> Engine<W> {
     /// x(t) of eq (16) at the current a, b from the lags.
     #[inline(always)]
     fn internal(&self) -> f64 {
-        let Dims { na, nb, .. } = self.dims;
+        let Orders { na, nb, .. } = self.dims;
         let mut x = 0.0;
         for i in 0..na {
             x += self.theta[i] * self.u_lag[i];
@@ -546,24 +526,19 @@ impl<const W: usize> Engine<W> {
 
     #[inline(always)]
     fn push_lags(&mut self, ut: f64, xt: f64) {
-        let Dims { na, nb, .. } = self.dims;
-        for i in (1..na).rev() {
-            self.u_lag[i] = self.u_lag[i - 1];
-        }
-        self.u_lag[0] = ut;
+        let Orders { na, nb, .. } = self.dims;
+        shift_in(&mut self.u_lag[..na], ut);
         if nb > 0 {
-            for j in (1..nb).rev() {
-                self.x_lag[j] = self.x_lag[j - 1];
-            }
-            self.x_lag[0] = xt;
+            shift_in(&mut self.x_lag[..nb], xt);
         }
     }
 
     /// One sample of the recursive prediction-error method: y_hat(t) of the current estimate
     /// and psi(t) = d y_hat(t) / d theta by the recursions of `identify::sensitivity`, then
-    /// the update with e(t) = y(t) - y_hat(t).
+    /// the update with e(t) = y(t) - y_hat(t). Every step returns the update's (e(t), x(t)),
+    /// None for a held sample without one (the monitor's input).
     #[inline(always)]
-    fn step_pe(&mut self, ut: f64, yt: f64) -> Result<()> {
+    fn step_pe(&mut self, ut: f64, yt: f64) -> Result<Option<(f64, f64)>> {
         let xt = self.inner_pe(ut)?;
         let psi = self.psi;
         self.update(&psi, yt - self.y_hat, xt)
@@ -575,9 +550,9 @@ impl<const W: usize> Engine<W> {
     /// theta = sum_i r_i psi_y(t-i) - sum_j s_j psi_w(t-j), plus y_hat(t-i) in r_i's column
     /// and -w_hat(t-j) in s_j's; the update with e(t) = w(t) - w_hat(t).
     #[inline(always)]
-    fn step_pe_sandwich(&mut self, ut: f64, wt: f64) -> Result<()> {
+    fn step_pe_sandwich(&mut self, ut: f64, wt: f64) -> Result<Option<(f64, f64)>> {
         let xt = self.inner_pe(ut)?;
-        let Dims { nr, ns, .. } = self.dims;
+        let Orders { nr, ns, .. } = self.dims;
         let (r0, s0) = (self.dims.r(), self.dims.s());
         let mut w = self.y_out[0];
         let mut psi = self.psi_y[0];
@@ -600,14 +575,10 @@ impl<const W: usize> Engine<W> {
         if !w.is_finite() {
             return Err(diverged(self.t));
         }
-        self.y_out.copy_within(..OUT_LAGS - 1, 1);
-        self.y_out[0] = self.y_hat;
-        self.psi_y.copy_within(..OUT_LAGS - 1, 1);
-        self.psi_y[0] = self.psi;
-        self.w_out.copy_within(..OUT_LAGS - 1, 1);
-        self.w_out[0] = w;
-        self.psi_w.copy_within(..OUT_LAGS - 1, 1);
-        self.psi_w[0] = psi;
+        shift_in(&mut self.y_out, self.y_hat);
+        shift_in(&mut self.psi_y, self.psi);
+        shift_in(&mut self.w_out, w);
+        shift_in(&mut self.psi_w, psi);
         self.update(&psi, wt - w, xt)
     }
 
@@ -617,7 +588,7 @@ impl<const W: usize> Engine<W> {
     #[inline(always)]
     fn inner_pe(&mut self, ut: f64) -> Result<f64> {
         let d = self.dims;
-        let (na, nb, n) = (d.na, d.nb, d.n);
+        let (na, nb, n) = (d.na, d.nb, d.degree);
         let (c_l, m_r1, c_r) = (d.c_l(), d.m_r1(), d.c_r());
         let xt = self.internal();
         let th = self.theta;
@@ -678,12 +649,8 @@ impl<const W: usize> Engine<W> {
             fu -= th[na + k] * self.wu[k];
             fx -= th[na + k] * self.wx[k];
         }
-        for k in (1..lags).rev() {
-            self.wu[k] = self.wu[k - 1];
-            self.wx[k] = self.wx[k - 1];
-        }
-        self.wu[0] = fu;
-        self.wx[0] = fx;
+        shift_in(&mut self.wu[..lags], fu);
+        shift_in(&mut self.wx[..lags], fx);
         self.push_lags(ut, xt);
         Ok(xt)
     }
@@ -693,14 +660,14 @@ impl<const W: usize> Engine<W> {
     /// and its target y(t) (eq 21 on a moving sample); a held sample's row is zero, so only
     /// forgetting and drift act on P (folded in at the next moving sample).
     #[inline(always)]
-    fn step_regression(&mut self, ut: f64, yt: f64) -> Result<()> {
+    fn step_regression(&mut self, ut: f64, yt: f64) -> Result<Option<(f64, f64)>> {
         let (moving, phi, xt) = self.inner_regression(ut)?;
         if moving {
             self.fold_pending();
             self.update(&phi, yt - self.y_hat, xt)
         } else {
             self.hold();
-            Ok(())
+            Ok(None)
         }
     }
 
@@ -710,11 +677,11 @@ impl<const W: usize> Engine<W> {
     /// f_2(t-1)]; the error against the current estimate, e = target - Phi' theta. A zero row
     /// (nr = 1, ns = 0 and a hold) is a held sample as in the cascade.
     #[inline(always)]
-    fn step_regression_sandwich(&mut self, ut: f64, wt: f64) -> Result<()> {
+    fn step_regression_sandwich(&mut self, ut: f64, wt: f64) -> Result<Option<(f64, f64)>> {
         let (moving, phi_now, xt) = self.inner_regression(ut)?;
-        let Dims { nr, ns, .. } = self.dims;
+        let Orders { nr, ns, .. } = self.dims;
         let (r0, s0) = (self.dims.r(), self.dims.s());
-        let (mut phi, mut target) = if self.moved_prev {
+        let (mut phi, target) = if self.moved_prev {
             (self.phi_prev, wt)
         } else {
             ([0.0; W], wt - self.y_out[1])
@@ -725,21 +692,20 @@ impl<const W: usize> Engine<W> {
         for j in 0..ns {
             phi[s0 + j] = -self.w_out[j];
         }
+        let mut e = target;
         for k in 0..W {
-            target -= phi[k] * self.theta[k];
+            e -= phi[k] * self.theta[k];
         }
-        self.y_out.copy_within(..OUT_LAGS - 1, 1);
-        self.y_out[0] = self.y_hat;
-        self.w_out.copy_within(..OUT_LAGS - 1, 1);
-        self.w_out[0] = wt;
+        shift_in(&mut self.y_out, self.y_hat);
+        shift_in(&mut self.w_out, wt);
         self.phi_prev = phi_now;
         self.moved_prev = moving;
         if phi.iter().any(|v| *v != 0.0) {
             self.fold_pending();
-            self.update(&phi, target, xt)
+            self.update(&phi, e, xt)
         } else {
             self.hold();
-            Ok(())
+            Ok(None)
         }
     }
 
@@ -758,7 +724,7 @@ impl<const W: usize> Engine<W> {
     #[inline(always)]
     fn inner_regression(&mut self, ut: f64) -> Result<(bool, [f64; W], f64)> {
         let d = self.dims;
-        let (na, nb, n) = (d.na, d.nb, d.n);
+        let (na, nb, n) = (d.na, d.nb, d.degree);
         let (c_l, m_r1, c_r) = (d.c_l(), d.m_r1(), d.c_r());
         let xt = self.internal();
         let th = self.theta;
@@ -848,13 +814,11 @@ impl<const W: usize> Engine<W> {
     /// The measurement update with row `phi` and error `e` at internal signal `xt`, then
     /// P / lambda (drift added in batches, `add_drift`); a step that leaves the linear block
     /// unstable, m_R1 <= 0 or a branch decreasing at `xt` is rejected (theta kept), a
-    /// negative width projected to 0 (the batch LM's `feasible` and `bounds`).
+    /// negative width projected to 0 (the batch LM's `feasible` and `bounds`). Returns (e,
+    /// xt) for the monitor.
     #[inline(always)]
-    fn update(&mut self, phi: &[f64; W], e: f64, xt: f64) -> Result<()> {
+    fn update(&mut self, phi: &[f64; W], e: f64, xt: f64) -> Result<Option<(f64, f64)>> {
         let p = self.dims.p();
-        self.innovation = e;
-        self.innovation_x = xt;
-        self.innovated = true;
         if self.q_wait >= DRIFT_BATCH {
             self.add_drift();
         }
@@ -898,7 +862,7 @@ impl<const W: usize> Engine<W> {
         cand[c_l] = cand[c_l].max(0.0);
         cand[c_r] = cand[c_r].max(0.0);
         // both branches still increase at this sample's x (m_L1 = 1)
-        let n = self.dims.n;
+        let n = self.dims.degree;
         let c_right = match self.method {
             Method::PredictionError => cand[c_r],
             Method::Regression => cand[c_r] / cand[m_r1],
@@ -944,7 +908,7 @@ impl<const W: usize> Engine<W> {
             self.sigma2 += gamma * (v - self.sigma2);
         }
         self.sigma2 = self.sigma2.max(f64::MIN_POSITIVE);
-        Ok(())
+        Ok(Some((e, xt)))
     }
 
     /// Every number that changes while tracking, in a fixed order (`load` reads it back).
@@ -1103,13 +1067,7 @@ mod tests {
         let cov: Vec<f64> = (0..121)
             .map(|k| if k % 12 == 0 { 1e-3 } else { 0.0 })
             .collect();
-        let dims = Dims {
-            na: 2,
-            nb: 2,
-            n: 3,
-            nr: 0,
-            ns: 0,
-        };
+        let dims = Orders::cascade(2, 2, 3);
         for method in [Method::Regression, Method::PredictionError] {
             let options = Options {
                 method,

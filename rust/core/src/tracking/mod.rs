@@ -44,7 +44,7 @@ pub use engine::MAX_OUTPUT_ORDER;
 pub use monitor::{Monitor, MonitorOptions, Window};
 
 use crate::error::{Error, Result};
-use engine::{Dims, Engine};
+use engine::Engine;
 
 /// The update rule (module header).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -118,7 +118,7 @@ impl Orders {
 /// (nr - 1 + ns more).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Tracker {
-    dims: Dims,
+    dims: Orders,
     engine: Sized_,
 }
 
@@ -154,13 +154,7 @@ impl Tracker {
                 m = engine::MAX_OUTPUT_ORDER
             )));
         }
-        let dims = Dims {
-            na,
-            nb,
-            n: degree,
-            nr,
-            ns,
-        };
+        let dims = orders;
         let p = dims.p();
         if p > MAX_PARAMETERS {
             return Err(Error::Model(format!(
@@ -362,6 +356,15 @@ impl Tracker {
     }
 }
 
+/// Move lags on by one sample: `lags[0]` takes `v`, the oldest drops out (`lags` not empty).
+#[inline(always)]
+pub(crate) fn shift_in<T: Copy>(lags: &mut [T], v: T) {
+    for i in (1..lags.len()).rev() {
+        lags[i] = lags[i - 1];
+    }
+    lags[0] = v;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -389,16 +392,19 @@ mod tests {
         }
     }
 
-    fn tracker(method: Method, theta0: &[f64], var: f64, det: bool) -> Tracker {
-        let cov: Vec<f64> = (0..121)
-            .map(|k| if k % 12 == 0 { var } else { 0.0 })
+    /// A tracker of `orders` started at `theta0` with variance `var` on every parameter,
+    /// lambda 0.999, optionally a detector reading every 500 samples.
+    fn tracker_of(orders: Orders, method: Method, theta0: &[f64], var: f64, det: bool) -> Tracker {
+        let p = theta0.len();
+        let cov: Vec<f64> = (0..p * p)
+            .map(|k| if k % (p + 1) == 0 { var } else { 0.0 })
             .collect();
         let det = det.then(|| DetectorOptions {
             spacing: 500,
             ..DetectorOptions::for_forgetting(0.999)
         });
         Tracker::new(
-            Orders::cascade(2, 2, 3),
+            orders,
             theta0,
             &cov,
             1e-4,
@@ -408,6 +414,20 @@ mod tests {
             None,
         )
         .unwrap()
+    }
+
+    /// Example 1's tracker (`tracker_of`).
+    fn tracker(method: Method, theta0: &[f64], var: f64, det: bool) -> Tracker {
+        tracker_of(Orders::cascade(2, 2, 3), method, theta0, var, det)
+    }
+
+    /// `theta` off by -5 %, 0 or +5 % per parameter in turn.
+    fn five_percent_off(theta: &[f64]) -> Vec<f64> {
+        theta
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v * (1.0 + 0.05 * ((k % 3) as f64 - 1.0)))
+            .collect()
     }
 
     /// The whole trajectory of a block.
@@ -443,11 +463,7 @@ mod tests {
     fn both_methods_converge_from_a_perturbed_start() {
         let (u, y) = record(40_000, 2);
         let y = noisy(&y, 3);
-        let start: Vec<f64> = TRUE
-            .iter()
-            .enumerate()
-            .map(|(k, v)| v * (1.0 + 0.05 * ((k % 3) as f64 - 1.0)))
-            .collect();
+        let start = five_percent_off(&TRUE);
         for method in [Method::PredictionError, Method::Regression] {
             let mut t = tracker(method, &start, 1e-3, false);
             let (theta, se, _) = run(&mut t, &u, &y);
@@ -786,33 +802,14 @@ mod tests {
         (u, w)
     }
 
+    /// Example 2's tracker (`tracker_of`).
     fn sandwich_tracker(method: Method, theta0: &[f64], var: f64, det: bool) -> Tracker {
-        let p = theta0.len();
-        let cov: Vec<f64> = (0..p * p)
-            .map(|k| if k % (p + 1) == 0 { var } else { 0.0 })
-            .collect();
-        let det = det.then(|| DetectorOptions {
-            spacing: 500,
-            ..DetectorOptions::for_forgetting(0.999)
-        });
         let orders = Orders {
-            na: 2,
-            nb: 2,
-            degree: 3,
             nr: 2,
             ns: 2,
+            ..Orders::cascade(2, 2, 3)
         };
-        Tracker::new(
-            orders,
-            theta0,
-            &cov,
-            1e-4,
-            10.0,
-            &options(method, 0.999),
-            det,
-            None,
-        )
-        .unwrap()
+        tracker_of(orders, method, theta0, var, det)
     }
 
     #[test]
@@ -839,11 +836,7 @@ mod tests {
     fn both_methods_track_the_sandwich_from_a_perturbed_start() {
         let (u, w) = sandwich_record(60_000, 22);
         let w = noisy(&w, 23);
-        let start: Vec<f64> = EXAMPLE2_THETA
-            .iter()
-            .enumerate()
-            .map(|(k, v)| v * (1.0 + 0.05 * ((k % 3) as f64 - 1.0)))
-            .collect();
+        let start = five_percent_off(&EXAMPLE2_THETA);
         for (method, bias) in [(Method::PredictionError, 0.0), (Method::Regression, 0.02)] {
             let mut t = sandwich_tracker(method, &start, 1e-3, false);
             let (theta, se, _) = run(&mut t, &u, &w);

@@ -22,6 +22,7 @@
 //! plant's dynamics: coloured (so not white) and correlated with the past input or the
 //! model's x, unless the tracker absorbs it within its forgetting window.
 
+use super::shift_in;
 use crate::error::{Error, Result};
 
 /// The largest number of lags K a monitor takes.
@@ -175,12 +176,9 @@ impl Monitor {
         } else {
             self.filled += 1;
         }
-        self.e_lag.copy_within(..k - 1, 1);
-        self.u_lag.copy_within(..k - 1, 1);
-        self.x_lag.copy_within(..k - 1, 1);
-        self.e_lag[0] = e;
-        self.u_lag[0] = u;
-        self.x_lag[0] = x;
+        shift_in(&mut self.e_lag[..k], e);
+        shift_in(&mut self.u_lag[..k], u);
+        shift_in(&mut self.x_lag[..k], x);
         out
     }
 
