@@ -261,15 +261,11 @@ def _model_options(command: F) -> F:
 
 
 def _tracking_start(head: tuple[Any, Any], structure: str, na: int, nb: int, nr: int, ns: int, degree: int) -> tuple[Any, str]:
-    """``track``'s start without --model: the --structure fitted on the record's first samples,
-    and its description."""
-    from ..identify import fit_cascade, fit_hammerstein_backlash, fit_sandwich
-
-    if structure == "sandwich":
-        return fit_sandwich(*head, na=na, nb=nb, nr=nr, ns=ns, degree=degree), f"a sandwich {na}/{nb}-{nr}/{ns}"
-    if structure == "hammerstein":
-        return fit_hammerstein_backlash(*head, nr=nr, ns=ns, degree=degree), f"an input backlash with a {nr}/{ns} load block"
-    return fit_cascade(*head, na=na, nb=nb, degree=degree), f"a cascade {na}/{nb}"
+    """``track``'s start without --model: the --structure fitted on the record's first samples
+    with the fits' defaults (no warm-up, 50 iterations), and its description."""
+    shape = {"sandwich": f"a sandwich {na}/{nb}-{nr}/{ns}", "hammerstein": f"an input backlash with a {nr}/{ns} load block"}
+    start = _fit_model(structure, *head, na, nb, nr, ns, degree, warmup=0, max_iter=50, feedthrough=False)
+    return start, shape.get(structure, f"a cascade {na}/{nb}")
 
 
 def _report_tracking(result: Any, tracker: Any) -> None:
@@ -283,13 +279,12 @@ def _report_tracking(result: Any, tracker: Any) -> None:
             f"{result.monitor.threshold:.4g}); the standard errors there are not trustworthy and the wear detector paused. "
             "A wandering estimate is then the model, not wear: try another --structure (sandwich, hammerstein) or orders"
         )
-    if result.alarms:
-        for alarm in result.alarms:
-            change = "wider" if alarm.direction > 0 else "narrower"
-            click.echo(f"alarm at sample {alarm.sample}: dead band {change}, c_L + c_R = {alarm.width:.6g} (reference {alarm.reference:.6g})")
-    elif result.mismatch:
+    for alarm in result.alarms:
+        change = "wider" if alarm.direction > 0 else "narrower"
+        click.echo(f"alarm at sample {alarm.sample}: dead band {change}, c_L + c_R = {alarm.width:.6g} (reference {alarm.reference:.6g})")
+    if result.alarms or result.mismatch:  # under a mismatch the detector paused: nothing more to say of the width
         return
-    elif tracker.detector_armed:
+    if tracker.detector_armed:
         click.echo("no alarm: the detector saw no change of the dead-band width c_L + c_R")
     else:
         click.echo("no alarm, but the detector never armed: it reads the width every 3 / (1 - forgetting) samples and "

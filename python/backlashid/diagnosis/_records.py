@@ -105,11 +105,7 @@ def nominal_chain(model: Any) -> Nominal:
             f"(fit_sandwich) or an input-backlash model (fit_hammerstein_backlash); got {type(model).__name__}"
         )
     plain = normalise(plain)
-    if isinstance(plain, SandwichModel):
-        i, o = plain.input_linear, plain.output_linear
-        structure = Structure(i.na, i.nb, plain.backlash.degree, o.na, o.nb)
-    else:
-        structure = Structure(plain.linear.na, plain.linear.nb, plain.backlash.degree)
+    structure = Structure.of(plain)  # no feedthrough: shifted into the data above
     return Nominal(plain, structure, structure.pack(plain), shift)
 
 

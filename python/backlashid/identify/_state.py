@@ -66,12 +66,7 @@ def _check_model(model: Any) -> None:
 
 def _structure(model: Model) -> Structure:
     """The model's structure with the initial state as parameters."""
-    if isinstance(model, SandwichModel):
-        lin, out = model.input_linear, model.output_linear
-        return Structure(
-            lin.na, lin.nb, model.backlash.degree, out.na, out.nb, lin.feedthrough, out.feedthrough, initial_state=True
-        )
-    return Structure(model.linear.na, model.linear.nb, model.backlash.degree, feedthrough=model.linear.feedthrough, initial_state=True)
+    return Structure.of(model, initial_state=True)
 
 
 def _scales(model: Model) -> tuple[float, float]:

@@ -262,6 +262,35 @@ class Structure:
         t = np.asarray(theta, dtype=np.float64)
         return t[sl["x0"]].tolist(), float(t[sl["y_prev"]][0]), t[sl["w0"]].tolist()
 
+    @classmethod
+    def of(cls, model: Model, *, initial_state: bool = False) -> Structure:
+        """The structure of a model: its blocks' orders and feedthroughs and its branch degree.
+
+        Parameters
+        ----------
+        model : CascadeModel or SandwichModel
+            The model.
+        initial_state : bool, default False
+            Whether the vector ends with the record's initial state.
+
+        Returns
+        -------
+        Structure
+            The structure whose :meth:`pack` takes ``model``.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> from backlashid.identify import Structure
+        >>> Structure.of(bid.example2()).size
+        14
+        """
+        if isinstance(model, SandwichModel):
+            lin, out = model.input_linear, model.output_linear
+            return cls(lin.na, lin.nb, model.backlash.degree, out.na, out.nb, lin.feedthrough, out.feedthrough, initial_state)
+        lin = model.linear
+        return cls(lin.na, lin.nb, model.backlash.degree, feedthrough=lin.feedthrough, initial_state=initial_state)
+
     def pack(self, model: Model) -> NDArray[np.float64]:
         """The physical vector of a model, normalised so that m_L1 = 1 and r_1 = 1; its
         initial state, if the structure has one, is rest (zeros).

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 from typing import Any
 
@@ -38,17 +39,6 @@ def _structure(value: Any) -> Structure:
     return Structure(value.na, value.nb, value.degree, value.nr, value.ns)
 
 
-def _model_structure(model: CascadeModel | SandwichModel) -> Structure:
-    if isinstance(model, SandwichModel):
-        lin, out = model.input_linear, model.output_linear
-        if lin.feedthrough or out.feedthrough:
-            raise ModelError("tracking takes a sandwich without feedthroughs")
-        return Structure(lin.na, lin.nb, model.backlash.degree, out.na, out.nb)
-    if model.linear.feedthrough:
-        raise ModelError("tracking takes a cascade without feedthrough")
-    return Structure(model.linear.na, model.linear.nb, model.backlash.degree)
-
-
 def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDArray[np.float64] | None, float | None]:
     """(structure, theta0, covariance or None, noise std or None) of the start."""
     if isinstance(model_or_structure, FitResult):
@@ -60,7 +50,7 @@ def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDA
         cov = np.asarray(fit.covariance, dtype=np.float64)[:p, :p]
         return structure, structure.pack(fit.model), cov if np.all(np.isfinite(cov)) else None, float(fit.noise_std)
     if isinstance(model_or_structure, (CascadeModel, SandwichModel)):
-        structure = _model_structure(model_or_structure)
+        structure = _structure(Structure.of(model_or_structure))
         cov = None
         pc = getattr(model_or_structure, "covariance", None)
         if pc is not None and list(pc.names) == structure.names:
@@ -77,6 +67,12 @@ def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDA
         "model_or_structure must be a FitResult, CascadeModel, SandwichModel or Structure, "
         f"got {type(model_or_structure).__name__}"
     )
+
+
+def _degrees(lags: int, whiteness: bool) -> int:
+    """The monitor's statistic's chi-square degrees of freedom (rust/core/src/tracking/monitor.rs):
+    ``lags`` per correlation tested, three with the whiteness, two without."""
+    return int(lags) * (3 if whiteness else 2)
 
 
 def _drift(drift: Any, names: list[str]) -> list[float]:
@@ -268,8 +264,8 @@ class Tracker:
             window = check_int(monitor_window, "monitor_window", 10 * _MONITOR_LAGS, _MOST)
             level = check_real(monitor_level, "monitor_level", low=0.0, high=0.5, low_open=True)
             whiteness = method == "prediction_error"  # the sandwich's equation error is coloured
-            degrees = _MONITOR_LAGS * (3 if whiteness else 2)
-            mon = (window, _MONITOR_LAGS, float(chdtri(degrees, level)), _MONITOR_CONFIRM, _MONITOR_CLEAR, whiteness)
+            threshold = float(chdtri(_degrees(_MONITOR_LAGS, whiteness), level))
+            mon = (window, _MONITOR_LAGS, threshold, _MONITOR_CONFIRM, _MONITOR_CLEAR, whiteness)
         self._names = names
         self._structure = structure
         self._args = (
@@ -438,7 +434,7 @@ class Tracker:
             statistics=np.array([w[1] for w in windows], dtype=np.float64),
             mismatch=np.array([w[2] for w in windows], dtype=bool),
             threshold=float(threshold),
-            degrees=int(lags * (3 if whiteness else 2)),
+            degrees=_degrees(lags, whiteness),
             window=int(window),
         )
 
@@ -470,6 +466,10 @@ class Tracker:
             f"Tracker({self.method}, forgetting={self.forgetting:g}, p={len(self._names)}, "
             f"samples={self.samples}, noise_std={self.noise_std:.3g})"
         )
+
+
+# Tracker's keyword options, which ``track`` passes on
+_OPTIONS = frozenset(inspect.signature(Tracker.__init__).parameters) - {"self", "model_or_structure"}
 
 
 def _restore(args: tuple[Any, ...], structure: Structure, state: list[float]) -> Tracker:
@@ -529,23 +529,7 @@ def track(
     >>> len(r), r.alarms
     (3000, [])
     """
-    unknown = set(options) - {
-        "forgetting",
-        "drift",
-        "method",
-        "covariance",
-        "noise_std",
-        "noise_memory",
-        "detector",
-        "spacing",
-        "threshold",
-        "slack",
-        "reference",
-        "holdoff",
-        "monitor",
-        "monitor_window",
-        "monitor_level",
-    }
+    unknown = set(options) - _OPTIONS
     if unknown:
         raise DataError(f"track() got unknown options {sorted(unknown)}: see Tracker for the options")
     return Tracker(model_or_structure, **options).update(u, y, every=every)
