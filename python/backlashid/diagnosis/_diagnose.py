@@ -49,7 +49,7 @@ from .analyses import (
     time_analysis,
 )
 from .effects import EFFECTS, REGISTRY, AugmentedModel, Screening
-from .effects._base import CoreEffects, RefitRecords, ScreenContext, Simulator, Start, simulate
+from .effects._base import Augmentation, CoreEffects, RefitRecords, ScreenContext, Simulator, Start, simulate
 from .effects._colored_noise import fit_ar
 from .effects._dead_time import MAX_DELAY
 from .effects._quantization import Lattice, lattice
@@ -244,6 +244,13 @@ def _score(d: _Diagnosis, model: AugmentedModel, r_step: Array, seed_outputs: li
     )  # fmt: skip
 
 
+def _at_zero(augmentation: Augmentation, params: dict[str, float]) -> bool:
+    """The refit ended with the effect at its zero size (e.g. no clipping level kept): what it
+    changed is the step's own parameters, a better fit of the step's model that no effect
+    may take the credit for."""
+    return bool(augmentation.names) and all(params.get(n) == z for n, z in zip(augmentation.names, augmentation.zero))
+
+
 def _refit_all(
     d: _Diagnosis, base_model: AugmentedModel | None, names: Sequence[str], r_step: Array, seed: int
 ) -> dict[str, _Scored]:
@@ -264,6 +271,8 @@ def _refit_all(
             aug = REGISTRY[name].fit(prob, theta0)
         except BacklashIdError:
             continue
+        if _at_zero(REGISTRY[name].augmentation, aug.params):  # the effect adds nothing: scored as the step's model
+            aug = replace(aug, theta=np.asarray(theta0, dtype=np.float64))
         if base_model is not None and base_model.ar.size and not aug.ar.size:
             aug = replace(aug, ar=base_model.ar)
         try:
