@@ -40,7 +40,10 @@ reported, alone on the nominal model, where the first step found "none", colored
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+
+from .effects import EFFECTS
 
 __all__ = [
     "ALPHA", "CLOSE_ENOUGH", "LATTICE_MATERIAL", "MATERIAL", "MATERIAL_GAP", "Evidence", "Naming", "Score", "Verdict", "decide",
@@ -53,6 +56,8 @@ MATERIAL = 0.25  # a significant deterministic candidate closing this much rules
 MATERIAL_GAP = 0.01  # a gap under this fraction of the noise variance is "none", however significant
 LATTICE_MATERIAL = 0.1  # a lattice's rounding variance q^2 / 12 over this share of the model's MSE is named
 SHARE_RANGE = (-10.0, 1.0)  # a gap share is reported within this range
+SAME_CRITERION = 0.01  # BICs this close are one model written two ways (clipping the input or the
+# state of an input backlash, whose input block is a delay): the catalogue's order decides
 
 
 @dataclass(frozen=True)
@@ -209,7 +214,7 @@ def decide(scores: list[Score], ev: Evidence) -> Verdict:
     significant = {s.effect for s in scores if s.p_value < level}
     if not (significant or ev.black_box_p < level) or not ev.gap > MATERIAL_GAP * ev.floor:
         return Verdict("none")
-    deterministic = sorted((s for s in scores if s.deterministic and s.effect in significant), key=lambda s: s.criterion)
+    deterministic = _by_criterion(s for s in scores if s.deterministic and s.effect in significant)
     not_named: dict[str, str] = {}
     closing = [s for s in deterministic if s.gap_closed >= CLOSE_ENOUGH]
     if closing and ev.modulation_p < level:
@@ -232,6 +237,25 @@ def decide(scores: list[Score], ev: Evidence) -> Verdict:
     # a candidate that closes half the gap yet a rule kept from being named is never provisional
     material = [s.effect for s in deterministic if MATERIAL <= s.gap_closed < CLOSE_ENOUGH and s.effect not in not_named]
     return Verdict("unexplained", not_named, tuple(ruled_out), material[0] if material else "")
+
+
+def _by_criterion(scores: Iterable[Score]) -> list[Score]:
+    """The scores by BIC; those within ``SAME_CRITERION`` of the first of their run are one
+    model written two ways and keep the catalogue's order."""
+    out: list[Score] = []
+    for group in _runs(sorted(scores, key=lambda s: s.criterion)):
+        out += sorted(group, key=lambda s: EFFECTS.index(s.effect) if s.effect in EFFECTS else len(EFFECTS))
+    return out
+
+
+def _runs(ordered: list[Score]) -> list[list[Score]]:
+    runs: list[list[Score]] = []
+    for s in ordered:
+        if runs and s.criterion - runs[-1][0].criterion <= SAME_CRITERION:
+            runs[-1].append(s)
+        else:
+            runs.append([s])
+    return runs
 
 
 def noise_named(noise: Score, ev: Evidence) -> tuple[str, ...]:
