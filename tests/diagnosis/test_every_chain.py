@@ -41,6 +41,14 @@ def test_rule_says_none_without_a_significant_improvement_or_a_material_gap():
     assert decide([Score("friction", 0.1, 1e-9, -1.0, 1.0)], Evidence(1e-3, 0.0005, 0.1)).best == "none"
 
 
+def test_rule_ties_in_bic_keep_the_catalogue_order():
+    # clipping the input or the state of an input backlash: one model, BICs 1e-3 apart
+    scores = [Score("state_saturation", 0.2, 1e-9, -500.001, 1.0), Score("saturation", 0.2, 1e-9, -500.0, 1.0)]
+    assert decide(scores, Evidence(1e-3, 1.0, 0.1)).best == "saturation"
+    scores[0] = Score("state_saturation", 0.2, 1e-9, -501.0, 1.0)  # a real difference
+    assert decide(scores, Evidence(1e-3, 1.0, 0.1)).best == "state_saturation"
+
+
 def test_rule_names_colored_noise_only_when_the_residual_is_noise():
     noise = Score("colored_noise", 1.0, 1e-9, -10.0, 0.0, deterministic=False)
     weak = Score("friction", 0.95, 1e-4, -5.0, 0.1)
