@@ -12,7 +12,8 @@ remaining gap (the step's MSE above the noise floor) it closes. The family-wise 
 
 - "none" if nothing improves on the step's model significantly, or the remaining gap is under
   ``MATERIAL_GAP`` of the noise variance (a consistent but immaterial improvement);
-- else the significant deterministic candidate of lowest BIC, if it closes at least
+- else the significant deterministic candidate of lowest BIC (BICs within ``SAME_CRITERION``
+  are one model written two ways: the catalogue's order), if it closes at least
   ``CLOSE_ENOUGH`` of the gap (and, when the step's residual is a slowly modulated copy of the
   output, leaves no such modulation in its own residual);
 - else (first step only) colored_noise if no significant deterministic candidate closes

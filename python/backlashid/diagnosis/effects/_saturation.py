@@ -11,7 +11,7 @@ from ._base import Array, Augmentation, Effect, Fitted, RefitRecords, ScreenCont
 # moves the position by several noise levels.
 SHARES = (0.0, 0.003, 0.01, 0.05, 0.15)
 KEEP = 6.63  # chi-square(1) quantile at 0.99: the cost rise that keeps a clipping level (see refit)
-BEYOND = 0.01  # the input beyond a kept level, a share of its swing from the median
+BEYOND = 0.01  # how far the input must go beyond a kept level: a share of the level's distance from the median
 AUGMENTATION = Augmentation("saturation", ("lo", "hi"), (-np.inf, np.inf), "drive input clipped to [lo, hi]")
 
 
@@ -49,8 +49,8 @@ class Saturation(Effect, rank=1, augmentation=AUGMENTATION):
     def refit(self, prob: RefitRecords, theta0: Array) -> Fitted:
         """The refit, with a level the estimation records do not establish set to +-inf.
 
-        A level is kept if the input goes beyond it by at least ``BEYOND`` of its swing from
-        the median (a level at the records' range, or a ramp's plateau clipped by a hair, is
+        A level is kept if the input goes beyond it by at least ``BEYOND`` of the level's
+        distance from the median (a level at the records' range, or a ramp's plateau clipped by a hair, is
         indistinguishable from a clip anywhere beyond the range, and a validation record that
         goes further is then clipped where the system is not: on an integrating plant that
         drifts without bound) and if removing it raises the cost by more than ``KEEP`` times
