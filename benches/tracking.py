@@ -62,6 +62,7 @@ import math
 import pickle
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -114,22 +115,28 @@ def start_fit(u: np.ndarray, y: np.ndarray) -> bid.FitResult:
     return bid.fit_cascade(u[:START], y[:START], na=2, nb=2, degree=3)
 
 
-def drift_case(seed: int, png: Path | None) -> dict[str, np.ndarray]:
-    u, y, c_r = drifting(seed)
-    fit = start_fit(u, y)
-    true = np.tile(TRUE, (u.size, 1))
-    true[:, NAMES.index("c_R")] = c_r
+def drift_shares(u: np.ndarray, y: np.ndarray, fit: Any, true: np.ndarray, figure: Path | None, reference: Any = None) -> dict[str, np.ndarray]:
+    """Per method, the share of samples after the settling with each parameter within 3
+    standard errors of the true trajectory ``true``; with ``figure``, the prediction error's
+    tracking drawn there (every 1000th sample; ``reference`` dotted)."""
     out = {}
     for method in ("prediction_error", "regression"):
         r = bid.track(u, y, fit, method=method, forgetting=LAMBDA, detector=False)
         z = np.abs(r.theta - true) / r.standard_errors
         out[method] = (z[SETTLE:] <= 3).mean(axis=0)
-        if png is not None and method == "prediction_error":
-            png.mkdir(parents=True, exist_ok=True)
-            step = 1000  # every 1000th sample in the figure
+        if figure is not None and method == "prediction_error":
+            figure.parent.mkdir(parents=True, exist_ok=True)
+            step = 1000
             thin = bid.tracking.TrackResult(r.names, r.samples[::step], r.theta[::step], r.standard_errors[::step], r.alarms, r.noise_std)
-            thin.plot(truth=true[::step], path=str(png / "tracking_drift.png"))
+            thin.plot(truth=true[::step], reference=reference, path=str(figure))
     return out
+
+
+def drift_case(seed: int, png: Path | None) -> dict[str, np.ndarray]:
+    u, y, c_r = drifting(seed)
+    true = np.tile(TRUE, (u.size, 1))
+    true[:, NAMES.index("c_R")] = c_r
+    return drift_shares(u, y, start_fit(u, y), true, None if png is None else png / "tracking_drift.png")
 
 
 def constant_case(seed: int) -> dict[str, np.ndarray]:

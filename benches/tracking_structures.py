@@ -57,6 +57,7 @@ Measured 2026-11-29 on the shared 2-core machine (quoted seeds 0..19, rules as a
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -65,17 +66,12 @@ from scipy.signal import lfilter
 
 import backlashid as bid
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from tracking import LAMBDA, SETTLE, START, drift_shares, seeds  # the cascade bench's tracker protocol
+
 N = 1_000_000
-LAMBDA = 0.999
-START = 5000
-SETTLE = 10_000
 SNR = 25.0
 MISMATCH_N = 100_000
-
-
-def seeds(text: str) -> list[int]:
-    lo, _, hi = text.partition("-")
-    return list(range(int(lo), int(hi or lo) + 1))
 
 
 def play(
@@ -228,17 +224,7 @@ def drift_case(key: str, seed: int, png: Path | None) -> dict[str, np.ndarray]:
     w = noisy(plant.output(u, c_left, c_right), rng)
     true = plant.truth(c_left, c_right)
     fit = plant.fit(u[:START], w[:START])
-    out = {}
-    for method in ("prediction_error", "regression"):
-        r = bid.track(u, w, fit, method=method, forgetting=LAMBDA, detector=False)
-        z = np.abs(r.theta - true) / r.standard_errors
-        out[method] = (z[SETTLE:] <= 3).mean(axis=0)
-        if png is not None and method == "prediction_error":
-            png.mkdir(parents=True, exist_ok=True)
-            step = 1000
-            thin = bid.tracking.TrackResult(r.names, r.samples[::step], r.theta[::step], r.standard_errors[::step], r.alarms, r.noise_std)
-            thin.plot(truth=true[::step], reference=fit, path=str(png / f"tracking_drift_{key}.png"))
-    return out
+    return drift_shares(u, w, fit, true, None if png is None else png / f"tracking_drift_{key}.png", reference=fit)
 
 
 def mismatch_case(key: str, seed: int, png: Path | None) -> dict[str, tuple[int | None, int]]:
