@@ -202,17 +202,3 @@ def test_the_fine_stage_uses_the_sub_record_only_on_long_records(long_record, mo
     assert not calls
     _coarse.refine_whole(S, whole, start, d.u, d.noisy, 0, 1000)  # 60 segments
     assert len(calls) == 1 and calls[0][2].shape == (S.size + 1, S.size + 1)
-
-
-def test_the_predicted_gain_over_dependent_free_columns_is_their_projection_not_an_error():
-    # a parameter at its bound leaves the others free; two of them move the output alike (equal
-    # columns of R), so the step over the free ones is not unique: its predicted gain still is
-    from backlashid.identify._refine import _gain
-
-    rng = np.random.default_rng(3)
-    r_mat = np.triu(rng.normal(size=(4, 4)))
-    r_mat[:, 2] = r_mat[:, 1]
-    qtr = rng.normal(size=4)
-    free = np.array([True, True, True, False])
-    basis = np.linalg.svd(r_mat[:, free], full_matrices=False)[0][:, :2]  # the span of 3 columns of rank 2
-    assert _gain(r_mat, qtr, free, ["a", "b", "c", "d"]) == pytest.approx(float(np.sum((basis.T @ qtr) ** 2)), rel=1e-12)

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _core
-from ..errors import BacklashIdError, DataError, NotIdentifiableError
+from ..errors import BacklashIdError, DataError
 
 
 @dataclass
@@ -607,10 +607,7 @@ def _gain(r_mat: NDArray[np.float64], qtr: NDArray[np.float64], free: NDArray[np
     free = free & np.any(r_mat != 0.0, axis=0)  # a zero column (a state the data never excite) gains nothing
     if not free.any():
         return 0.0
-    try:
-        delta = _core.lstsq(r_mat[:, free], qtr, [k for k, f in zip(names, free) if f])[0]
-    except NotIdentifiableError:  # dependent free columns: the gain is the projection on their span
-        delta = np.linalg.lstsq(r_mat[:, free], qtr, rcond=None)[0]
+    delta = _core.lstsq(r_mat[:, free], qtr, [k for k, f in zip(names, free) if f])[0]
     step = r_mat[:, free] @ delta
     return float(step @ step)
 
