@@ -39,17 +39,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+from friction_damper import DECIMATE, DT, FIT_FREQS, INIT, LUGRE_NRMSE, WINDOWS, nrmse  # the page's protocol, beside this script
 from scipy.optimize import least_squares
 
 import backlashid as bid
 from backlashid.app import decimate, load_record
 
-DECIMATE = 8
-DT = DECIMATE / 1024.0
-INIT = 64
-FIT_FREQS = ("0.25Hz", "1Hz")
-WINDOWS = {"ImperialValleyDBE": (3072, 7680), "ImperialValleyMCE": (3072, 7680), "KocaeliDBE": (6144, 14336), "KocaeliMCE": (6144, 14336)}
-LUGRE_NRMSE = {"ImperialValleyDBE": 0.058, "ImperialValleyMCE": 0.076, "KocaeliDBE": 0.121, "KocaeliMCE": 0.094}
 NAMES = ("sigma_0", "sigma_1", "sigma_2", "F_c+", "F_c-", "F_s+ - F_c+", "F_s- - F_c-", "v_s", "F_0")
 
 
@@ -91,10 +86,6 @@ def padded(series: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     for j, s in enumerate(series):
         arr[: len(s), j], mask[: len(s), j] = s, True
     return arr, mask
-
-
-def nrmse(measured: np.ndarray, simulated: np.ndarray) -> float:
-    return float(np.sqrt(np.mean((simulated - measured) ** 2)) / np.ptp(measured))
 
 
 def main() -> None:
