@@ -309,14 +309,14 @@ def test_a_wrong_structure_is_reported_and_raises_no_wear_alarm() -> None:
     wrong = track(u, w, bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3), every=100, spacing=1000)
     assert wrong.mismatch and wrong.alarms == []
     test = wrong.monitor
-    assert test is not None and test.window == 2000 and test.degrees == 15
-    assert np.all(test.statistics > 10 * test.threshold)
+    assert test is not None and test.window == 2000 and np.all(test.degrees == 15)
+    assert np.all(test.statistics > 10 * test.thresholds)
     assert test.periods()[0][0] <= 4000 and test.mismatch[1:].all()
     bare = track(u, w, bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3), every=100, spacing=1000, monitor=False)
     assert bare.monitor is None and not bare.mismatch
     right = track(u, w, bid.fit_hammerstein_backlash(u[:5000], w[:5000], 2, 2, 2), every=100, spacing=1000)
     assert not right.mismatch and right.alarms == []
-    assert right.monitor is not None and np.all(right.monitor.statistics < right.monitor.threshold)
+    assert right.monitor is not None and np.all(right.monitor.statistics < right.monitor.thresholds)
     tracker = Tracker(bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3))
     assert tracker.mismatch is False
     tracker.update(u[:10_000], w[:10_000])

@@ -272,11 +272,10 @@ def _report_tracking(result: Any, tracker: Any) -> None:
     """``track``'s lines on the monitor's verdict and the detector's alarms."""
     if result.mismatch and result.monitor is not None:
         stretches = ", ".join(f"{a}-{b}" for a, b in result.monitor.periods())
-        worst = float(result.monitor.statistics.max())
         click.echo(
             f"mismatch: the tracked {tracker.model.__class__.__name__} does not explain the record over samples {stretches} "
-            f"(its innovations are coloured or follow the input: window statistic up to {worst:.4g}, threshold "
-            f"{result.monitor.threshold:.4g}); the standard errors there are not trustworthy and the wear detector paused. "
+            f"(its innovations are coloured or follow the input: window statistic up to {result.monitor.worst:.3g} times "
+            "its threshold); the standard errors there are not trustworthy and the wear detector paused. "
             "A wandering estimate is then the model, not wear: try another --structure (sandwich, hammerstein) or orders"
         )
     for alarm in result.alarms:

@@ -57,15 +57,19 @@ class MismatchTest:
     samples : numpy.ndarray
         The last sample of each window closed (int64), counted from the tracker's first sample.
     statistics : numpy.ndarray
-        Each window's statistic Q, about chi-square with ``degrees`` degrees of freedom when the
-        tracked structure is right.
+        Each window's statistic Q, about chi-square with that window's ``degrees`` when the
+        tracked structure is right: the whiteness part plus n R^2 of the innovation regressed
+        on the lagged input and x.
+    degrees : numpy.ndarray
+        Each window's degrees of freedom (int64): the whiteness lags plus the rank of the
+        lagged input and x in that window (a slow input's lags count as few, a window at rest
+        as none).
+    thresholds : numpy.ndarray
+        The chi-square quantile each window's Q was compared with (inf for a window with
+        nothing to test).
     mismatch : numpy.ndarray
-        Whether the mismatch verdict held after each window (bool): set by a window above
-        ``threshold``, cleared by consecutive windows below it.
-    threshold : float
-        The chi-square quantile a window's Q is compared with.
-    degrees : int
-        Q's degrees of freedom under the right structure.
+        Whether the mismatch verdict held after each window (bool): set by windows above their
+        threshold, cleared by consecutive windows below it.
     window : int
         Samples per window.
 
@@ -73,17 +77,25 @@ class MismatchTest:
     --------
     >>> import numpy as np
     >>> from backlashid.tracking import MismatchTest
-    >>> test = MismatchTest(np.array([1999, 3999]), np.array([12.0, 900.0]), np.array([False, True]), 68.0, 15, 2000)
+    >>> test = MismatchTest(np.array([1999, 3999]), np.array([12.0, 900.0]), np.array([15, 15]),
+    ...                     np.array([68.0, 68.0]), np.array([False, True]), 2000)
     >>> test.periods()
     [(2000, 3999)]
+    >>> round(test.worst, 2)
+    13.24
     """
 
     samples: NDArray[np.int64] = field(repr=False)
     statistics: NDArray[np.float64] = field(repr=False)
+    degrees: NDArray[np.int64] = field(repr=False)
+    thresholds: NDArray[np.float64] = field(repr=False)
     mismatch: NDArray[np.bool_] = field(repr=False)
-    threshold: float
-    degrees: int
     window: int
+
+    @property
+    def worst(self) -> float:
+        """The largest ratio of a window's statistic to its threshold (0 without windows)."""
+        return float((self.statistics / self.thresholds).max()) if self.statistics.size else 0.0
 
     @property
     def any(self) -> bool:

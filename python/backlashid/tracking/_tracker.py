@@ -69,10 +69,12 @@ def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDA
     )
 
 
-def _degrees(lags: int, whiteness: bool) -> int:
-    """The monitor's statistic's chi-square degrees of freedom (rust/core/src/tracking/monitor.rs):
-    ``lags`` per correlation tested, three with the whiteness, two without."""
-    return int(lags) * (3 if whiteness else 2)
+def _thresholds(lags: int, whiteness: bool, level: float) -> list[float]:
+    """The monitor's thresholds for a window's 1, 2, .. degrees of freedom: the chi-square
+    quantiles of tail probability ``level`` up to ``lags`` per correlation tested, three with
+    the whiteness, two without (rust/core/src/tracking/monitor.rs: a window's degrees are the
+    whiteness lags plus the rank of its lagged input and x)."""
+    return [float(chdtri(d, level)) for d in range(1, int(lags) * (3 if whiteness else 2) + 1)]
 
 
 def _drift(drift: Any, names: list[str]) -> list[float]:
@@ -264,8 +266,8 @@ class Tracker:
             window = check_int(monitor_window, "monitor_window", 10 * _MONITOR_LAGS, _MOST)
             level = check_real(monitor_level, "monitor_level", low=0.0, high=0.5, low_open=True)
             whiteness = method == "prediction_error"  # the sandwich's equation error is coloured
-            threshold = float(chdtri(_degrees(_MONITOR_LAGS, whiteness), level))
-            mon = (window, _MONITOR_LAGS, threshold, _MONITOR_CONFIRM, _MONITOR_CLEAR, whiteness)
+            thresholds = _thresholds(_MONITOR_LAGS, whiteness, level)
+            mon = (window, _MONITOR_LAGS, thresholds, _MONITOR_CONFIRM, _MONITOR_CLEAR, whiteness)
         self._names = names
         self._structure = structure
         self._args = (
@@ -424,17 +426,19 @@ class Tracker:
             monitor=self._mismatch_test(windows),
         )
 
-    def _mismatch_test(self, windows: list[tuple[int, float, bool]]) -> MismatchTest | None:
+    def _mismatch_test(self, windows: list[tuple[int, float, int, bool]]) -> MismatchTest | None:
         mon = self._args[14] if len(self._args) > 14 else None
         if mon is None:
             return None
-        window, lags, threshold, _, _, whiteness = mon
+        window, _, thresholds, _, _, _ = mon
+        degrees = np.array([w[2] for w in windows], dtype=np.int64)
+        table = np.r_[np.inf, thresholds]  # 0 degrees (nothing to test): never fails
         return MismatchTest(
             samples=np.array([w[0] for w in windows], dtype=np.int64),
             statistics=np.array([w[1] for w in windows], dtype=np.float64),
-            mismatch=np.array([w[2] for w in windows], dtype=bool),
-            threshold=float(threshold),
-            degrees=_degrees(lags, whiteness),
+            degrees=degrees,
+            thresholds=table[degrees],
+            mismatch=np.array([w[3] for w in windows], dtype=bool),
             window=int(window),
         )
 

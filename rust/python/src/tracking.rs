@@ -4,7 +4,7 @@
 
 use backlashid_core::guard;
 use backlashid_core::tracking::{
-    DetectorOptions, Method, MonitorOptions, Options, Orders, Sink, Tracker,
+    DetectorOptions, Method, MonitorOptions, Options, Orders, Sink, Tracker, MAX_MONITOR_DEGREES,
 };
 use numpy::PyArrayMethods;
 use pyo3::prelude::*;
@@ -16,10 +16,10 @@ use crate::errors::{run, CoreError, DataError};
 type AlarmOut = (u64, i8, f64, f64, f64);
 /// (spacing, reference, slack, threshold, holdoff).
 type DetectorIn = (u64, u32, f64, f64, u32);
-/// (window, lags, threshold, confirm, clear, whiteness).
-type MonitorIn = (u64, usize, f64, u32, u32, bool);
-/// A monitor window: (last sample, Q, mismatch verdict after it).
-type WindowOut = (u64, f64, bool);
+/// (window, lags, thresholds for 1, 2, .. degrees of freedom, confirm, clear, whiteness).
+type MonitorIn = (u64, usize, Vec<f64>, u32, u32, bool);
+/// A monitor window: (last sample, Q, its degrees of freedom, mismatch verdict after it).
+type WindowOut = (u64, f64, usize, bool);
 
 #[pyclass(module = "backlashid._core", name = "Tracker")]
 pub(crate) struct PyTracker(Tracker);
@@ -82,6 +82,27 @@ impl PyTracker {
             nr,
             ns,
         };
+        let monitor = monitor
+            .map(|(window, lags, given, confirm, clear, whiteness)| {
+                if given.len() > MAX_MONITOR_DEGREES {
+                    return Err(DataError::new_err(format!(
+                        "{} monitor thresholds: give at most {MAX_MONITOR_DEGREES}",
+                        given.len()
+                    )));
+                }
+                // a degree without a threshold stays 0: MonitorOptions::check refuses it
+                let mut thresholds = [0.0; MAX_MONITOR_DEGREES];
+                thresholds[..given.len()].copy_from_slice(&given);
+                Ok(MonitorOptions {
+                    window,
+                    lags,
+                    thresholds,
+                    confirm,
+                    clear,
+                    whiteness,
+                })
+            })
+            .transpose()?;
         let tracker = Tracker::new(
             orders,
             &theta0,
@@ -90,16 +111,7 @@ impl PyTracker {
             noise_count,
             &options,
             detector,
-            monitor.map(
-                |(window, lags, threshold, confirm, clear, whiteness)| MonitorOptions {
-                    window,
-                    lags,
-                    threshold,
-                    confirm,
-                    clear,
-                    whiteness,
-                },
-            ),
+            monitor,
         )
         .map_err(CoreError)?;
         Ok(Self(tracker))
@@ -191,7 +203,7 @@ impl PyTracker {
             .collect();
         let windows = windows
             .into_iter()
-            .map(|w| (w.sample, w.statistic, w.mismatch))
+            .map(|w| (w.sample, w.statistic, w.degrees, w.mismatch))
             .collect();
         Ok((
             vec_f64(py, theta).reshape([rows, p])?,

@@ -371,28 +371,57 @@ impl<const W: usize> Engine<W> {
         (theta, cov)
     }
 
-    /// The dead-band width c_L + c_R and its variance.
+    /// The dead-band width the detector watches and its variance: c_L + c_R for a cascade
+    /// (the backlash's output is the record's, slope m_L1 = 1: a width in its units); for a
+    /// sandwich referred to the input, (c_L + c_R) (1 + sum b) / sum a, the input block's
+    /// static gain dividing (for the input backlash, na = 1, nb = 0: the play in the input's
+    /// units, (c_L + c_R) / a_1). The sandwich's normalisation (m_L1 = r_1 = 1) leaves x's
+    /// scale to the input block against the output block's gain, a direction a slow input
+    /// hardly determines: along it a, c_L and c_R move together by 10 % on a constant plant
+    /// while the width referred to the input stays within 1 % (docs/tracking.md). None of it
+    /// changes for a cascade.
     #[inline]
     fn width(&self) -> (f64, f64) {
         let (c_l, m_r1, c_r) = (self.dims.c_l(), self.dims.m_r1(), self.dims.c_r());
-        let (w, g): (f64, [(usize, f64); 3]) = match self.method {
-            Method::PredictionError => (
-                self.theta[c_l] + self.theta[c_r],
-                [(c_l, 1.0), (c_r, 1.0), (m_r1, 0.0)],
-            ),
+        let mut g = [0.0; W];
+        let w = match self.method {
+            Method::PredictionError => {
+                g[c_l] = 1.0;
+                g[c_r] = 1.0;
+                self.theta[c_l] + self.theta[c_r]
+            }
             Method::Regression => {
                 let (m, c2) = (self.theta[m_r1], self.theta[c_r]);
-                (
-                    self.theta[c_l] + c2 / m,
-                    [(c_l, 1.0), (c_r, 1.0 / m), (m_r1, -c2 / (m * m))],
-                )
+                g[c_l] = 1.0;
+                g[c_r] = 1.0 / m;
+                g[m_r1] = -c2 / (m * m);
+                self.theta[c_l] + c2 / m
             }
+        };
+        let w = if self.dims.sandwich() {
+            // w h with h = (1 + sum b) / sum a; d h / d a_i = -h / sum a, d h / d b_j = 1 / sum a
+            let Orders { na, nb, .. } = self.dims;
+            let sa: f64 = self.theta[..na].iter().sum();
+            let den = 1.0 + self.theta[na..na + nb].iter().sum::<f64>();
+            let h = den / sa;
+            for v in &mut g {
+                *v *= h;
+            }
+            for v in &mut g[..na] {
+                *v = -w * h / sa;
+            }
+            for v in &mut g[na..na + nb] {
+                *v = w / sa;
+            }
+            w * h
+        } else {
+            w
         };
         // g' S S' g = |S' g|^2
         let mut var = 0.0;
         for k in 0..W {
             let mut f = 0.0;
-            for &(i, gi) in &g {
+            for (i, gi) in g.iter().enumerate() {
                 f += gi * self.sm[i][k];
             }
             var += f * f;
@@ -540,8 +569,27 @@ impl<const W: usize> Engine<W> {
     #[inline(always)]
     fn step_pe(&mut self, ut: f64, yt: f64) -> Result<Option<(f64, f64)>> {
         let xt = self.inner_pe(ut)?;
-        let psi = self.psi;
-        self.update(&psi, yt - self.y_hat, xt)
+        let (psi, before) = (self.psi, self.theta);
+        let out = self.update(&psi, yt - self.y_hat, xt)?;
+        self.refresh_memory(&before);
+        Ok(out)
+    }
+
+    /// Carry the simulated backlash memory y_hat(t) over to the updated estimate, to first
+    /// order: y_hat += psi(t)' (theta(t) - theta(t-1)). A moving sample recomputes y_hat from
+    /// the branch anyway; a held one keeps the value of its last contact, and without this the
+    /// memory stays that of the estimate at the contact while psi (held too) says how it moves
+    /// with theta: the updates then push along psi for a change the prediction never shows,
+    /// and the estimate runs away along a direction the data barely determine (an input
+    /// backlash under a slow input: a_1 and the widths to 0, r_2 up, within 30 samples of a
+    /// hold; docs/tracking.md).
+    #[inline(always)]
+    fn refresh_memory(&mut self, before: &[f64; W]) {
+        let mut change = 0.0;
+        for k in 0..W {
+            change += self.psi[k] * (self.theta[k] - before[k]);
+        }
+        self.y_hat += change;
     }
 
     /// The sandwich's prediction-error sample: the cascade part's y_hat(t), psi_y(t)
@@ -579,7 +627,10 @@ impl<const W: usize> Engine<W> {
         shift_in(&mut self.psi_y, self.psi);
         shift_in(&mut self.w_out, w);
         shift_in(&mut self.psi_w, psi);
-        self.update(&psi, wt - w, xt)
+        let before = self.theta;
+        let out = self.update(&psi, wt - w, xt)?;
+        self.refresh_memory(&before);
+        Ok(out)
     }
 
     /// The cascade part of a prediction-error sample: x(t), y_hat(t) and psi(t) = d y_hat(t)

@@ -41,7 +41,7 @@ pub mod monitor;
 pub use detector::{Alarm, Detector, DetectorOptions};
 pub use engine::Sink;
 pub use engine::MAX_OUTPUT_ORDER;
-pub use monitor::{Monitor, MonitorOptions, Window};
+pub use monitor::{Monitor, MonitorOptions, Window, MAX_MONITOR_DEGREES};
 
 use crate::error::{Error, Result};
 use engine::Engine;
