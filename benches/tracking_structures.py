@@ -279,8 +279,10 @@ def mismatch_case(key: str, seed: int, png: Path | None, kind: str = "white") ->
     plant = PLANTS[key]
     rng = np.random.default_rng(30_000 + seed)
     u = excitation(kind, MISMATCH_N, rng)
-    w = noisy(plant.constant(u)[0], rng)
-    out: dict = {"raised": []}
+    clean = plant.constant(u)[0]
+    w = noisy(clean, rng)
+    sd = clean.std() / SNR  # the noise std noisy() drew
+    out: dict = {"raised": [], "level": {}}
     for which, fit in (("right", plant.fit), ("wrong", plant.wrong_fit)):
         try:
             start = fit(u[:START], w[:START])
@@ -292,6 +294,7 @@ def mismatch_case(key: str, seed: int, png: Path | None, kind: str = "white") ->
         r = bid.track(u, w, start, forgetting=LAMBDA, every=100)
         m = r.monitor
         out[which] = (int(m.samples[m.mismatch][0]) if m.any else None, len(r.alarms))
+        out["level"][which] = r.noise_std / sd  # the tracker's innovation std at the end, in noise stds
         if png is not None and which == "wrong":
             png.mkdir(parents=True, exist_ok=True)
             r.plot(path=str(png / f"tracking_mismatch_{key}{'' if kind == 'white' else '_' + kind}.png"))
@@ -380,13 +383,18 @@ def mismatch(chosen: list[int], args: argparse.Namespace, kind: str = "white") -
             print(f"  {key} {kind} seed {s}: right structure (first mismatch, alarms) {row['right']}, {wrong} {row['wrong']}"
                   + "".join(f"; start raised ({e})" for e in row["raised"]))
         found = [r["wrong"][0] for r in rows if r["wrong"][0] is not None and r["wrong"][0] < 20_000]
+        missed = [r["level"]["wrong"] for r in rows if "wrong" in r["level"] and not (r["wrong"][0] is not None and r["wrong"][0] < 20_000)]
+        flagged = [r["level"]["right"] for r in rows if "right" in r["level"] and r["right"][0] is not None]
         print(
             f"MISMATCH {key} tracked with {wrong}, {kind} input ({MISMATCH_N:.0e} samples, constant plant): reported within 20,000 samples "
             f"on {len(found)}/{len(rows)} seeds (first sample max {max(found, default=0)}); wear alarms "
             f"{sum(r['wrong'][1] for r in rows)} (without the monitor {sum(r['unmonitored'][1] for r in rows)}); "
             f"with the right structure: mismatch on "
             f"{sum(r['right'][0] is not None for r in rows)}/{len(rows)}, alarms {sum(r['right'][1] for r in rows)}; "
-            f"start fits that raised {sum(len(r['raised']) for r in rows)}  "
+            f"start fits that raised {sum(len(r['raised']) for r in rows)}; innovation std at the end / noise std: "
+            f"right median {np.median([r['level']['right'] for r in rows if 'right' in r['level']]):.3f}, "
+            f"wrong median {np.median([r['level']['wrong'] for r in rows if 'wrong' in r['level']]):.3f}, "
+            f"wrong ones not reported {sorted(round(v, 3) for v in missed)}, right ones reported {sorted(round(v, 3) for v in flagged)}  "
             f"[{time.perf_counter() - t0:.0f} s]"
         )
 

@@ -278,13 +278,14 @@ def _report_tracking(result: Any, tracker: Any) -> None:
             "its threshold); the standard errors there are not trustworthy and the wear detector paused. "
             "A wandering estimate is then the model, not wear: try another --structure (sandwich, hammerstein) or orders"
         )
+    width = "its width referred to the input" if isinstance(tracker.model, SandwichModel) else "c_L + c_R"
     for alarm in result.alarms:
         change = "wider" if alarm.direction > 0 else "narrower"
-        click.echo(f"alarm at sample {alarm.sample}: dead band {change}, c_L + c_R = {alarm.width:.6g} (reference {alarm.reference:.6g})")
+        click.echo(f"alarm at sample {alarm.sample}: dead band {change}, {width} = {alarm.width:.6g} (reference {alarm.reference:.6g})")
     if result.alarms or result.mismatch:  # under a mismatch the detector paused: nothing more to say of the width
         return
     if tracker.detector_armed:
-        click.echo("no alarm: the detector saw no change of the dead-band width c_L + c_R")
+        click.echo(f"no alarm: the detector saw no change of the dead band ({width})")
     else:
         click.echo("no alarm, but the detector never armed: it reads the width every 3 / (1 - forgetting) samples and "
                    "needs 8 readings for its reference (24,000 samples at the default forgetting 0.999); "

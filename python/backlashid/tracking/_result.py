@@ -17,7 +17,9 @@ __all__ = ["Alarm", "MismatchTest", "TrackResult"]
 
 @dataclass(frozen=True)
 class Alarm:
-    """A change of the dead-band width c_L + c_R flagged by the tracker's detector.
+    """A change of the dead-band width flagged by the tracker's detector: c_L + c_R for a
+    cascade, referred to the input for a sandwich ((c_L + c_R) (1 + sum b) / sum a; for the
+    input backlash the play in the input's units).
 
     Attributes
     ----------
@@ -26,7 +28,7 @@ class Alarm:
     direction : int
         +1 for a wider dead band (wear), -1 for a narrower one.
     width : float
-        The tracked width c_L + c_R when it fired.
+        The tracked width when it fired (a sandwich's referred to the input).
     reference : float
         The width it was compared with (the mean of the readings after arming).
     statistic : float

@@ -124,7 +124,10 @@ class Tracker:
     update continues from the state the previous one left; interleaved blocks of one record
     from two threads are still the caller's to order.
 
-    A detector watches the dead-band width c_L + c_R: every ``spacing`` samples (by default
+    A detector watches the dead-band width: c_L + c_R for a cascade; for a sandwich referred
+    to the input, (c_L + c_R) (1 + sum b) / sum a (the input backlash's play in the input's
+    units, (c_L + c_R) / a_1), as the sandwich's x scale moves against its output block's gain
+    where the input hardly determines it. Every ``spacing`` samples (by default
     3 / (1 - lambda): readings that share under 5 % of their data) it reads the tracked
     width and its standard error, and a two-sided CUSUM of the standardised deviations from
     a reference (the mean of the first ``reference`` readings) raises an :class:`Alarm`
