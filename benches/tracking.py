@@ -53,6 +53,10 @@ Measured 2026-11-24 on the shared 2-core machine (quoted seeds 0..19, rules as a
 
 2026-11-29, ``--throughput`` alone: ``track(every=100)`` 7.9 M samples/s against the core's
 update through the binding 9.2 M (86 %); ``Tracker.update`` (every=1000) 9.3 M, simulate 118.5 M.
+Later that day, with the monitor's cross part as n R^2 (the lagged u and x's 10 x 10 sums per
+sample), beside another bench on the second core: ``track(every=100)`` 6.0 M against the core's
+6.2 M (98 %), the pickled tracker 4734 bytes; the monitor's cost, timed in one process on 2e6
+samples of Example 1 (best of 3 each): 6.31 M samples/s with it, 8.18 M without (23 % slower).
 """
 
 from __future__ import annotations

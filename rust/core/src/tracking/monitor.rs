@@ -211,6 +211,7 @@ impl Monitor {
     /// n R^2 of the innovation regressed on z (module header) and the rank of z's centred
     /// correlation matrix, by pivoted elimination: each step takes the direction with the most
     /// variance left, adds its share of the innovation and removes it from the others.
+    #[allow(clippy::needless_range_loop)] // the symmetric matrix reads best by its indices
     fn cross(&self) -> (f64, usize) {
         let d = 2 * self.options.lags;
         let n = self.n;
@@ -254,7 +255,7 @@ impl Monitor {
                 .max_by(|&a, &b| c[a][a].total_cmp(&c[b][b]));
             let Some(p) = pivot else { break };
             let cpp = c[p][p];
-            if !(cpp > TOL) {
+            if cpp <= TOL || cpp.is_nan() {
                 break;
             }
             left[p] = false;
