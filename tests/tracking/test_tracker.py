@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -344,6 +345,25 @@ def test_an_input_backlash_alarm_reads_the_play_in_the_input_s_units() -> None:
     alarms = tracker.update(u[30_000:], w[30_000:]).alarms
     assert alarms and alarms[0].direction == 1 and 30_000 < alarms[0].sample < 40_000
     assert abs(alarms[0].reference - 0.55) < 0.02 and 0.6 < alarms[0].width < 0.85
+
+
+def test_a_tracker_pickled_before_the_monitor_s_n_r2_continues() -> None:
+    """Trackers pickled by the version of 2026-11-28 (tests/tracking/data, made from
+    `_input_backlash_record(12_000, 8)`: a cascade after 10,000 samples under the mismatch
+    verdict, the input backlash after 7000) load with their estimate and verdict, take the
+    thresholds of the same level (1e-8) for every degree, and go on judging the record."""
+    with open(Path(__file__).parent / "data" / "trackers_2026-11-28.pkl", "rb") as f:
+        saved = pickle.load(f)
+    wrong, right = saved["wrong"], saved["right"]
+    assert np.array_equal(wrong.theta, saved["wrong_theta"]) and np.array_equal(right.theta, saved["right_theta"])
+    assert wrong.mismatch is True and right.mismatch is False and right.samples == 7000
+    u, w = _input_backlash_record(12_000, 8)
+    fresh = Tracker(bid.fit_hammerstein_backlash(u[:5000], w[:5000], 2, 2, 2))
+    assert right._args[14][2] == pytest.approx(fresh._args[14][2], rel=1e-9)
+    assert right.update(u[7000:], w[7000:]).monitor.statistics.size == 2
+    assert right.mismatch is False
+    later = wrong.update(u[10_000:], w[10_000:])
+    assert later.monitor.statistics.size == 1 and wrong.mismatch is True
 
 
 def test_a_wrong_structure_is_reported_and_raises_no_wear_alarm() -> None:

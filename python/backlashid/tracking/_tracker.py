@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import chdtri
+from scipy.special import chdtrc, chdtri
 
 from .. import _core
 from .._threads import Serialised
@@ -479,8 +479,29 @@ class Tracker:
 _OPTIONS = frozenset(inspect.signature(Tracker.__init__).parameters) - {"self", "model_or_structure"}
 
 
+def _monitor_of_2026_11_28(args: tuple[Any, ...], state: list[float]) -> tuple[tuple[Any, ...], list[float]]:
+    """The arguments and state of a tracker pickled before the monitor's cross part became n R^2
+    (2026-11-29): its monitor took one threshold (for all 3K or 2K degrees of freedom) and kept
+    6K + 12 numbers (lags of e, u, x; the window's sums; the counts and the verdict). Rebuilt
+    with the thresholds of the same level for every degree; the lags, the counts and the
+    verdict carried over, the window in progress started afresh (its sums are of the old
+    statistic). Anything else passes through."""
+    mon = args[14] if len(args) > 14 else None
+    if mon is None or not isinstance(mon[2], (int, float)):
+        return args, state
+    window, lags, threshold, confirm, clear, whiteness = mon
+    level = float(chdtrc(lags * (3 if whiteness else 2), threshold))
+    monitor = (window, lags, _thresholds(lags, whiteness, level), confirm, clear, whiteness)
+    old = state[len(state) - (6 * lags + 12) :]
+    d = 2 * lags
+    sums = [0.0] * (lags + 2 * d + d * (d + 1) // 2)  # per lag e e_k; z, e z, z z^T (monitor.rs)
+    counts = [old[6 * lags], 0.0, 0.0, 0.0, *old[6 * lags + 8 : 6 * lags + 11], 0.0]  # filled, n, sums, failed, passed, verdict
+    return (*args[:14], monitor, *args[15:]), state[: len(state) - len(old)] + old[: 3 * lags] + sums + counts
+
+
 def _restore(args: tuple[Any, ...], structure: Structure, state: list[float]) -> Tracker:
     """A pickled :class:`Tracker`: rebuilt from its arguments, then its state restored."""
+    args, state = _monitor_of_2026_11_28(args, list(state))
     tracker = Tracker.__new__(Tracker)
     tracker._args = args
     tracker._structure = structure
