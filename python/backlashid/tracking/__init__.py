@@ -4,10 +4,10 @@ The paper motivates the general backlash by wear ("backlash in gears ... can cha
 time and wear"); :class:`Tracker` follows a cascade, a sandwich or an input backlash whose
 parameters drift, one block of samples at a time, with a state of fixed size whatever the
 record length (picklable: resume later or ship it to a worker), and raises an :class:`Alarm`
-when the dead-band width c_L + c_R changes. A monitor tests the tracker's own innovations and
-says when the tracked structure does not explain the data (:class:`MismatchTest`): a wrong
-model's wandering estimate is then not taken for wear. :func:`track` runs it over a whole
-record. The per-sample work (the recursive prediction-error or least-squares update, the
+when the dead-band width changes (a sandwich's referred to the input). A monitor tests the
+tracker's own innovations and says when the tracked structure does not explain the data
+(:class:`MismatchTest`): a wrong model's wandering estimate is then not taken for wear.
+:func:`track` runs it over a whole record. The per-sample work (the recursive prediction-error or least-squares update, the
 detector, the monitor) runs in the Rust core (rust/core/src/tracking).
 """
 
