@@ -298,7 +298,7 @@ def mismatch_case(key: str, seed: int, png: Path | None, kind: str = "white") ->
         r = bid.track(u, w, start, forgetting=LAMBDA, every=100)
         m = r.monitor
         out[which] = (int(m.samples[m.mismatch][0]) if m.any else None, len(r.alarms))
-        out["level"][which] = r.noise_std / sd  # the tracker's innovation std at the end, in noise stds
+        out["level"][which] = float(r.noise_std / sd)  # the tracker's innovation std at the end, in noise stds
         if png is not None and which == "wrong":
             png.mkdir(parents=True, exist_ok=True)
             r.plot(path=str(png / f"tracking_mismatch_{key}{'' if kind == 'white' else '_' + kind}.png"))

@@ -69,12 +69,18 @@ def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDA
     )
 
 
+def _most_degrees(lags: int, whiteness: bool) -> int:
+    """The most degrees of freedom of a monitor window's statistic: ``lags`` per correlation
+    tested, three with the whiteness, two without (MonitorOptions::degrees in
+    rust/core/src/tracking/monitor.rs; a window's own are the whiteness lags plus the rank of
+    its lagged input and x)."""
+    return int(lags) * (3 if whiteness else 2)
+
+
 def _thresholds(lags: int, whiteness: bool, level: float) -> list[float]:
     """The monitor's thresholds for a window's 1, 2, .. degrees of freedom: the chi-square
-    quantiles of tail probability ``level`` up to ``lags`` per correlation tested, three with
-    the whiteness, two without (rust/core/src/tracking/monitor.rs: a window's degrees are the
-    whiteness lags plus the rank of its lagged input and x)."""
-    return [float(chdtri(d, level)) for d in range(1, int(lags) * (3 if whiteness else 2) + 1)]
+    quantiles of tail probability ``level``."""
+    return [float(chdtri(d, level)) for d in range(1, _most_degrees(lags, whiteness) + 1)]
 
 
 def _drift(drift: Any, names: list[str]) -> list[float]:
@@ -490,7 +496,7 @@ def _monitor_of_2026_11_28(args: tuple[Any, ...], state: list[float]) -> tuple[t
     if mon is None or not isinstance(mon[2], (int, float)):
         return args, state
     window, lags, threshold, confirm, clear, whiteness = mon
-    level = float(chdtrc(lags * (3 if whiteness else 2), threshold))
+    level = float(chdtrc(_most_degrees(lags, whiteness), threshold))
     monitor = (window, lags, _thresholds(lags, whiteness, level), confirm, clear, whiteness)
     old = state[len(state) - (6 * lags + 12) :]
     d = 2 * lags

@@ -569,27 +569,29 @@ impl<const W: usize> Engine<W> {
     #[inline(always)]
     fn step_pe(&mut self, ut: f64, yt: f64) -> Result<Option<(f64, f64)>> {
         let xt = self.inner_pe(ut)?;
-        let (psi, before) = (self.psi, self.theta);
-        let out = self.update(&psi, yt - self.y_hat, xt)?;
-        self.refresh_memory(&before);
-        Ok(out)
+        let psi = self.psi;
+        self.update_pe(&psi, yt - self.y_hat, xt)
     }
 
-    /// Carry the simulated backlash memory y_hat(t) over to the updated estimate, to first
-    /// order: y_hat += psi(t)' (theta(t) - theta(t-1)). A moving sample recomputes y_hat from
-    /// the branch anyway; a held one keeps the value of its last contact, and without this the
-    /// memory stays that of the estimate at the contact while psi (held too) says how it moves
+    /// The prediction-error rule's update (`update`, row `phi`), then the simulated backlash
+    /// memory y_hat(t) carried over to the updated estimate to first order: y_hat += psi(t)'
+    /// (theta(t) - theta(t-1)), psi the cascade part's d y_hat / d theta. A moving sample
+    /// recomputes y_hat from the branch anyway; a held one keeps the value of its last
+    /// contact, and without this the memory stays that of the estimate at the contact while psi (held too) says how it moves
     /// with theta: the updates then push along psi for a change the prediction never shows,
     /// and the estimate runs away along a direction the data barely determine (an input
     /// backlash under a slow input: a_1 and the widths to 0, r_2 up, within 30 samples of a
     /// hold; docs/tracking.md).
     #[inline(always)]
-    fn refresh_memory(&mut self, before: &[f64; W]) {
+    fn update_pe(&mut self, phi: &[f64; W], e: f64, xt: f64) -> Result<Option<(f64, f64)>> {
+        let before = self.theta;
+        let out = self.update(phi, e, xt)?;
         let mut change = 0.0;
         for k in 0..W {
             change += self.psi[k] * (self.theta[k] - before[k]);
         }
         self.y_hat += change;
+        Ok(out)
     }
 
     /// The sandwich's prediction-error sample: the cascade part's y_hat(t), psi_y(t)
@@ -627,10 +629,7 @@ impl<const W: usize> Engine<W> {
         shift_in(&mut self.psi_y, self.psi);
         shift_in(&mut self.w_out, w);
         shift_in(&mut self.psi_w, psi);
-        let before = self.theta;
-        let out = self.update(&psi, wt - w, xt)?;
-        self.refresh_memory(&before);
-        Ok(out)
+        self.update_pe(&psi, wt - w, xt)
     }
 
     /// The cascade part of a prediction-error sample: x(t), y_hat(t) and psi(t) = d y_hat(t)
