@@ -95,6 +95,7 @@ fn tracker(method: Method, forgetting: f64, drift: f64) -> Tracker {
         forgetting,
         drift: if drift > 0.0 { vec![drift; 11] } else { vec![] },
         noise_memory: 1e4,
+        innovation_bound: 20.0, // the Python default
     };
     let det = DetectorOptions::for_forgetting(0.9999);
     Tracker::new(

@@ -101,3 +101,18 @@ def test_track_says_when_the_structure_does_not_fit(tmp_path: Path) -> None:
     fine = run("track", path, "-i", "u", "-o", "y", "--structure", "hammerstein", "--degree", "2", "--fit-samples", "5000",
                "--every", "1000", "--out", tmp_path / "q.csv")
     assert fine.exit_code == 0 and "mismatch" not in fine.output, fine.output
+
+
+def test_track_says_how_many_updates_the_innovation_bound_refused(log: Path, tmp_path: Path) -> None:
+    """Three spikes of about 100 noise stds in the log: the command says the bound refused
+    those three updates and calls them outliers (the model fits, no mismatch)."""
+    data = np.genfromtxt(log, delimiter=",", names=True)
+    y = data["y"].copy()
+    y[[5000, 7000, 9000]] += 100 * y[:3000].std() / 25
+    path = tmp_path / "spiked.csv"
+    np.savetxt(path, np.column_stack([data["u"], y]), delimiter=",", header="u,y", comments="")
+    res = run("track", path, "-i", "u", "-o", "y", "--fit-samples", "3000", "--every", "1000", "--out", tmp_path / "p.csv")
+    assert res.exit_code == 0, res.output
+    assert "refused the update on 3 of 12000 samples" in res.output and "outliers in the record" in res.output
+    clean = run("track", log, "-i", "u", "-o", "y", "--fit-samples", "3000", "--every", "1000", "--out", tmp_path / "q.csv")
+    assert "refused" not in clean.output

@@ -177,6 +177,9 @@ def test_bad_starts_and_options_are_refused(data: bid.ExampleData, start: bid.Fi
         {"spacing": 0},
         {"threshold": 0.0},
         {"detector": "yes"},
+        {"innovation_bound": 0.0},
+        {"innovation_bound": float("nan")},
+        {"innovation_bound": "20"},
     ]
     for options in bad:
         with pytest.raises(DataError):
@@ -364,6 +367,40 @@ def test_a_tracker_pickled_before_the_monitor_s_n_r2_continues() -> None:
     assert right.mismatch is False
     later = wrong.update(u[10_000:], w[10_000:])
     assert later.monitor.statistics.size == 1 and wrong.mismatch is True
+
+
+def test_a_tracker_pickled_before_the_innovation_bound_continues_with_the_same_bits() -> None:
+    """Trackers pickled by the version before the innovation bound (2026-11-29, ac620c6;
+    tests/tracking/data, `_input_backlash_record(12_000, 8)`: a cascade after 10,000 samples,
+    the input backlash after 7000) load and go on to the last estimate that version reached
+    (stored beside them): no bound for them, the checkpoint their estimate."""
+    with open(Path(__file__).parent / "data" / "trackers_2026-11-29.pkl", "rb") as f:
+        saved = pickle.load(f)
+    u, w = _input_backlash_record(12_000, 8)
+    for key, at in (("wrong", 10_000), ("right", 7000)):
+        tracker = saved[key]
+        assert tracker.samples == at and tracker.refused == 0
+        assert np.array_equal(tracker.theta, saved[f"{key}_theta"])
+        assert np.array_equal(tracker.update(u[at:], w[at:]).theta[-1], saved[f"{key}_rest"])
+
+
+def test_the_innovation_bound_refuses_outliers_and_keeps_the_noise_level() -> None:
+    """Five spikes of 500 noise stds in an input-backlash record: the bound (default 20 noise
+    stds of the start) refuses exactly those updates, the noise level and the estimate stay
+    those of the clean record; without it the spikes enter the noise level. A start without a
+    noise level (a bare structure) has no bound."""
+    u, w = _input_backlash_record(30_000, 8)
+    start = bid.fit_hammerstein_backlash(u[:5000], w[:5000], 2, 2, 2)
+    spiked = w.copy()
+    spiked[[8000, 12_000, 17_000, 21_000, 29_500]] += 500 * start.noise_std
+    clean = track(u, w, start)
+    bounded = track(u, spiked, start)
+    free = track(u, spiked, start, innovation_bound=None)
+    assert clean.refused == 0 and bounded.refused == 5 and free.refused == 0
+    assert bounded.noise_std == pytest.approx(clean.noise_std, rel=0.05)
+    assert free.noise_std > 3 * clean.noise_std
+    assert np.abs(bounded.theta[-1] - clean.theta[-1]).max() < 3 * clean.standard_errors[-1].max()
+    assert Tracker(Structure.of(start.model)).update(u[:3000], spiked[:3000]).refused == 0
 
 
 def test_a_wrong_structure_is_reported_and_raises_no_wear_alarm() -> None:

@@ -278,6 +278,12 @@ def _report_tracking(result: Any, tracker: Any) -> None:
             "its threshold); the standard errors there are not trustworthy and the wear detector paused. "
             "A wandering estimate is then the model, not wear: try another --structure (sandwich, hammerstein) or orders"
         )
+    if result.refused:
+        click.echo(
+            f"refused the update on {result.refused} of {tracker.samples} samples: the innovation exceeded 20 noise stds of "
+            "the start (each sent the estimate back to its last checkpoint): "
+            + ("the tracked structure runs away from this record" if result.mismatch else "outliers in the record, or a start far off")
+        )
     width = "its width referred to the input" if isinstance(tracker.model, SandwichModel) else "c_L + c_R"
     for alarm in result.alarms:
         change = "wider" if alarm.direction > 0 else "narrower"

@@ -148,6 +148,10 @@ class TrackResult:
         The model-mismatch monitor's windows closed in this block or record (None without a
         monitor). Where it says "mismatch" the tracked structure does not explain the data:
         the standard errors there are not trustworthy and the wear detector took no readings.
+    refused : int
+        Updates in this block or record the innovation bound refused (an innovation beyond
+        ``innovation_bound`` start noise stds), each sending the estimate back to its
+        checkpoint: a runaway of a structure that does not fit, or outliers.
 
     Examples
     --------
@@ -165,6 +169,7 @@ class TrackResult:
     alarms: list[Alarm]
     noise_std: float
     monitor: MismatchTest | None = None
+    refused: int = 0
 
     @property
     def mismatch(self) -> bool:

@@ -123,7 +123,11 @@ class Tracker:
     positive semi-definite; standard errors are its diagonal scaled by a running estimate of
     the noise variance. A step that would make a linear block unstable or m_R1 <= 0 is
     rejected and a negative width projected to 0; forgetting pauses while the covariance is
-    very large (anti-windup, for stretches without excitation). The state is a fixed set of p x p numbers:
+    very large (anti-windup, for stretches without excitation). An innovation beyond
+    ``innovation_bound`` noise stds of the start is one no estimate near the current one
+    explains (the estimate running away, or an outlier): that update is refused and the
+    estimate goes back to its checkpoint, the estimate after the last 1000 consecutive
+    accepted updates (counted in :attr:`refused` and :attr:`TrackResult.refused`). The state is a fixed set of p x p numbers:
     memory does not grow with the record, and a pickled tracker continues with the same bits.
 
     Threads may share one tracker: their updates and reads take turns (one lock), so each
@@ -191,6 +195,13 @@ class Tracker:
     monitor_level : float, default 1e-8
         The chi-square tail probability of a window's threshold (the false-mismatch rate per
         window under the right structure and white noise).
+    innovation_bound : float or None, default 20.0
+        K: an update whose innovation e(t) exceeds K times the start's noise std (times
+        sqrt(1 + psi' P psi), the innovation's own scale) is refused and the estimate goes
+        back to its checkpoint. It applies when the start's noise level is known (a
+        :class:`~backlashid.FitResult` start or ``noise_std``); None: off. A tracker
+        following a structure that does not fit the plant can otherwise run away by orders
+        of magnitude while every estimate stays stable (docs/tracking.md).
 
     Raises
     ------
@@ -231,6 +242,7 @@ class Tracker:
         monitor: bool = True,
         monitor_window: int = 2000,
         monitor_level: float = 1e-8,
+        innovation_bound: float | None = 20.0,
     ) -> None:
         structure, theta0, cov, fit_noise = _start(model_or_structure)
         names = structure.names
@@ -256,6 +268,11 @@ class Tracker:
             sigma, count = fit_noise, _PRIOR_NOISE_COUNT
         else:
             sigma, count = 0.1, 0.0  # no prior: the data set it from the first sample
+        bound = np.inf
+        if innovation_bound is not None:
+            bound = check_real(innovation_bound, "innovation_bound", low=0.0, low_open=True)
+            if count == 0.0:  # no noise level to bound against
+                bound = np.inf
         memory = np.inf if noise_memory is None else check_real(noise_memory, "noise_memory", low=1.0)
         det = None
         if check_flag(detector, "detector"):
@@ -295,14 +312,17 @@ class Tracker:
             structure.nr,
             structure.ns,
             mon,
+            float(bound),
         )
         self._native = Serialised(self._build(self._args))  # shared across threads: one call at a time
 
     @staticmethod
     def _build(args: tuple[Any, ...]) -> Any:
         na, nb, degree, theta0, cov, var, count, method, lam, rates, memory, det, *later = args
-        nr, ns, mon = (*later, None, None, None)[:3] if later else (0, 0, None)  # pickled by an older version
-        return _core.Tracker(na, nb, degree, theta0, np.asarray(cov), var, count, method, lam, rates, memory, det, nr, ns, mon)
+        # pickled by an older version: a cascade without monitor; no innovation bound
+        defaults = (0, 0, None, np.inf)
+        nr, ns, mon, bound = (*later, *defaults[len(later) :])
+        return _core.Tracker(na, nb, degree, theta0, np.asarray(cov), var, count, method, lam, rates, memory, det, nr, ns, mon, bound)
 
     @property
     def names(self) -> list[str]:
@@ -318,6 +338,12 @@ class Tracker:
     def rejected(self) -> int:
         """Updates whose step the stability guard rejected."""
         return int(self._native.rejected)
+
+    @property
+    def refused(self) -> int:
+        """Updates the innovation bound refused, each sending the estimate back to its
+        checkpoint (``innovation_bound``)."""
+        return int(self._native.refused)
 
     @property
     def noise_std(self) -> float:
@@ -421,7 +447,7 @@ class Tracker:
         if u.ndim != 1 or y.ndim != 1 or u.size != y.size:
             raise DataError(f"u_block and y_block must be 1-D of one length, got shapes {u.shape} and {y.shape}")
         step = check_int(every, "every", 1, _MOST)
-        first = self.samples
+        first, refused = self.samples, self.refused
         theta, se, alarms, windows = self._native.update(u, y, step)
         start = (first // step + 1) * step - 1
         samples = np.arange(start, first + u.size, step, dtype=np.int64)
@@ -433,6 +459,7 @@ class Tracker:
             alarms=[Alarm(int(s), int(d), float(w), float(r), float(z)) for s, d, w, r, z in alarms],
             noise_std=self.noise_std,
             monitor=self._mismatch_test(windows),
+            refused=self.refused - refused,
         )
 
     def _mismatch_test(self, windows: list[tuple[int, float, int, bool]]) -> MismatchTest | None:
@@ -540,7 +567,7 @@ def track(
     **options
         The options of :class:`Tracker` (forgetting, drift, method, covariance, noise_std,
         noise_memory, detector, spacing, threshold, slack, reference, holdoff, monitor,
-        monitor_window, monitor_level).
+        monitor_window, monitor_level, innovation_bound).
 
     Returns
     -------

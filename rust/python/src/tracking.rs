@@ -28,7 +28,7 @@ pub(crate) struct PyTracker(Tracker);
 impl PyTracker {
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (na, nb, degree, theta0, covariance, noise_var, noise_count, method, forgetting, drift, noise_memory, detector, nr=0, ns=0, monitor=None))]
+    #[pyo3(signature = (na, nb, degree, theta0, covariance, noise_var, noise_count, method, forgetting, drift, noise_memory, detector, nr=0, ns=0, monitor=None, innovation_bound=f64::INFINITY))]
     fn new(
         na: usize,
         nb: usize,
@@ -45,6 +45,7 @@ impl PyTracker {
         nr: usize,
         ns: usize,
         monitor: Option<MonitorIn>,
+        innovation_bound: f64,
     ) -> PyResult<Self> {
         let method = match method {
             "regression" => Method::Regression,
@@ -64,6 +65,7 @@ impl PyTracker {
             forgetting,
             drift,
             noise_memory,
+            innovation_bound,
         };
         let detector =
             detector.map(
@@ -133,6 +135,12 @@ impl PyTracker {
     #[getter]
     fn rejected(&self) -> u64 {
         self.0.rejected()
+    }
+
+    /// Updates the innovation bound refused.
+    #[getter]
+    fn refused(&self) -> u64 {
+        self.0.refused()
     }
 
     /// The running noise-variance estimate.

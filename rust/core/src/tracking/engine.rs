@@ -111,9 +111,28 @@ pub(crate) struct Engine<const W: usize> {
     pending: f64,
     t: u64,
     rejected: u64,
+    /// The innovation bound's square, in units of the noise variance, times the start's
+    /// noise variance: e(t)^2 > bound2 (1 + psi' P psi) refuses the update and sends the
+    /// estimate back to its checkpoint (`update`); infinite: off.
+    bound2: f64,
+    /// The checkpoint: theta, S and trace(P) after `CHECKPOINT` consecutive accepted updates.
+    ck_theta: [f64; W],
+    ck_sm: [[f64; W]; W],
+    ck_trace: f64,
+    /// Accepted updates since the checkpoint or the last refusal.
+    since_ck: u64,
+    /// Updates the innovation bound refused.
+    refused: u64,
     detector: Option<Detector>,
     monitor: Option<Monitor>,
 }
+
+/// Consecutive accepted updates after which the estimate becomes the checkpoint the
+/// innovation bound returns to.
+const CHECKPOINT: u64 = 1000;
+/// The guard's numbers `save` appends after the monitor's: since_ck, refused, ck_trace, then
+/// ck_theta (p) and ck_sm (p x p).
+const GUARD_SAVED: usize = 3;
 
 /// Horner: sum_{i>=1} m_i xi^i with m_1 = `m1` and m_2.. = `rest`.
 #[inline(always)]
@@ -308,6 +327,12 @@ impl<const W: usize> Engine<W> {
             pending: 0.0,
             t: 0,
             rejected: 0,
+            bound2: options.innovation_bound * options.innovation_bound * sigma2,
+            ck_theta: theta,
+            ck_sm: sm,
+            ck_trace: trace,
+            since_ck: 0,
+            refused: 0,
             detector,
             monitor,
         })
@@ -319,6 +344,10 @@ impl<const W: usize> Engine<W> {
 
     pub(crate) fn rejected(&self) -> u64 {
         self.rejected
+    }
+
+    pub(crate) fn refused(&self) -> u64 {
+        self.refused
     }
 
     pub(crate) fn noise_variance(&self) -> f64 {
@@ -584,8 +613,13 @@ impl<const W: usize> Engine<W> {
     /// hold; docs/tracking.md).
     #[inline(always)]
     fn update_pe(&mut self, phi: &[f64; W], e: f64, xt: f64) -> Result<Option<(f64, f64)>> {
-        let before = self.theta;
+        let (before, refused) = (self.theta, self.refused);
         let out = self.update(phi, e, xt)?;
+        if self.refused != refused {
+            // sent back to the checkpoint: too far for the first-order carry; the memory
+            // meets the checkpoint's branches at the next contact
+            return Ok(out);
+        }
         let mut change = 0.0;
         for k in 0..W {
             change += self.psi[k] * (self.theta[k] - before[k]);
@@ -895,6 +929,16 @@ impl<const W: usize> Engine<W> {
         if !beta.is_finite() {
             return Err(sensitivities_overflowed(self.t));
         }
+        if e * e > self.bound2 * beta {
+            // an innovation no estimate near this one explains (a runaway or an outlier):
+            // the update is refused and the estimate goes back to its checkpoint
+            self.theta = self.ck_theta;
+            self.sm = self.ck_sm;
+            self.trace = self.ck_trace;
+            self.since_ck = 0;
+            self.refused += 1;
+            return Ok(Some((e, xt)));
+        }
         let inv_s = 1.0 / beta;
         let gamma = 1.0 / (beta + beta.sqrt());
         let mut cand = self.theta;
@@ -958,6 +1002,13 @@ impl<const W: usize> Engine<W> {
             self.sigma2 += gamma * (v - self.sigma2);
         }
         self.sigma2 = self.sigma2.max(f64::MIN_POSITIVE);
+        self.since_ck += 1;
+        if self.since_ck == CHECKPOINT {
+            self.ck_theta = self.theta;
+            self.ck_sm = self.sm;
+            self.ck_trace = self.trace;
+            self.since_ck = 0;
+        }
         Ok(Some((e, xt)))
     }
 
@@ -1000,10 +1051,22 @@ impl<const W: usize> Engine<W> {
         if let Some(m) = &self.monitor {
             m.save(&mut out);
         }
+        out.extend([self.since_ck as f64, self.refused as f64, self.ck_trace]);
+        out.extend_from_slice(&self.ck_theta[..p]);
+        for row in self.ck_sm.iter().take(p) {
+            out.extend_from_slice(&row[..p]);
+        }
         out
     }
 
     pub(crate) fn saved_len(&self) -> usize {
+        let p = self.dims.p();
+        self.saved_len_before_guard() + GUARD_SAVED + p + p * p
+    }
+
+    /// The length of a state saved before the innovation bound (2026-11-29): `load` takes
+    /// it, the checkpoint its estimate, nothing refused yet.
+    fn saved_len_before_guard(&self) -> usize {
         let p = self.dims.p();
         let sandwich = match self.dims.sandwich() {
             true => 2 * OUT_LAGS * (1 + p) + p + 1,
@@ -1021,7 +1084,8 @@ impl<const W: usize> Engine<W> {
     }
 
     pub(crate) fn load(&mut self, s: &[f64]) -> Result<()> {
-        if s.len() != self.saved_len() {
+        let guarded = s.len() == self.saved_len();
+        if !guarded && s.len() != self.saved_len_before_guard() {
             return Err(Error::Data(format!(
                 "a saved tracker state of {} numbers, this tracker's has {}: restore it \
                  into a tracker of the same structure and options",
@@ -1079,6 +1143,18 @@ impl<const W: usize> Engine<W> {
             take(&mut ms);
             m.load(&ms);
         }
+        if guarded {
+            let mut g = [0.0; GUARD_SAVED];
+            take(&mut g);
+            (self.since_ck, self.refused, self.ck_trace) = (g[0] as u64, g[1] as u64, g[2]);
+            take(&mut self.ck_theta[..p]);
+            for row in self.ck_sm.iter_mut().take(p) {
+                take(&mut row[..p]);
+            }
+        } else {
+            (self.since_ck, self.refused) = (0, 0);
+            (self.ck_theta, self.ck_sm, self.ck_trace) = (self.theta, self.sm, self.trace);
+        }
         Ok(())
     }
 }
@@ -1124,6 +1200,7 @@ mod tests {
                 forgetting: 0.999,
                 drift: vec![1e-5; 11],
                 noise_memory: 1e4,
+                innovation_bound: f64::INFINITY,
             };
             let det = Detector::new(super::super::DetectorOptions::for_forgetting(0.99)).ok();
             let new =

@@ -64,6 +64,11 @@ pub struct Options {
     /// Samples the noise-variance average spans (infinite: all; with forgetting at most
     /// 1 / (1 - lambda)).
     pub noise_memory: f64,
+    /// K > 0: an update whose innovation exceeds K start noise stds (times sqrt(1 + psi' P
+    /// psi)) is refused and the estimate goes back to its checkpoint, the estimate after the
+    /// last 1000 consecutive accepted updates (a runaway bounded, an outlier ignored);
+    /// infinite: off.
+    pub innovation_bound: f64,
 }
 
 /// The largest number of parameters a tracker takes.
@@ -222,6 +227,12 @@ impl Tracker {
                 "drift: give p = {p} finite rates >= 0 (or none)"
             )));
         }
+        if options.innovation_bound.is_nan() || options.innovation_bound <= 0.0 {
+            return Err(Error::Data(format!(
+                "innovation_bound = {}: give a number of noise stds > 0 (infinite: off)",
+                options.innovation_bound
+            )));
+        }
         if options.noise_memory.is_nan() || options.noise_memory < 1.0 {
             return Err(Error::Data(format!(
                 "noise_memory = {}: give a number of samples >= 1",
@@ -266,6 +277,11 @@ impl Tracker {
     /// Updates whose step the stability guard rejected.
     pub fn rejected(&self) -> u64 {
         each!(&self.engine, e => e.rejected())
+    }
+
+    /// Updates the innovation bound refused (each sent the estimate back to its checkpoint).
+    pub fn refused(&self) -> u64 {
+        each!(&self.engine, e => e.refused())
     }
 
     /// The running noise-variance estimate.
@@ -389,6 +405,7 @@ mod tests {
             forgetting,
             drift: vec![],
             noise_memory: f64::INFINITY,
+            innovation_bound: f64::INFINITY,
         }
     }
 
@@ -536,6 +553,7 @@ mod tests {
                 forgetting,
                 drift,
                 noise_memory: 1e4,
+                innovation_bound: f64::INFINITY,
             };
             let det = DetectorOptions {
                 spacing: 2000,
@@ -608,6 +626,75 @@ mod tests {
         }
     }
 
+    /// Example 1's prediction-error tracker with the innovation bound at `bound` noise stds.
+    fn bounded(bound: f64) -> Tracker {
+        let p = TRUE.len();
+        let cov: Vec<f64> = (0..p * p)
+            .map(|k| if k % (p + 1) == 0 { 1e-4 } else { 0.0 })
+            .collect();
+        let options = Options {
+            innovation_bound: bound,
+            ..options(Method::PredictionError, 0.999)
+        };
+        let orders = Orders::cascade(2, 2, 3);
+        Tracker::new(orders, &TRUE, &cov, 1e-4, 10.0, &options, None, None).unwrap()
+    }
+
+    #[test]
+    fn the_innovation_bound_refuses_an_outlier_and_returns_to_the_checkpoint() {
+        let (u, y) = record(6000, 3);
+        let mut y = noisy(&y, 4); // uniform, 0.014 std: never 20 stds
+        for t in [2500, 4200] {
+            y[t] += 2000.0;
+        }
+        let mut t = bounded(20.0);
+        let (theta, _, _) = run(&mut t, &u, &y);
+        assert_eq!(t.refused(), 2);
+        // sent back to the estimate after update 2000 (sample 1999), the last checkpoint
+        assert_eq!(&theta[2500 * 11..2501 * 11], &theta[1999 * 11..2000 * 11]);
+        let worst = |th: &[f64]| {
+            th.iter()
+                .zip(TRUE)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+        };
+        assert!(
+            worst(&theta[5999 * 11..]) < 0.05,
+            "{:?}",
+            &theta[5999 * 11..]
+        );
+        // the noise variance (uniform noise: 2.1e-4) is not poisoned; without the bound
+        // the stability guard rejects the wild steps, but the outliers' squares enter it
+        assert!(
+            (t.noise_variance() / 2.1e-4 - 1.0).abs() < 0.2,
+            "{}",
+            t.noise_variance()
+        );
+        let mut free = bounded(f64::INFINITY);
+        run(&mut free, &u, &y);
+        assert_eq!(free.refused(), 0);
+        assert!(
+            free.noise_variance() > 100.0 * 2.1e-4,
+            "{}",
+            free.noise_variance()
+        );
+        // the checkpoint travels with the state
+        let mut first = bounded(20.0);
+        run(&mut first, &u[..3000], &y[..3000]);
+        let mut second = bounded(20.0);
+        second.load(&first.save()).unwrap();
+        run(&mut second, &u[3000..], &y[3000..]);
+        assert_eq!(second.save(), t.save());
+        // a state saved before the bound existed (without its p + p^2 + 3 numbers) loads:
+        // nothing refused, the checkpoint its estimate
+        let state = first.save();
+        let mut old = bounded(20.0);
+        old.load(&state[..state.len() - 3 - 11 - 121]).unwrap();
+        assert_eq!(old.refused(), 0);
+        assert_eq!(old.estimate(), first.estimate());
+        assert!(old.load(&state[..state.len() - 1]).is_err());
+    }
+
     #[test]
     fn every_records_a_subsample() {
         let (u, y) = record(1000, 5);
@@ -641,6 +728,24 @@ mod tests {
 
     #[test]
     fn bad_arguments_are_refused() {
+        for bound in [0.0, -1.0, f64::NAN] {
+            let options = Options {
+                innovation_bound: bound,
+                ..options(Method::PredictionError, 0.999)
+            };
+            let cov = vec![0.0; 121];
+            let got = Tracker::new(
+                Orders::cascade(2, 2, 3),
+                &TRUE,
+                &cov,
+                1e-4,
+                1.0,
+                &options,
+                None,
+                None,
+            );
+            assert!(got.is_err_and(|e| e.to_string().contains("innovation_bound")));
+        }
         let cov = vec![0.0; 121];
         let o = options(Method::Regression, 1.0);
         let new = |theta: &[f64], cov: &[f64], var: f64, o: &Options| {
