@@ -234,6 +234,37 @@ def test_plot_draws_the_batch_fits_value_as_a_reference(start: bid.FitResult) ->
         r.plot(reference=[1.0, 2.0])
 
 
+def test_plot_draws_the_widths_in_the_record_s_units(tmp_path: Path) -> None:
+    """An input-backlash drive logged in its own units (motor angle in degrees around 40, load
+    in mm around 100), fitted and tracked in scaled units: with the fit's scaling the figure
+    draws the play c / a1 in degrees (its batch line at the play the fit found, about 0.3 +
+    0.25 deg times the record's scale), the other panels in model units."""
+    from backlashid.identify import Scaling
+
+    u, w = _input_backlash_record(12_000, 8)
+    u_rec, w_rec = 40.0 + 20.0 * u, 100.0 + 5.0 * w
+    scaling = Scaling(input_offset=40.0, input_scale=20.0, output_offset=100.0, output_scale=5.0)
+    um, wm = scaling.input_to_model(u_rec), scaling.output_to_model(w_rec)
+    start = bid.fit_hammerstein_backlash(um[:5000], wm[:5000], 2, 2, 2)
+    r = track(um, wm, start, every=100)
+    fig = r.plot(reference=start, scaling=scaling, path=str(tmp_path / "p.png"))
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles[r.names.index("c_L")] == "c_L / a1 (record's u units)" and titles[0] == "a1"
+    k = r.names.index("c_R")
+    tracked = [line for line in fig.axes[k].lines if line.get_label() == "tracked"][0].get_ydata()
+    a1 = r.theta[:, r.names.index("a1")]
+    assert np.allclose(tracked, r.theta[:, k] / a1 * 20.0)
+    batch = [line for line in fig.axes[k].lines if line.get_label() == "batch fit"][0].get_ydata()[0]
+    assert batch == pytest.approx(start.parameters["c_R"] / start.parameters["a1"] * 20.0)
+    assert abs(batch - 0.25 * 20.0) < 0.1 * 0.25 * 20.0  # the drive's play, 0.25 of the model input, in degrees
+    assert "widths in the record's units" in fig._suptitle.get_text()
+    tracked_cascade = track(um, wm, bid.fit_cascade(um[:5000], wm[:5000], 2, 2, 2), every=100)
+    fig = tracked_cascade.plot(scaling=scaling)
+    assert fig.axes[tracked_cascade.names.index("c_L")].get_title() == "c_L (record's y units)"
+    with pytest.raises(DataError, match="Scaling"):
+        r.plot(scaling={"input_scale": 20.0})
+
+
 E2 = bid.example2()
 TRUE2 = Structure(2, 2, 3, 2, 2).pack(E2)
 

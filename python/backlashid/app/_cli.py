@@ -385,7 +385,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
 
         plt = pyplot()
         plots.mkdir(parents=True, exist_ok=True)
-        fig = result.plot(reference=batch)
+        fig = result.plot(reference=batch, scaling=scaling)
         click.echo(f"wrote {_save(plt, fig, plots / 'parameters.png')}")
 
 

@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._optional import pyplot
 from .._validation import as_signal
 from ..errors import DataError
+from ..identify._scaling import Scaling
 
 __all__ = ["Alarm", "MismatchTest", "TrackResult"]
 
@@ -220,7 +221,13 @@ class TrackResult:
         return self.theta[:, k], self.standard_errors[:, k]
 
     def plot(
-        self, *, truth: ArrayLike | None = None, reference: Any = None, path: str | None = None, columns: int = 3
+        self,
+        *,
+        truth: ArrayLike | None = None,
+        reference: Any = None,
+        path: str | None = None,
+        columns: int = 3,
+        scaling: Scaling | None = None,
     ) -> Any:
         """Every parameter over time with its +-2 standard-error band, and the alarms.
 
@@ -238,6 +245,14 @@ class TrackResult:
             Save the figure there (any format matplotlib writes, e.g. ``params.png``).
         columns : int, default 3
             Panels per row.
+        scaling : Scaling, optional
+            The fit's scaling (:class:`~backlashid.identify.Scaling`, e.g. ``--scale auto``
+            of the command line): the dead-band widths c_L and c_R are drawn in the record's
+            units, a cascade's in the output's (c times ``output_scale``: x is in y's units), a
+            sandwich's referred to the input (c (1 + sum b) / sum a times ``input_scale``; the
+            input backlash's play, c / a_1). Their band is the width's own standard error
+            scaled alike (the input block's uncertainty left out). The other parameters stay in
+            model units.
 
         Returns
         -------
@@ -274,29 +289,32 @@ class TrackResult:
             if true.shape != self.theta.shape:
                 raise DataError(f"truth has shape {true.shape}: give {p} values or an array of shape {self.theta.shape}")
         batch = None if reference is None else _reference_values(reference, self.names)
+        if scaling is not None and not isinstance(scaling, Scaling):
+            raise DataError(f"scaling must be a Scaling (the fit's), got {type(scaling).__name__}")
+        in_record = scaling is not None and not scaling.is_identity
         cols = max(1, min(int(columns), p))
         rows = -(-p // cols)
         fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.4 * rows), sharex=True, squeeze=False)
         t = self.samples
         periods = self.monitor.periods() if self.monitor is not None else []
-        for k, name in enumerate(self.names):
+        for k in range(p):
             ax = axes[k // cols][k % cols]
-            v, s = self.theta[:, k], self.standard_errors[:, k]
+            title, v, s, line, level = self._panel(k, true, batch, scaling if in_record else None)
             ax.fill_between(t, v - 2 * s, v + 2 * s, color="C0", alpha=0.25, linewidth=0, label="+-2 s.e.")
             ax.plot(t, v, color="C0", linewidth=0.9, label="tracked")
             shown = []  # the lines beside the estimate, inside the panel's y range
-            if true is not None:
-                ax.plot(t, true[:, k], color="k", linestyle="--", linewidth=0.9, label="true")
-                shown.append(true[:, k])
-            if batch is not None:
-                ax.axhline(batch[k], color="C2", linestyle=":", linewidth=1.2, label="batch fit")
-                shown.append(batch[k : k + 1])
+            if line is not None:
+                ax.plot(t, line, color="k", linestyle="--", linewidth=0.9, label="true")
+                shown.append(line)
+            if level is not None:
+                ax.axhline(level, color="C2", linestyle=":", linewidth=1.2, label="batch fit")
+                shown.append(np.array([level]))
             for alarm in self.alarms:
                 ax.axvline(alarm.sample, color="C3", linewidth=0.8, alpha=0.7)
             for first, last in periods:
                 ax.axvspan(first, last, color="C1", alpha=0.15, linewidth=0)
             ax.set_ylim(*_settled_limits(v, s, np.concatenate(shown) if shown else None))
-            ax.set_title(name, fontsize=10)
+            ax.set_title(title, fontsize=10)
             ax.tick_params(labelsize=8)
             ax.locator_params(axis="x", nbins=5)
             ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))
@@ -312,11 +330,43 @@ class TrackResult:
         suffix = f", {len(self.alarms)} alarm(s) (red)" if self.alarms else ""
         if periods:
             suffix += "; the structure does not fit the data where shaded (standard errors not trustworthy)"
-        fig.suptitle(f"tracked parameters with +-2 standard errors{suffix}", fontsize=11)
+        units = " (widths in the record's units, the rest in model units)" if in_record else ""
+        fig.suptitle(f"tracked parameters{units} with +-2 standard errors{suffix}", fontsize=11)
         fig.tight_layout()
         if path is not None:
             fig.savefig(path, dpi=120)
         return fig
+
+
+    def _panel(
+        self, k: int, true: NDArray[np.float64] | None, batch: NDArray[np.float64] | None, scaling: Scaling | None
+    ) -> tuple[str, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None, float | None]:
+        """Parameter k's panel: its title, trajectory, standard errors, true line and batch
+        level, a width in the record's units where ``scaling`` is given."""
+        name = self.names[k]
+        v, s = self.theta[:, k], self.standard_errors[:, k]
+        line = None if true is None else true[:, k]
+        level = None if batch is None else float(batch[k])
+        if scaling is None or name not in ("c_L", "c_R"):
+            return name, v, s, line, level
+        factor, title = _width_units(self.names, self.theta, scaling, name)
+        if line is not None:
+            line = line * _width_units(self.names, true, scaling, name)[0]  # type: ignore[arg-type]
+        if level is not None:
+            level *= float(_width_units(self.names, batch[None, :], scaling, name)[0][0])  # type: ignore[index]
+        return title, v * factor, s * np.abs(factor), line, level
+
+
+def _width_units(names: list[str], theta: NDArray[np.float64], scaling: Scaling, name: str) -> tuple[NDArray[np.float64], str]:
+    """Per row of ``theta`` (rows x p), the factor that takes the width ``name`` (c_L or c_R)
+    to the record's units, and the panel's title (``TrackResult.plot``'s ``scaling``)."""
+    a = [k for k, n in enumerate(names) if n[0] == "a" and n[1:].isdigit()]
+    b = [k for k, n in enumerate(names) if n[0] == "b" and n[1:].isdigit()]
+    if not any(n[0] in "rs" and n[1:].isdigit() for n in names):  # a cascade: x in y's units
+        return np.full(len(theta), float(scaling.output_scale)), f"{name} (record's y units)"
+    referred = (1.0 + theta[:, b].sum(axis=1)) / theta[:, a].sum(axis=1) * float(scaling.input_scale)
+    what = f"{name} / a1" if not b and len(a) == 1 else f"{name} referred to the input"
+    return referred, f"{what} (record's u units)"
 
 
 def _reference_values(reference: Any, names: list[str]) -> NDArray[np.float64]:
