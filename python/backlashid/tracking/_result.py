@@ -350,10 +350,10 @@ class TrackResult:
         if scaling is None or name not in ("c_L", "c_R"):
             return name, v, s, line, level
         factor, title = _width_units(self.names, self.theta, scaling, name)
-        if line is not None:
-            line = line * _width_units(self.names, true, scaling, name)[0]  # type: ignore[arg-type]
-        if level is not None:
-            level *= float(_width_units(self.names, batch[None, :], scaling, name)[0][0])  # type: ignore[index]
+        if true is not None:
+            line = true[:, k] * _width_units(self.names, true, scaling, name)[0]
+        if batch is not None:
+            level = float(batch[k] * _width_units(self.names, batch[None, :], scaling, name)[0][0])
         return title, v * factor, s * np.abs(factor), line, level
 
 
