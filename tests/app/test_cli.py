@@ -459,3 +459,29 @@ def test_a_sandwichs_internal_signals_are_labelled_with_the_output_blocks_gain(t
     gain = fitted.output_linear.static_gain()
     label = drawn[0].axes[0].get_xlabel()
     assert abs(gain - 1.0) > 0.05 and f"/ {gain:.3g}, G2's static gain" in label, label
+
+
+def test_a_runtime_warning_is_shown_once_and_the_command_ends(tmp_path, csv_file):
+    """A warning that is not a FitWarning (numpy's "overflow encountered in matmul" inside a
+    structure selection) is shown as Python shows it, once, after the command: it used to be
+    shown while the command's warnings were still being recorded, which appended it to the
+    list being shown, and `fit --model auto` grew to 24 GB until the kernel killed it. Run in a
+    process of its own under a 2 GB address-space limit and a timeout, so that the old loop
+    fails the test instead of the machine."""
+    import subprocess
+    import textwrap
+
+    code = textwrap.dedent(f"""
+        import resource, warnings
+        resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))
+        import backlashid.app._cli as cli
+        original = cli._write_json
+        def write_with_a_warning(path, payload):
+            warnings.warn("overflow encountered in matmul", RuntimeWarning, stacklevel=1)
+            original(path, payload)
+        cli._write_json = write_with_a_warning
+        cli.main(["fit", {str(csv_file)!r}, "-i", "u", "-o", "y", "--split", "0.6", "--json", {str(tmp_path / "m.json")!r}])
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stderr.count("overflow encountered in matmul") == 1, r.stderr[-2000:]

@@ -62,20 +62,23 @@ def _clean_errors(command: F) -> F:
 
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", FitWarning)
-            try:
+        caught: list[warnings.WarningMessage] = []
+        try:
+            with warnings.catch_warnings(record=True) as caught:  # type: ignore[assignment]
+                warnings.simplefilter("always", FitWarning)
                 return command(*args, **kwargs)
-            except BacklashIdError as exc:
-                raise click.ClickException(str(exc)) from None
-            except OSError as exc:  # writing outputs: a missing folder, no permission, a full disk
-                raise click.ClickException(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
-            finally:
-                for w in caught:
-                    if issubclass(w.category, FitWarning):
-                        click.echo(f"Warning: {w.message}", err=True)
-                    else:
-                        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+        except BacklashIdError as exc:
+            raise click.ClickException(str(exc)) from None
+        except OSError as exc:  # writing outputs: a missing folder, no permission, a full disk
+            raise click.ClickException(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
+        finally:
+            # shown after the recording ended: inside it, showwarning appends to the list being
+            # shown, and a numpy RuntimeWarning looped until the memory ran out (24 GB)
+            for w in caught:
+                if issubclass(w.category, FitWarning):
+                    click.echo(f"Warning: {w.message}", err=True)
+                else:
+                    warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
     return wrapper  # type: ignore[return-value]
 
