@@ -601,15 +601,20 @@ def _free(theta: NDArray[np.float64], g: NDArray[np.float64] | None, lo: NDArray
 
 def _gain(r_mat: NDArray[np.float64], qtr: NDArray[np.float64], free: NDArray[np.bool_], names: list[str]) -> float:
     """The predicted gain of the Gauss-Newton step over the free parameters: ||Q^T r||^2 with
-    all free, else ||R_F delta_F||^2 of the least-squares step in the free columns."""
-    if free.all():
-        return float(qtr @ qtr)
-    free = free & np.any(r_mat != 0.0, axis=0)  # a zero column (a state the data never excite) gains nothing
-    if not free.any():
-        return 0.0
-    delta = _core.lstsq(r_mat[:, free], qtr, [k for k, f in zip(names, free) if f])[0]
-    step = r_mat[:, free] @ delta
-    return float(step @ step)
+    all free, else ||R_F delta_F||^2 of the least-squares step in the free columns. Infinite
+    where it overflows (the residuals of a diverging simulation, or a huge step in nearly
+    dependent free columns): no reason to stop."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if free.all():
+            gain = float(qtr @ qtr)
+        else:
+            free = free & np.any(r_mat != 0.0, axis=0)  # a zero column (a state the data never excite) gains nothing
+            if not free.any():
+                return 0.0
+            delta = _core.lstsq(r_mat[:, free], qtr, [k for k, f in zip(names, free) if f])[0]
+            step = r_mat[:, free] @ delta
+            gain = float(step @ step)
+    return gain if np.isfinite(gain) else math.inf
 
 
 def _kept_factor_qtr(r_mat: NDArray[np.float64], g: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
