@@ -62,6 +62,7 @@ accurate when that validation RMSE is at most 1.5 times the noise std.
     python benches/structure_classes.py --per-family 20 --jobs 2          # prints the table
     python benches/structure_classes.py --families hammerstein --index 3   # one case
     python benches/structure_classes.py --families sandwich_position hammerstein_position --seeds second
+    python benches/structure_classes.py --seeds third --per-family 5 --via-cli   # the user's command line instead
 
 Seeds: ``--seeds first`` (36_303, the default), ``--seeds second`` (36_404, quoted from
 2026-11-28; on 2026-11-29 four of its position input-backlash records were probed to find why a
