@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._optional import pyplot
 from .._validation import as_signal
 from ..errors import DataError
-from ..identify._scaling import Scaling
+from ..identify import Scaling
 
 __all__ = ["Alarm", "MismatchTest", "TrackResult"]
 
