@@ -57,6 +57,9 @@ Later that day, with the monitor's cross part as n R^2 (the lagged u and x's 10 
 sample), beside another bench on the second core: ``track(every=100)`` 6.0 M against the core's
 6.2 M (98 %), the pickled tracker 4734 bytes; the monitor's cost, timed in one process on 2e6
 samples of Example 1 (best of 3 each): 6.31 M samples/s with it, 8.18 M without (23 % slower).
+With the innovation bound (its checkpoint of theta and S kept in the state), quiet machine:
+``track(every=100)`` 6.4 M against the core's 6.6 M (97 %); the pickled tracker 5958 bytes
+after 1e3 and after 1e6 samples.
 """
 
 from __future__ import annotations
