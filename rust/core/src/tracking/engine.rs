@@ -115,16 +115,22 @@ pub(crate) struct Engine<const W: usize> {
     /// noise variance: e(t)^2 > bound2 (1 + psi' P psi) refuses the update and sends the
     /// estimate back to its checkpoint (`update`); infinite: off.
     bound2: f64,
-    /// The checkpoint: theta, S and trace(P) after `CHECKPOINT` consecutive accepted updates.
-    ck_theta: [f64; W],
-    ck_sm: [[f64; W]; W],
-    ck_trace: f64,
+    /// The estimate after the last `CHECKPOINT` consecutive accepted updates.
+    checkpoint: Checkpoint<W>,
     /// Accepted updates since the checkpoint or the last refusal.
     since_ck: u64,
     /// Updates the innovation bound refused.
     refused: u64,
     detector: Option<Detector>,
     monitor: Option<Monitor>,
+}
+
+/// theta, S and trace(P) of a moment: the estimate the innovation bound returns to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Checkpoint<const W: usize> {
+    theta: [f64; W],
+    sm: [[f64; W]; W],
+    trace: f64,
 }
 
 /// Consecutive accepted updates after which the estimate becomes the checkpoint the
@@ -328,9 +334,7 @@ impl<const W: usize> Engine<W> {
             t: 0,
             rejected: 0,
             bound2: options.innovation_bound * options.innovation_bound * sigma2,
-            ck_theta: theta,
-            ck_sm: sm,
-            ck_trace: trace,
+            checkpoint: Checkpoint { theta, sm, trace },
             since_ck: 0,
             refused: 0,
             detector,
@@ -348,6 +352,15 @@ impl<const W: usize> Engine<W> {
 
     pub(crate) fn refused(&self) -> u64 {
         self.refused
+    }
+
+    /// The estimate now, as a checkpoint.
+    fn now(&self) -> Checkpoint<W> {
+        Checkpoint {
+            theta: self.theta,
+            sm: self.sm,
+            trace: self.trace,
+        }
     }
 
     pub(crate) fn noise_variance(&self) -> f64 {
@@ -932,9 +945,11 @@ impl<const W: usize> Engine<W> {
         if e * e > self.bound2 * beta {
             // an innovation no estimate near this one explains (a runaway or an outlier):
             // the update is refused and the estimate goes back to its checkpoint
-            self.theta = self.ck_theta;
-            self.sm = self.ck_sm;
-            self.trace = self.ck_trace;
+            Checkpoint {
+                theta: self.theta,
+                sm: self.sm,
+                trace: self.trace,
+            } = self.checkpoint;
             self.since_ck = 0;
             self.refused += 1;
             return Ok(Some((e, xt)));
@@ -1004,9 +1019,7 @@ impl<const W: usize> Engine<W> {
         self.sigma2 = self.sigma2.max(f64::MIN_POSITIVE);
         self.since_ck += 1;
         if self.since_ck == CHECKPOINT {
-            self.ck_theta = self.theta;
-            self.ck_sm = self.sm;
-            self.ck_trace = self.trace;
+            self.checkpoint = self.now();
             self.since_ck = 0;
         }
         Ok(Some((e, xt)))
@@ -1051,9 +1064,10 @@ impl<const W: usize> Engine<W> {
         if let Some(m) = &self.monitor {
             m.save(&mut out);
         }
-        out.extend([self.since_ck as f64, self.refused as f64, self.ck_trace]);
-        out.extend_from_slice(&self.ck_theta[..p]);
-        for row in self.ck_sm.iter().take(p) {
+        let ck = &self.checkpoint;
+        out.extend([self.since_ck as f64, self.refused as f64, ck.trace]);
+        out.extend_from_slice(&ck.theta[..p]);
+        for row in ck.sm.iter().take(p) {
             out.extend_from_slice(&row[..p]);
         }
         out
@@ -1146,14 +1160,14 @@ impl<const W: usize> Engine<W> {
         if guarded {
             let mut g = [0.0; GUARD_SAVED];
             take(&mut g);
-            (self.since_ck, self.refused, self.ck_trace) = (g[0] as u64, g[1] as u64, g[2]);
-            take(&mut self.ck_theta[..p]);
-            for row in self.ck_sm.iter_mut().take(p) {
+            (self.since_ck, self.refused, self.checkpoint.trace) = (g[0] as u64, g[1] as u64, g[2]);
+            take(&mut self.checkpoint.theta[..p]);
+            for row in self.checkpoint.sm.iter_mut().take(p) {
                 take(&mut row[..p]);
             }
         } else {
             (self.since_ck, self.refused) = (0, 0);
-            (self.ck_theta, self.ck_sm, self.ck_trace) = (self.theta, self.sm, self.trace);
+            self.checkpoint = self.now();
         }
         Ok(())
     }
