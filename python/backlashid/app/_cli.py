@@ -283,7 +283,8 @@ def _report_tracking(result: Any, tracker: Any) -> None:
         )
     if result.refused:
         click.echo(
-            f"refused the update on {result.refused} of {tracker.samples} samples: the innovation exceeded 20 noise stds of "
+            f"refused the update on {result.refused} of {tracker.samples} samples: the innovation exceeded "
+            f"{tracker.innovation_bound:g} noise stds of "
             "the start (each sent the estimate back to its last checkpoint): "
             + ("the tracked structure runs away from this record" if result.mismatch else "outliers in the record, or a start far off")
         )

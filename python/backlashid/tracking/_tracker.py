@@ -340,6 +340,20 @@ class Tracker:
         return int(self._native.rejected)
 
     @property
+    def innovation_bound(self) -> float | None:
+        """The innovation bound in noise stds of the start, None where it is off (not asked,
+        no noise level at the start, or a tracker pickled before it existed).
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> bid.Tracker(bid.example1(), noise_std=0.02).innovation_bound, bid.Tracker(bid.example1()).innovation_bound
+        (20.0, None)
+        """
+        bound = self._args[15] if len(self._args) > 15 else np.inf
+        return float(bound) if np.isfinite(bound) else None
+
+    @property
     def refused(self) -> int:
         """Updates the innovation bound refused, each sending the estimate back to its
         checkpoint (``innovation_bound``)."""
