@@ -65,10 +65,17 @@ numpydoc_attributes_as_param_list = True
 numpydoc_xref_param_type = False
 
 html_theme = "alabaster"
-html_theme_options = {"description": "Identification of systems with general backlash", "fixed_sidebar": True}
+# 1180 px: a body of about 900 px, 100 characters of code, on a 1280 px screen (the theme's 940 px
+# left 660: synopses, tables and eq 15-18 ran past the right edge; tests/test_docs_layout.py)
+html_theme_options = {
+    "description": "Identification of systems with general backlash",
+    "fixed_sidebar": True,
+    "page_width": "1180px",
+}
 html_title = f"backlashid {release}"
 html_static_path = ["_static"]
-html_css_files = ["parameters.css", "math.css"]  # the Parameters sections as tables (one row per parameter); MathML layout
+# the Parameters sections as tables (one row per parameter); MathML layout; wide tables and printed lines
+html_css_files = ["parameters.css", "math.css", "layout.css"]
 
 
 # -- API reference: one page per public module, generated from its __all__ -----------------------
