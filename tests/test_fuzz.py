@@ -12,7 +12,7 @@ Every call must
 - leave the caller's arrays and lists unchanged;
 - give the same outcome for the same arguments (same seed) when called again.
 
-Seeded (``derandomize=True``) and bounded: 5,755 generated examples in total (each test's
+Seeded (``derandomize=True``) and bounded: 6,705 generated examples in total (each test's
 ``max_examples`` below; most examples make several calls, each also repeated). ``fit_many`` / ``diagnose_many`` start clusters and are tested in
 tests/app/test_parallel.py instead. Calls with an unknown keyword or a missing argument raise
 ``TypeError`` as for any Python function; they are not generated here.
@@ -26,6 +26,7 @@ import faulthandler
 import json
 import math
 import os
+import warnings
 from typing import Any, Callable
 
 import numpy as np
@@ -774,3 +775,38 @@ def test_short_sandwich_record_is_evaluated():
     model = bid.SandwichModel(bid.LinearBlock([1.0]), bid.GeneralBacklash(0.0, 0.0, [1.0], [1.0]), bid.LinearBlock([1.0, 1.0, 1.0]))
     metrics = bid.evaluate(model, [0.5, 1.0], [0.0, 0.5])
     assert metrics.samples == 2 and np.isfinite(metrics.simulation_rmse)
+
+
+_FITS: dict[str, bid.FitResult] = {}
+
+
+def _fitted(kind: str) -> bid.FitResult:
+    """One fit per structure for the prediction fuzz (fitted once per session)."""
+    if kind not in _FITS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if kind == "cascade":
+                _FITS[kind] = bid.fit_cascade(_U, _Y, 2, 2, 3)
+            else:
+                _FITS[kind] = bid.fit_hammerstein_backlash(_U, _Y, 2, 2, 1, restarts=0)
+    return _FITS[kind]
+
+
+@fuzz(150, 30000)
+@given(
+    kind=st.sampled_from(["cascade", "hammerstein"]),
+    u=signals(n_max=60),
+    band=maybe(st.floats(0.5, 0.99, **finite)),
+    method=maybe(st.sampled_from(["linear", "sampling"])),
+    draws=maybe(st.integers(2, 30), HUGE_INTS),
+    seed=maybe(st.integers(0, 5), HUGE_INTS),
+    scale=st.sampled_from([1.0, 1e100, 1e-300]),
+)
+def test_predict(kind, u, band, method, draws, seed, scale):
+    """``FitResult.predict`` (issue 32's "silent inf" was one of its calls): junk or extreme
+    inputs and options end in a library error or a finite prediction and band."""
+    if isinstance(u, np.ndarray) and u.dtype.kind == "f":
+        with np.errstate(over="ignore"):
+            u = u * scale
+    parts = lambda p: (p.output, p.lower, p.upper, p.std) if hasattr(p, "lower") else p  # noqa: E731 (band=None: the output)
+    check_call(_fitted(kind).predict, u, band=band, method=method, draws=draws, seed=seed, finite=parts)
