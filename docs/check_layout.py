@@ -85,6 +85,7 @@ def main() -> int:
     ap.add_argument("--width", type=int, default=1280, help="the browser window's width in pixels (default 1280)")
     ap.add_argument("--chromium", default=shutil.which("chromium") or "chromium", help="the Chromium executable")
     args = ap.parse_args()
+    args.build = args.build.resolve()  # Chromium opens the pages by their file URI
     pages = sorted(p for p in [*args.build.glob("*.html"), *args.build.glob("api/*.html")] if p.name not in SKIPPED)
     if not pages:
         print(f"no HTML pages in {args.build}: build the docs first (python -m sphinx -b html docs {args.build})")
