@@ -1490,8 +1490,11 @@ def _multiple_shooting(
         return fit
     p0 = dataclasses.replace(with_state, initial_state=False).size
     u, y = u[:STATE_SEARCH_SAMPLES], y[:STATE_SEARCH_SAMPLES]
+    stages = [k for k in SHOOTING_STAGES if len(u) // k >= warmup + SHOOTING_SEGMENT]
+    if not stages:  # too short for a stage
+        return fit
     theta = fit.theta[:p0]
-    for k in (k for k in SHOOTING_STAGES if len(u) // k >= warmup + SHOOTING_SEGMENT):
+    for k in stages:
         cuts = np.linspace(0, len(u), k + 1).astype(int)
         us, ys = [u[a:b] for a, b in zip(cuts, cuts[1:])], [y[a:b] for a, b in zip(cuts, cuts[1:])]
         segments = with_state.problem(us, ys, warmup)
@@ -1499,8 +1502,6 @@ def _multiple_shooting(
         if stage is None:
             return fit
         theta = stage.theta[:p0]
-    if theta is fit.theta[:p0]:  # too short for a stage
-        return fit
     trial = _state_first_then_all(prob, _state_start(names, theta, p0, y, warmup, with_state), p0)
     rank = functools.partial(_state_rank, with_state, prob)
     return trial if trial is not None and rank(trial) < rank(fit) and _determined(trial, p0, names) else fit
