@@ -16,6 +16,7 @@ runs it after the docs build (.ci/run).
 from __future__ import annotations
 
 import argparse
+import html
 import json
 import re
 import shutil
@@ -75,8 +76,7 @@ def findings(page: Path, chromium: str, width: int) -> list[str]:
     match = re.search(r'<pre id="layout-findings">(.*?)</pre>', dom, re.S)
     if match is None:
         return ["the probe did not report (the page did not load in Chromium)"]
-    raw = match.group(1).replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", '"').replace("&amp;", "&")
-    return list(json.loads(raw))
+    return list(json.loads(html.unescape(match.group(1))))
 
 
 def main() -> int:
