@@ -23,6 +23,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import faulthandler
+import functools
 import json
 import math
 import os
@@ -777,19 +778,14 @@ def test_short_sandwich_record_is_evaluated():
     assert metrics.samples == 2 and np.isfinite(metrics.simulation_rmse)
 
 
-_FITS: dict[str, bid.FitResult] = {}
-
-
+@functools.cache
 def _fitted(kind: str) -> bid.FitResult:
     """One fit per structure for the prediction fuzz (fitted once per session)."""
-    if kind not in _FITS:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            if kind == "cascade":
-                _FITS[kind] = bid.fit_cascade(_U, _Y, 2, 2, 3)
-            else:
-                _FITS[kind] = bid.fit_hammerstein_backlash(_U, _Y, 2, 2, 1, restarts=0)
-    return _FITS[kind]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        if kind == "cascade":
+            return bid.fit_cascade(_U, _Y, 2, 2, 3)
+        return bid.fit_hammerstein_backlash(_U, _Y, 2, 2, 1, restarts=0)
 
 
 @fuzz(150, 30000)
