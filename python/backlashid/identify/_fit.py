@@ -28,6 +28,7 @@ from ..models import CascadeModel, LinearBlock, Model, ParameterCovariance, Pred
 from . import _records
 from ._checks import warn_if_suspicious
 from ._coarse import refine_whole
+from ._integrator import HeldIntegrator, poles_on_wall
 from ._refine import OutputErrorFit, budget_hit, levenberg_marquardt, out_of_time, spectral_radius, time_budget
 from ._starts import cost_at, linear_start, output_pole_restarts, pole_restarts, scale_starts, state_starts
 from ._state import lm_holding_vanishing, lm_state_first
@@ -1365,6 +1366,7 @@ def _refine_with_state(
             raise
     fit = _searched_with_state(with_state, prob, raw, u, y, warmup, fit, names, derived, estimate)
     fit = _multiple_shooting(with_state, prob, u, y, warmup, fit, names)
+    fit = _off_the_wall(with_state, prob, fit, names)
     # a state that starts the record holding leaves y_prev's column zero until it moves: LM
     # can stop in a shallow local minimum there; seeded restarts are kept only if cheaper
     rng = np.random.default_rng(seed)
@@ -1505,6 +1507,29 @@ def _multiple_shooting(
     trial = _state_first_then_all(prob, _state_start(names, theta, p0, y, warmup, with_state), p0)
     rank = functools.partial(_state_rank, with_state, prob)
     return trial if trial is not None and rank(trial) < rank(fit) and _determined(trial, p0, names) else fit
+
+
+def _off_the_wall(with_state: Structure, prob: Any, fit: OutputErrorFit, names: list[str]) -> OutputErrorFit:
+    """LM with the pole of a block that ``fit`` left on the stability guard's wall (a real pole
+    within ON_WALL of z = 1: a position that integrates) held at AT_INTEGRATOR, the rest free
+    (:class:`HeldIntegrator`), then on ``prob`` from there; kept where it ranks better and the
+    record determines it. On the wall every step that nudges that pole outward is rejected,
+    and LM stops with the other parameters short of their optimum."""
+    p0 = dataclasses.replace(with_state, initial_state=False).size
+    rank = functools.partial(_state_rank, with_state, prob)
+    for prefix in ("b", "s"):  # the input block's, the sandwich's output block's
+        at = poles_on_wall(names, fit.theta, prefix)
+        if at is None:
+            continue
+        held = HeldIntegrator(prob, at, AT_INTEGRATOR)
+        try:
+            found = lm_holding_vanishing(held, held.reduced(fit.theta), p0 - 1)
+        except BacklashIdError:
+            continue
+        trial = _refit_at(prob, held.full(found.theta), p0)
+        if trial is not None and rank(trial) < rank(fit) and _determined(trial, p0, names):
+            fit = trial
+    return fit
 
 
 def _state_start(names: list[str], theta: NDArray[np.float64], p0: int, y: Any, warmup: int, with_state: Structure) -> NDArray[np.float64]:
