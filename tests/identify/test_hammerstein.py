@@ -102,3 +102,22 @@ def test_bad_arguments_are_refused_naming_them():
         as_hammerstein(TRUTH, unit_load_gain="yes")
     with pytest.raises(bid.ModelError, match="output_linear"):
         hammerstein_backlash(GeneralBacklash(0.1, 0.1, [1.0], [1.0]), [1.0])
+
+
+def test_the_search_with_the_state_has_starts_of_its_own():
+    # the input block is a gain and a delay, so the linear fits of the state's starts vary the
+    # output block's poles (before, this structure had none: an empty list); on this record
+    # LM from the best of them reaches the noise, the record started mid-motion
+    from backlashid.identify import Structure, _starts
+    from backlashid.identify._state import lm_holding_vanishing
+
+    u, w, clean = _record(3, n=2500)
+    u, w, clean = u[500:], w[500:], clean[500:]
+    noise = float(np.std(w - clean))
+    s = Structure(1, 0, 2, 2, 2, initial_state=True)
+    prob = s.problem(u, w, 20)
+    starts = _starts.state_starts(s, prob, u, w, 20)
+    assert starts
+    p0 = Structure(1, 0, 2, 2, 2).size
+    best = min(lm_holding_vanishing(prob, theta, p0).cost for theta in starts)
+    assert np.sqrt(best / (len(w) - 20)) <= 1.1 * noise

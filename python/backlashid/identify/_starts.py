@@ -21,7 +21,8 @@ things here avoid both:
 - :func:`state_starts`: for a search with the record's initial state, the linear fit and the
   scale starts again with that state free from the beginning (and pole sets with a pole at
   z = 1): a record that starts mid-motion, above all a position that integrates, misleads a
-  linear fit from rest, whose x then starts at the wrong place for good.
+  linear fit from rest, whose x then starts at the wrong place for good. For the input
+  backlash (no input poles) the linear fits vary the output block's poles instead.
 
 Every search is the package's one bounded Levenberg-Marquardt (dead-band widths >= 0 by the
 problem's ``bounds()``); a start that raises is skipped. The per-sample work is the core's: the
@@ -43,6 +44,7 @@ from ..errors import BacklashIdError
 from ..models import LinearBlock
 from ._records import y_prev_starts
 from ._refine import OutputErrorFit, levenberg_marquardt
+from ._state import lm_holding_vanishing
 from ._structure import Structure
 
 # Dead bands of the scale starts, as fractions of std(x) of the linear fit.
@@ -200,6 +202,8 @@ def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y
     base[names.index("m_R1")] = 1.0
     free[: s.n_a + s.nb] = True
     free[p0:] = True
+    if s.is_sandwich and s.nb == 0:  # an input backlash: the output block holds the dynamics
+        return _output_block_state_starts(s, prob, base, free, u, y, warmup)
     for k, first in y_prev_starts(names, y, warmup) if not s.is_sandwich else []:
         base[k], free[k] = first, False  # the identity holds y_prev's column at zero
     dens = _denominators(s.nb)
@@ -208,6 +212,61 @@ def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y
     out = []
     for linear in _linear_fits(s, prob, base, free, dens, u, y, warmup, screened=4)[:STATE_TOP]:
         out += scale_starts(s, prob, linear)
+    return out
+
+
+def _output_block_state_starts(
+    structure: Structure,
+    prob: object,
+    base: NDArray[np.float64],
+    free: NDArray[np.bool_],
+    u: Signal | list[Signal],
+    y: Signal | list[Signal],
+    warmup: int,
+) -> list[NDArray[np.float64]]:
+    """:func:`state_starts` of a sandwich whose input block has no poles (the input backlash,
+    x(t) = a_1 u(t-1)): the linear fits vary the output block's denominator over the fixed pole
+    sets and those with a pole at z = 1 (a load whose position is measured), a_1 and r_2..r_nr
+    by least squares (eq 29 with the backlash at the identity: w = a_1 q^-2 R(q) / S(q) u, r_1 =
+    1), that block, a_1 and the state free; the dead bands of the scale starts are fractions of
+    std(x) = |a_1| std(u). Before, this structure had no start of its own in the search with the
+    state. LM from the best of them, on the first 2800 samples of benches/structure_classes.py's
+    first five input-backlash records (fourth seeds): 0.99-3.6 noise stds where the load does
+    not integrate, 1.0-44 where its position is measured: starts, which the search refines."""
+    s = structure
+    names = list(prob.names)  # type: ignore[attr-defined]
+    p0 = dataclasses.replace(s, initial_state=False).size
+    r_at = [names.index(f"r{k}") for k in range(2, s.nr + 1)]
+    s_at = [names.index(f"s{k}") for k in range(1, s.ns + 1)]
+    a_at = names.index("a1")
+    free = free.copy()
+    free[r_at + s_at] = True
+    dens = _denominators(s.ns)
+    if s.ns >= 2:
+        dens += [np.real(np.poly([_INTEGRATOR, p, *np.zeros(s.ns - 2)]))[1:] for p in _BESIDE_INTEGRATOR]
+    starts = []
+    for den in dens:
+        num = _numerator(u, y, den, s.nr, 2, warmup)  # a_1 (1, r_2, .., r_nr)
+        if not (np.all(np.isfinite(num)) and num[0] != 0.0):
+            continue
+        theta = base.copy()
+        theta[a_at], theta[r_at], theta[s_at] = num[0], num[1:] / num[0], den
+        starts.append(theta)
+    costs = [cost_at(prob, th) for th in starts]
+    linear = []
+    for i in [i for i in np.argsort(costs)[:4] if np.isfinite(costs[i])]:
+        lo, hi = _held(prob, starts[i], free)
+        try:  # a stable output block's state columns vanish after the warm-up: held
+            linear.append(lm_holding_vanishing(prob, starts[i], p0, lo, hi))
+        except BacklashIdError:
+            continue
+    scale = float(np.std(np.concatenate(_records(u))))
+    out = []
+    for fit in sorted(linear, key=lambda f: f.cost)[:STATE_TOP]:
+        for k in SCALE_FRACTIONS:
+            theta = fit.theta.copy()
+            theta[names.index("c_L")] = theta[names.index("c_R")] = k * abs(theta[a_at]) * scale
+            out.append(theta)
     return out
 
 
