@@ -24,6 +24,9 @@ def test_fit_orders_auto_prints_the_table_and_writes_the_chosen_model(tmp_path):
     assert r.exit_code == 0, r.output
     assert "Structure selection: 36 candidates" in r.output and "chosen (*): cascade na=2, nb=2, degree=3" in r.output
     assert r.output.count("\n* cascade       2  2   3") == 1
+    # a count of the candidates on stderr while they run, the table on stdout
+    assert r.stderr.count("\ncandidate ") + r.stderr.startswith("candidate ") == 36 and "candidate 36/36: cascade na=" in r.stderr
+    assert "candidate 1/36" not in r.stdout
     payload = json.loads(out.read_text())
     model = bx.model_from_dict(payload["model"])
     assert (model.linear.na, model.linear.nb, model.backlash.degree) == (2, 2, 3)

@@ -63,6 +63,15 @@ def test_table_has_a_row_per_candidate_and_its_outputs(example1_data):
     plt.close(ax.figure)
 
 
+def test_progress_is_told_after_each_candidate(example1_data):
+    told = []
+    sel = select_structure(example1_data.u, example1_data.noisy, na=(1, 2), nb=2, degree=(2, 3), refit=False,
+                           progress=lambda done, total, row: told.append((done, total, row["na"], row["degree"], row["validation_rmse"])))
+    assert told == [(k + 1, 4, r["na"], r["degree"], r["validation_rmse"]) for k, r in enumerate(sel.rows)]
+    with pytest.raises(DataError, match=r"^progress = "):
+        select_structure(example1_data.u, example1_data.noisy, progress="yes")
+
+
 def test_a_raising_candidate_is_a_row(example1_data, monkeypatch):
     real = _selection.fit_cascade
 

@@ -211,9 +211,16 @@ def _select_model(kind: str, u: np.ndarray, y: np.ndarray, warmup: int, max_iter
     if valid is not None:  # else select_structure's own default: valid backlashes
         extra["valid"] = valid
     selection = select_structure(u, y, kind=kinds, warmup=warmup, max_iter=max_iter, feedthrough=feedthrough, coarse=coarse,
-                                 min_moving=min_moving, initial_state=initial_state, **extra, **grid)
+                                 min_moving=min_moving, initial_state=initial_state, progress=_candidate_done, **extra, **grid)
     click.echo(selection.summary())
     return selection
+
+
+def _candidate_done(done: int, total: int, row: dict[str, Any]) -> None:
+    """The selection's progress on stderr, one line per candidate (stdout keeps the table)."""
+    orders = " ".join(f"{k}={row[k]}" for k in ("na", "nb", "nr", "ns") if row[k] and not (row["kind"] == "hammerstein" and k in ("na", "nb")))
+    outcome = "raised" if row["raised"] else f"validation RMSE {row['validation_rmse']:.4g}"
+    click.echo(f"candidate {done}/{total}: {row['kind']} {orders} degree={row['degree']}: {outcome} ({row['seconds']:.1f} s)", err=True)
 
 
 def _metrics_dict(metrics: Any) -> dict[str, Any]:

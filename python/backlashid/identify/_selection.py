@@ -12,7 +12,7 @@ import itertools
 import math
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -272,6 +272,7 @@ def select_structure(
     tolerance: float = 0.02,
     refit: bool = True,
     warmup: int = 0,
+    progress: Callable[[int, int, dict[str, Any]], None] | None = None,
     **options: Any,
 ) -> StructureSelection:
     """Choose the linear orders and the branch degree by held-out simulation error and BIC.
@@ -332,6 +333,10 @@ def select_structure(
         estimation part.
     warmup : int, default 0
         Samples at the start left out of every fit criterion and of BIC.
+    progress : callable, optional
+        Called after each candidate as ``progress(done, total, row)``: the candidates judged so
+        far, how many the grid holds and the new row of the table (a long grid, e.g. the 72
+        candidates of ``backlashid fit --model auto --orders auto``, takes minutes).
     **options
         Further keywords of :func:`fit_cascade` / :func:`fit_sandwich` (``max_iter``,
         ``feedthrough``, ``min_moving``, ``initial_state``, ...), passed to every candidate's
@@ -369,6 +374,8 @@ def select_structure(
     with_output = "sandwich" in kinds or "hammerstein" in kinds
     grid_r, grid_s = (_grid(nr, "nr", 1), _grid(ns, "ns", 0)) if with_output else ([0], [0])
     _check_settings(validation, tolerance, refit)
+    if progress is not None and not callable(progress):
+        raise DataError(f"progress = {shown(progress)}: give a function progress(done, total, row), or None")
     record = _split_record(u, y, validation, warmup, options)
     feedthrough = bool(options.get("feedthrough", False))
     options = {"valid": True, **options}  # every candidate a backlash where it is used
@@ -376,11 +383,14 @@ def select_structure(
     rows: list[dict[str, Any]] = []
     fits: list[FitResult | None] = []
     errors: list[BacklashIdError | None] = []
-    for candidate in _candidates(kinds, grid_a, grid_b, grid_n, grid_r, grid_s):
+    candidates = _candidates(kinds, grid_a, grid_b, grid_n, grid_r, grid_s)
+    for candidate in candidates:
         row, result, error = _judged(candidate, record, feedthrough, options)
         rows.append(row)
         fits.append(result)
         errors.append(error)
+        if progress is not None:
+            progress(len(rows), len(candidates), dict(row))
 
     ok = [i for i, r in enumerate(rows) if not r["raised"]]
     if not ok:
