@@ -202,7 +202,9 @@ def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y
     base[names.index("m_R1")] = 1.0
     free[: s.n_a + s.nb] = True
     free[p0:] = True
-    if s.is_sandwich and s.nb == 0:  # an input backlash: the output block holds the dynamics
+    if s.is_sandwich and s.nb == 0:  # no input poles (an input backlash): the output block's
+        if s.feedthrough or s.output_feedthrough:  # (the numerator's delay below is two samples)
+            return []
         return _output_block_state_starts(s, prob, base, free, u, y, warmup)
     for k, first in y_prev_starts(names, y, warmup) if not s.is_sandwich else []:
         base[k], free[k] = first, False  # the identity holds y_prev's column at zero
@@ -224,12 +226,13 @@ def _output_block_state_starts(
     y: Signal | list[Signal],
     warmup: int,
 ) -> list[NDArray[np.float64]]:
-    """:func:`state_starts` of a sandwich whose input block has no poles (the input backlash,
-    x(t) = a_1 u(t-1)): the linear fits vary the output block's denominator over the fixed pole
-    sets and those with a pole at z = 1 (a load whose position is measured), a_1 and r_2..r_nr
-    by least squares (eq 29 with the backlash at the identity: w = a_1 q^-2 R(q) / S(q) u, r_1 =
-    1), that block, a_1 and the state free; the dead bands of the scale starts are fractions of
-    std(x) = |a_1| std(u). Before, this structure had no start of its own in the search with the
+    """:func:`state_starts` of a sandwich whose input block has no poles and neither block a
+    feedthrough (the input backlash, x(t) = a_1 u(t-1); an FIR block's a_2.. start at 0): the
+    linear fits vary the output block's denominator over the fixed pole sets and those with a
+    pole at z = 1 (a load whose position is measured), a_1 and r_2..r_nr by least squares (eq 29
+    with the backlash at the identity: w = a_1 q^-2 R(q) / S(q) u, r_1 = 1), that block, a_1 and
+    the state free; the dead bands of the scale starts are fractions of std(x) = |a_1| std(u).
+    Before, this structure had no start of its own in the search with the
     state. LM from the best of them, on the first 2800 samples of benches/structure_classes.py's
     first five input-backlash records (fourth seeds): 0.99-3.6 noise stds where the load does
     not integrate, 1.0-44 where its position is measured: starts, which the search refines."""
