@@ -40,6 +40,9 @@ def test_the_held_problem_is_the_compiled_one_along_its_map():
     # the block's poles: rho and the other of THETA's (the map divides out 1 - rho q^-1)
     assert np.allclose(np.sort(np.roots(np.r_[1.0, full[9:11]])), np.sort(np.roots(np.r_[1.0, THETA[9:11]])), atol=1e-6)
     assert np.isclose(held.cost(reduced), prob.cost(full), rtol=1e-12)
+    assert np.array_equal(held.simulate(reduced), prob.simulate(full)) and held.warmup == prob.warmup
+    with pytest.raises(AttributeError):  # nothing that reads theta passes through unmapped
+        held.motion(reduced)
     # the gradient (J^T r, r = y - y_sim) against central differences of the cost, and the
     # factor's normal equations against the Jacobian of the simulation by central differences
     g, _ = held.gradient(reduced)

@@ -46,7 +46,8 @@ class HeldIntegrator:
     """A compiled problem (or a wrapper of one, e.g. :class:`~._valid.ValidOnly`) with one
     pole of the block whose denominator coefficients sit at ``coefficients`` (b_1..b_n, n >=
     2) held at ``rho``; theta in its layout with b'_1..b'_{n-1} in the places of b_1..b_{n-1}
-    and b_n left out (module header). Everything else is the problem's."""
+    and b_n left out (module header): what Levenberg-Marquardt asks of a problem (names,
+    bounds, cost, feasible, gradient, oe_factor, simulate, samples, warmup)."""
 
     def __init__(self, prob: Any, coefficients: list[int], rho: float) -> None:
         p = len(prob.names)
@@ -71,7 +72,13 @@ class HeldIntegrator:
         self._coefficients = coefficients
 
     def __getattr__(self, name: str) -> Any:
-        return getattr(self._prob, name)
+        # what takes no theta is the problem's; anything else would read theta in the wrong layout
+        if name in ("samples", "warmup", "lengths"):
+            return getattr(self._prob, name)
+        raise AttributeError(f"{type(self).__name__} has no {name!r}")
+
+    def simulate(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(self._prob.simulate(self.full(theta)), dtype=np.float64)
 
     @property
     def names(self) -> list[str]:
