@@ -64,6 +64,8 @@ _BESIDE_INTEGRATOR = (0.3, 0.6, 0.8, 0.9, 0.95)
 _INTEGRATOR = 0.999
 # Of the state starts' linear fits, this many best give scale starts.
 STATE_TOP = 2
+# The state starts' denominators kept (by their cost) for the linear fit.
+STATE_SCREENED = 4
 # LM steps of the linear start's search, and of each pole restart's linear-only search (a
 # screening: the POLE_TOP best are then searched whole).
 LINEAR_START_ITER = 30
@@ -208,13 +210,20 @@ def state_starts(structure: Structure, prob: object, u: Signal | list[Signal], y
         return _output_block_state_starts(s, prob, base, free, u, y, warmup)
     for k, first in y_prev_starts(names, y, warmup) if not s.is_sandwich else []:
         base[k], free[k] = first, False  # the identity holds y_prev's column at zero
-    dens = _denominators(s.nb)
-    if s.nb >= 2:  # a position that integrates: a pole at z = 1 (just inside) and another
-        dens += [np.real(np.poly([_INTEGRATOR, p, *np.zeros(s.nb - 2)]))[1:] for p in _BESIDE_INTEGRATOR]
     out = []
-    for linear in _linear_fits(s, prob, base, free, dens, u, y, warmup, screened=4)[:STATE_TOP]:
+    for linear in _linear_fits(s, prob, base, free, _state_denominators(s.nb), u, y, warmup, screened=STATE_SCREENED)[:STATE_TOP]:
         out += scale_starts(s, prob, linear)
     return out
+
+
+def _state_denominators(n: int) -> list[NDArray[np.float64]]:
+    """The denominators of the state starts' linear fits for a block of n poles: the fixed pole
+    sets and, for n >= 2, a pole at z = 1 (just inside) beside each of _BESIDE_INTEGRATOR (a
+    position that integrates)."""
+    dens = _denominators(n)
+    if n >= 2:
+        dens += [np.real(np.poly([_INTEGRATOR, p, *np.zeros(n - 2)]))[1:] for p in _BESIDE_INTEGRATOR]
+    return dens
 
 
 def _output_block_state_starts(
@@ -244,11 +253,8 @@ def _output_block_state_starts(
     a_at = names.index("a1")
     free = free.copy()
     free[r_at + s_at] = True
-    dens = _denominators(s.ns)
-    if s.ns >= 2:
-        dens += [np.real(np.poly([_INTEGRATOR, p, *np.zeros(s.ns - 2)]))[1:] for p in _BESIDE_INTEGRATOR]
     starts = []
-    for den in dens:
+    for den in _state_denominators(s.ns):
         num = _numerator(u, y, den, s.nr, 2, warmup)  # a_1 (1, r_2, .., r_nr)
         if not (np.all(np.isfinite(num)) and num[0] != 0.0):
             continue
@@ -257,7 +263,7 @@ def _output_block_state_starts(
         starts.append(theta)
     costs = [cost_at(prob, th) for th in starts]
     linear = []
-    for i in [i for i in np.argsort(costs)[:4] if np.isfinite(costs[i])]:
+    for i in [i for i in np.argsort(costs)[:STATE_SCREENED] if np.isfinite(costs[i])]:
         lo, hi = _held(prob, starts[i], free)
         try:  # a stable output block's state columns vanish after the warm-up: held
             linear.append(lm_holding_vanishing(prob, starts[i], p0, lo, hi))
