@@ -211,10 +211,31 @@ def test_each_derived_fit_runs_once_per_record_searched(monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         fit_hammerstein_backlash(u[:N_EST], y[:N_EST], 2, 2, 3, initial_state="estimate", valid=True)
-        assert calls == [(0, 1, N_EST - 1)]  # the output's changes: one output pole fewer
+        assert calls == [(0, 1, N_EST - 1)] * 2  # the output's changes, raw and smoothed: one output pole fewer
         calls.clear()
         bid.fit_cascade(u[:N_EST], y[:N_EST], 2, 2, degree=3, initial_state="estimate")
     assert calls == [(1, 0, N_EST)]  # the input's sums: one input pole fewer
+
+
+def test_a_noisy_load_position_is_started_from_its_smoothed_changes(monkeypatch):
+    # five times the noise of the records above: the position's one-sample changes are
+    # mostly noise, and the search from their fit ended 3.5 noise stds off (validation 11.2);
+    # from the fit of the low-passed position's changes, at the noise (1.01; validation 1.39)
+    from backlashid.identify import _fit
+
+    u, y, noise = _load_position_record("lowpass", 0, noise=0.1)
+
+    def fitted() -> tuple[float, float]:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fit = fit_hammerstein_backlash(u[:N_EST], y[:N_EST], 2, 2, 3, initial_state="estimate", warmup=20)
+        val = bid.evaluate(fit.model, u[N_EST:], y[N_EST:], init_samples=100).simulation_rmse
+        return fit.simulation_rmse / noise, val / noise
+
+    est, val = fitted()
+    assert est <= 1.1 and val <= 1.5, (est, val)
+    monkeypatch.setattr(_fit, "_smoothed_velocity_model", lambda *args: None)
+    assert fitted()[0] > 2.0
 
 
 @pytest.mark.parametrize("kind, seed", [("lowpass", 1), ("white", 3)])

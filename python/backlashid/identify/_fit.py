@@ -63,6 +63,14 @@ AT_INTEGRATOR = 1.0 - 1e-6
 # The first window of that start's search on lengthening heads of the record (doubled to the
 # whole record): a model a little off drifts less over a short head (_lengthened).
 FIRST_HEAD = 300
+# The output's changes of the smoothed velocity start (_smoothed_velocity_model) are those of y
+# low-passed at this fraction of the Nyquist frequency (zero phase, second order). On 7 load-position
+# records of benches/structure_classes.py (development seeds, fits of the 4000 estimation samples,
+# validation in noise stds): 3.9, 4.4, 6.9 -> 1.1, 1.4, 1.1; 1.35 -> 1.02; two unchanged; one 1.88 ->
+# 2.13 at the same cost. A cut-off of 0.03 helped less. SMOOTHING_PAD is sosfiltfilt's default padding
+# for one second-order section.
+SMOOTHING_CUTOFF = 0.1
+SMOOTHING_PAD = 9
 # A trial from the input's sums is kept where its integrator's time constant is at least this many
 # records (_input_integrates): the integrating drives of benches/structure_classes.py end with 1 - |z|
 # of 1e-12 to 1e-6 on 4000 samples (<= 2.5e-5 here), a slow mode on a short record 1.2e-3 on 400.
@@ -1548,8 +1556,9 @@ def _derived_trials(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: i
     start whose blocks are a little off drifts over the record, and the search from rest ends
     far from the optimum (on such drives from a few to about 2000 noise stds off, where the
     true model fits to the noise). The fits of derived records that do not drift give the
-    start, the integrator put back into the block it came from: the output's changes
-    (:func:`_velocity_model`, an integrator in the sandwich's output block) and the input's
+    start, the integrator put back into the block it came from: the output's changes, raw
+    and smoothed (:func:`_velocity_model`, :func:`_smoothed_velocity_model`, an integrator
+    in the sandwich's output block) and the input's
     sums (:func:`_summed_input_model`, one in the input block). Each starts LM on ``prob``
     (the model and the state of ``u``, ``y``), the state first with the model held, directly
     and (one record) on lengthening heads of the record (:func:`_lengthened`); a trial from
@@ -1560,7 +1569,7 @@ def _derived_trials(setup: _Setup, prob: Any, u: Any, y: Any, warmup: int, p0: i
     kept: list[OutputErrorFit] = []
     # the output's changes are kept whatever the pole: their start also leaves the local minimum of
     # sandwiches that do not integrate (structure_classes' sandwich #6, first seeds: 4.96 -> 1.01 noise stds)
-    for derive, confirmed in ((_velocity_model, False), (_summed_input_model, True)):
+    for derive, confirmed in ((_velocity_model, False), (_smoothed_velocity_model, False), (_summed_input_model, True)):
         if (derive, lengths) not in setup.derived_models:  # one fit per record searched
             setup.derived_models[derive, lengths] = derive(setup, u, y, warmup)
         model = setup.derived_models[derive, lengths]
@@ -1638,21 +1647,42 @@ def _derived_fit(setup: _Setup, structure: Structure, u: Any, y: Any, warmup: in
         return None
 
 
-def _velocity_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
+def _velocity_model(setup: _Setup, u: Any, y: Any, warmup: int, *, smoothed: bool = False) -> Model | None:
     """An integrator in the sandwich's output block (a load whose position is measured): the
     structure with one output pole fewer, fitted to (u(t), y(t) - y(t-1)), t >= 1, each
     record's (a velocity does not drift), times (1 - AT_INTEGRATOR q^-1) in its output block.
-    None for a cascade, an output block without poles, or a failed fit."""
+    With ``smoothed``, the changes of y low-passed first (:func:`_smoothed`). None for a
+    cascade, an output block without poles, or a failed fit."""
     s = setup.structure
     if not s.is_sandwich or s.ns < 1:
         return None
     several = isinstance(u, list)
+    if smoothed:
+        y = [_smoothed(yi) for yi in y] if several else _smoothed(y)
     du = [ui[1:] for ui in u] if several else u[1:]
     dy = [np.diff(yi) for yi in y] if several else np.diff(y)
     model = _derived_fit(setup, dataclasses.replace(s, ns=s.ns - 1), du, dy, max(warmup - 1, 0))
     if not isinstance(model, SandwichModel):
         return None
     return SandwichModel(model.input_linear, model.backlash, _with_integrator(model.output_linear))
+
+
+def _smoothed_velocity_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
+    """:func:`_velocity_model` of the output low-passed (:func:`_smoothed`): a measured position
+    changes little from one sample to the next, so its raw changes are mostly noise (on the
+    load-position records of benches/structure_classes.py the changes' signal is 0.03-0.25 times
+    the noise under steps, 0.1-1.7 under the other inputs) and their fit is no start."""
+    return _velocity_model(setup, u, y, warmup, smoothed=True)
+
+
+def _smoothed(y: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``y`` through a zero-phase second-order Butterworth low-pass at SMOOTHING_CUTOFF of the
+    Nyquist frequency (forward and backward, the ends padded by odd reflection over
+    SMOOTHING_PAD samples, fewer on a shorter record)."""
+    from scipy import signal  # imported when first needed: import backlashid stays fast
+
+    sos = signal.butter(2, SMOOTHING_CUTOFF, output="sos")
+    return np.asarray(signal.sosfiltfilt(sos, y, padlen=min(SMOOTHING_PAD, len(y) - 1)), dtype=np.float64)
 
 
 def _summed_input_model(setup: _Setup, u: Any, y: Any, warmup: int) -> Model | None:
