@@ -34,9 +34,20 @@ __all__ = ["StructureSelection", "select_structure"]
 KINDS = ("cascade", "sandwich", "hammerstein")
 INIT_SAMPLES = 20  # samples that set an estimated start at least (the CLI's too)
 VALID_SLACK = 1.25  # a valid backlash is preferred unless an invalid one validates this much better
+# A candidate's tail error is not significantly above the best one's (it joins the validation band)
+# where the mean difference of their squared errors over TAIL_BLOCKS consecutive blocks of the tail
+# is below TAIL_T times its standard error (batch means: Student's t, 0.975 quantile of 4 degrees
+# of freedom). A tail of a few events (steps; a position that integrates, whose errors are one slow
+# drift) ranks nested candidates by chance: on the position input backlashes of
+# benches/structure_classes.py (development seeds) the band of 2 % alone chose sandwiches 3-5 %
+# better on the tail, which validated no better than the input backlash.
+TAIL_BLOCKS = 5
+TAIL_T = 2.776
 RULE = (
     "validation band, then BIC: among the candidates that did not raise, keep those whose "
-    "validation simulation RMSE is at most (1 + tolerance) times the best one; choose the lowest "
+    "validation simulation RMSE is at most (1 + tolerance) times the best one, or whose squared "
+    "errors on the tail are not significantly above the best one's (batch means over 5 blocks, "
+    "Student's t at 0.975); choose the lowest "
     "BIC among them (ties: fewer parameters); a candidate whose refit on the whole record raises, does "
     "not converge or simulates the record worse than its fit on the head gives way to the next of the band "
     "by BIC; if none holds, the first one's estimation fit is kept. Valid backlashes first: where the band "
@@ -383,19 +394,21 @@ def select_structure(
     rows: list[dict[str, Any]] = []
     fits: list[FitResult | None] = []
     errors: list[BacklashIdError | None] = []
+    tails: list[NDArray[np.float64] | None] = []
     candidates = _candidates(kinds, grid_a, grid_b, grid_n, grid_r, grid_s)
     for candidate in candidates:
-        row, result, error = _judged(candidate, record, feedthrough, options)
+        row, result, error, tail = _judged(candidate, record, feedthrough, options)
         rows.append(row)
         fits.append(result)
         errors.append(error)
+        tails.append(tail)
         if progress is not None:
             progress(len(rows), len(candidates), dict(row))
 
     ok = [i for i, r in enumerate(rows) if not r["raised"]]
     if not ok:
         raise _all_raised(rows, [e for e in errors if e is not None])
-    chosen, fit, refit_error, note = _choose(rows, fits, ok, record, tolerance, refit, options)
+    chosen, fit, refit_error, note = _choose(rows, fits, tails, ok, record, tolerance, refit, options)
     return StructureSelection(
         structure=fit.structure, kind=rows[chosen]["kind"], fit=fit, rows=rows, chosen=chosen, rule=RULE,
         tolerance=float(tolerance), estimation_samples=record.n_est, validation_samples=record.n_val,
@@ -491,9 +504,10 @@ def _structure(kind: str, a: int, b: int, r: int, s: int, n: int, feedthrough: b
 
 def _judged(
     candidate: tuple[str, int, int, int, int, int], record: _Split, feedthrough: bool, options: dict[str, Any]
-) -> tuple[dict[str, Any], FitResult | None, BacklashIdError | None]:
+) -> tuple[dict[str, Any], FitResult | None, BacklashIdError | None, NDArray[np.float64] | None]:
     """One candidate fitted on the head and judged on the tail: its row of the table, its fit
-    (None if it raised) and its error (None if it did not)."""
+    (None if it raised), its error (None if it did not) and its simulation error on the tail
+    (None if it raised)."""
     k, a, b, r, s, n = candidate
     structure = _structure(k, a, b, r, s, n, feedthrough, options)
     p = structure.size
@@ -505,7 +519,7 @@ def _judged(
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result, val, error = _fit_and_validate(k, structure, record, options)
+        result, tail, error = _fit_and_validate(k, structure, record, options)
     row["warnings"] = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
     for w in caught:  # anything else is shown as Python would have
         if not issubclass(w.category, FitWarning):
@@ -515,42 +529,41 @@ def _judged(
         row["raised"], row["error"] = True, _error_text(error)
     else:
         assert result is not None
+        assert tail is not None
         est = float(result.simulation_rmse)
-        row["estimation_rmse"], row["validation_rmse"] = est, val
+        row["estimation_rmse"], row["validation_rmse"] = est, float(np.sqrt(np.mean(tail**2)))
         row["bic"] = record.n_fit * math.log(max(est, 1e-300) ** 2) + p * math.log(record.n_fit)
         row["valid"] = _is_backlash(result.model, record.u_est, record.warmup)
-    return row, result, error
+    return row, result, error, tail
 
 
 def _fit_and_validate(
     kind: str, structure: Structure, record: _Split, options: dict[str, Any]
-) -> tuple[FitResult | None, float, BacklashIdError | None]:
-    """The candidate's fit on the head and its validation RMSE on the tail (simulated from the
-    record's start: rest, or the state the fit estimated), or (None, NaN, the error) if either fails."""
+) -> tuple[FitResult | None, NDArray[np.float64] | None, BacklashIdError | None]:
+    """The candidate's fit on the head and its simulation error on the tail (simulated from the
+    record's start: rest, or the state the fit estimated), or (None, None, the error) if either fails."""
     try:
         result = _fit_one(kind, record.u_est, record.y_est, structure, record.warmup, options)
         if result.model is None:
             raise NotConvergedError("the fit ended with no valid model", result)
         simulated = _simulated(result.model, record.u, record.y, record.init, result)
-        val = float(np.sqrt(np.mean((record.y[record.n_est :] - simulated[record.n_est :]) ** 2)))
-        if not math.isfinite(val):
+        tail = record.y[record.n_est :] - simulated[record.n_est :]
+        if not np.all(np.isfinite(tail)):
             raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
     except BacklashIdError as exc:
-        return None, math.nan, exc
-    return result, val, None
+        return None, None, exc
+    return result, tail, None
 
 
 def _choose(
-    rows: list[dict[str, Any]], fits: list[FitResult | None], ok: list[int], record: _Split, tolerance: float, refit: bool,
-    options: dict[str, Any],
+    rows: list[dict[str, Any]], fits: list[FitResult | None], tails: list[NDArray[np.float64] | None], ok: list[int],
+    record: _Split, tolerance: float, refit: bool, options: dict[str, Any],
 ) -> tuple[int, FitResult, str | None, str]:
     """The chosen row, its fit, why no refit held (or None) and the validity note; marks the
     rows in the band and the chosen one."""
-    best_val = min(rows[i]["validation_rmse"] for i in ok)
-    band = [i for i in ok if rows[i]["validation_rmse"] <= (1.0 + tolerance) * best_val]
-    for i in band:
+    for i in validation_band(rows, ok, float(tolerance), tails):
         rows[i]["in_band"] = True
-    preferred, note = preferred_candidates(rows, ok, float(tolerance))
+    preferred, note = preferred_candidates(rows, ok, float(tolerance), tails)
     # the preferred candidates by BIC (ties: fewer parameters): the order in which a candidate
     # whose whole-record refit fails gives way to the next equally good one (never to one
     # outside them: there the first candidate's validated estimation fit is returned)
@@ -580,14 +593,65 @@ def _first_refit_that_holds(
     return order[0], fits[order[0]], rows[order[0]]["refit_error"]
 
 
-def preferred_candidates(rows: Sequence[dict[str, Any]], ok: Sequence[int], tolerance: float) -> tuple[list[int], str]:
+def validation_band(
+    rows: Sequence[dict[str, Any]], pool: Sequence[int], tolerance: float, tails: Sequence[NDArray[np.float64] | None] | None = None
+) -> list[int]:
+    """The candidates of ``pool`` that validate as well as its best one, within the tail's
+    noise: a validation RMSE within ``1 + tolerance`` of the best, or (with the tails' errors)
+    squared errors not significantly above the best one's (:func:`_not_worse_on_tail`).
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        The table's rows (``validation_rmse``).
+    pool : sequence of int
+        The rows to compare (none raised).
+    tolerance : float
+        The band's relative width.
+    tails : sequence of ndarray or None, optional
+        Each row's simulation error on the tail (None for a row that raised).
+
+    Returns
+    -------
+    list of int
+        The rows of the band, in the order of ``pool``.
+
+    Examples
+    --------
+    >>> rows = [dict(validation_rmse=1.0), dict(validation_rmse=1.01), dict(validation_rmse=1.1)]
+    >>> validation_band(rows, [0, 1, 2], 0.02)
+    [0, 1]
+    """
+    best = min(pool, key=lambda i: rows[i]["validation_rmse"])
+    near = (1.0 + tolerance) * rows[best]["validation_rmse"]
+    return [
+        i for i in pool
+        if rows[i]["validation_rmse"] <= near or (tails is not None and _not_worse_on_tail(tails[i], tails[best]))
+    ]  # fmt: skip
+
+
+def _not_worse_on_tail(tail: NDArray[np.float64] | None, best: NDArray[np.float64] | None) -> bool:
+    """Whether the squared errors ``tail`` are not significantly above ``best``'s on the same
+    samples: the mean of their difference over TAIL_BLOCKS consecutive blocks below TAIL_T times
+    its standard error (batch means; False for a tail shorter than two samples per block)."""
+    if tail is None or best is None or len(tail) < 2 * TAIL_BLOCKS:
+        return False
+    m = len(tail) // TAIL_BLOCKS
+    d = (tail[: m * TAIL_BLOCKS] ** 2 - best[: m * TAIL_BLOCKS] ** 2).reshape(TAIL_BLOCKS, m).mean(axis=1)
+    spread = float(np.std(d, ddof=1))
+    return bool(spread > 0.0 and float(np.mean(d)) < TAIL_T * spread / math.sqrt(TAIL_BLOCKS))
+
+
+def preferred_candidates(
+    rows: Sequence[dict[str, Any]], ok: Sequence[int], tolerance: float, tails: Sequence[NDArray[np.float64] | None] | None = None
+) -> tuple[list[int], str]:
     """The candidates the choice is made among, valid backlashes first, and what that did in
     words ("" when it changed nothing).
 
-    The validation band (within ``1 + tolerance`` of the best validation RMSE); its valid
-    backlashes (rows' ``valid``) where it holds any; else the valid candidates within
-    ``1 + tolerance`` of the best valid one, where that one is within VALID_SLACK of the best of
-    all; else the band as it is (no valid backlash comes close).
+    The validation band (:func:`validation_band` of all rows); its valid backlashes (rows'
+    ``valid``) where it holds any; else the band of the valid candidates alone, where their
+    best is within VALID_SLACK of the best of all; else the band as it is (no valid backlash
+    comes close).
 
     Parameters
     ----------
@@ -597,6 +661,9 @@ def preferred_candidates(rows: Sequence[dict[str, Any]], ok: Sequence[int], tole
         The rows that did not raise.
     tolerance : float
         The band's relative width.
+    tails : sequence of ndarray or None, optional
+        Each row's simulation error on the tail (None for a row that raised); without them the
+        band is the relative one alone.
 
     Returns
     -------
@@ -612,7 +679,7 @@ def preferred_candidates(rows: Sequence[dict[str, Any]], ok: Sequence[int], tole
     """
     val = {i: rows[i]["validation_rmse"] for i in ok}
     best = min(val.values())
-    band = [i for i in ok if val[i] <= (1.0 + tolerance) * best]
+    band = validation_band(rows, ok, tolerance, tails)
     valid = [i for i in ok if rows[i]["valid"]]
     in_band = [i for i in band if rows[i]["valid"]]
     if in_band:
@@ -621,7 +688,7 @@ def preferred_candidates(rows: Sequence[dict[str, Any]], ok: Sequence[int], tole
     if valid:
         best_valid = min(val[i] for i in valid)
         if best_valid <= VALID_SLACK * best:
-            near = [i for i in valid if val[i] <= (1.0 + tolerance) * best_valid]
+            near = validation_band(rows, valid, tolerance, tails)
             return near, (
                 f"a valid backlash preferred: the band held none; the best valid one validates {best_valid / best:.2f} times the "
                 f"best (at most {VALID_SLACK:g} allowed)"
