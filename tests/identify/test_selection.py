@@ -225,3 +225,30 @@ def test_the_selection_table_says_which_candidates_are_valid_backlashes(example1
     sel = select_structure(example1_data.u, example1_data.noisy, na=2, nb=2, degree=(1, 3))
     assert all(r["valid"] for r in sel.rows) and sel.note == ""
     assert _chosen(sel) == (2, 2, 3)
+
+
+def test_a_tail_error_that_is_one_slow_wander_does_not_rank_the_candidates():
+    # issue 31: a tail of a few events (steps; a position that integrates, whose error is one
+    # slow drift) ranked nested candidates by chance. Two tails about 5 % apart in RMSE: where
+    # the difference is white it is significant and the worse one leaves the band; where it is
+    # a slow wander (each candidate's own), the batch means see one event, and both stay in
+    rng = np.random.default_rng(3)
+    n = 1200
+    noise = rng.standard_normal(n)
+
+    def wander() -> np.ndarray:
+        walk = np.cumsum(rng.standard_normal(n))
+        return (walk - walk.mean()) / walk.std()
+
+    def band(best: np.ndarray, other: np.ndarray) -> tuple[list[int], float]:
+        tails = [best, other]
+        rows = [dict(validation_rmse=float(np.sqrt(np.mean(t**2)))) for t in tails]
+        ratio = rows[1]["validation_rmse"] / rows[0]["validation_rmse"]
+        return _selection.validation_band(rows, [0, 1], 0.02, tails), ratio
+
+    white, ratio = band(noise, noise + 0.32 * rng.standard_normal(n))
+    assert 1.03 < ratio < 1.08 and white == [0], ratio
+    slow, ratio = band(noise + 0.5 * wander(), noise + 0.58 * wander())
+    assert 1.03 < ratio < 1.08 and slow == [0, 1], ratio
+    # without the tails, the relative band alone: the worse one out either way
+    assert _selection.validation_band([dict(validation_rmse=1.0), dict(validation_rmse=1.05)], [0, 1], 0.02) == [0]

@@ -301,9 +301,12 @@ def select_structure(
     after ``warmup`` and p its number of parameters.
 
     Decision rule: among the candidates that did not raise, keep those whose validation RMSE
-    is at most ``(1 + tolerance)`` times the smallest one (those within the noise of the best:
-    an omitted term that matters raises the validation error by more); of these choose the
-    lowest BIC (ties: fewer parameters). The chosen structure is then refitted on the whole
+    is at most ``(1 + tolerance)`` times the smallest one, or whose squared errors on the tail
+    are not significantly above the best one's (a batch-means t test over 5 blocks of the tail,
+    level 0.025: a tail of a few steps, or the one slow drift of a position that integrates,
+    ranks candidates by chance), i.e. those within the noise of the best (an omitted term that
+    matters raises the validation error by more); of these choose the lowest BIC (ties: fewer
+    parameters). The chosen structure is then refitted on the whole
     record (``refit=True``). A candidate whose fit raises, or whose model cannot be simulated
     on the tail, is a row of the table with its error; only when every candidate raises does
     the selection raise.
@@ -338,7 +341,8 @@ def select_structure(
         Fraction of the record, at its end, held out for validation, in (0, 1).
     tolerance : float, default 0.02
         Relative width of the validation band: candidates whose validation RMSE is within
-        ``1 + tolerance`` of the best are judged equal and BIC decides among them.
+        ``1 + tolerance`` of the best (or not significantly above it on the tail) are judged
+        equal and BIC decides among them.
     refit : bool, default True
         Refit the chosen structure on the whole record; otherwise ``fit`` is its fit on the
         estimation part.
