@@ -59,7 +59,9 @@ def test_an_estimated_state_fails_only_where_the_estimate_does(name, kind, order
     [
         ("CED1", "cascade", (2, 2), 3, "rest", True),  # branch L fell across the dead band
         ("CED2", "cascade", (3, 3), 3, "rest", True),  # moved on 0.2 % of samples
-        ("CED1", "sandwich", (2, 2, 2, 2), 3, "estimate", True),
+        # the start from the smoothed output's changes (2026-11-30) finds a valid degree 3
+        # directly: estimation RMSE 0.196 (0.200 through the fallback), test 0.166 (0.143)
+        ("CED1", "sandwich", (2, 2, 2, 2), 3, "estimate", False),
         ("CED1", "cascade", (3, 3), 2, "estimate", False),  # the state's refinement left the valid models
     ],
 )
