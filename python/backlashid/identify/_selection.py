@@ -523,7 +523,7 @@ def _judged(
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result, tail, error = _fit_and_validate(k, structure, record, options)
+        result, tail, val, error = _fit_and_validate(k, structure, record, options)
     row["warnings"] = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
     for w in caught:  # anything else is shown as Python would have
         if not issubclass(w.category, FitWarning):
@@ -533,9 +533,8 @@ def _judged(
         row["raised"], row["error"] = True, _error_text(error)
     else:
         assert result is not None
-        assert tail is not None
         est = float(result.simulation_rmse)
-        row["estimation_rmse"], row["validation_rmse"] = est, float(np.sqrt(np.mean(tail**2)))
+        row["estimation_rmse"], row["validation_rmse"] = est, val
         row["bic"] = record.n_fit * math.log(max(est, 1e-300) ** 2) + p * math.log(record.n_fit)
         row["valid"] = _is_backlash(result.model, record.u_est, record.warmup)
     return row, result, error, tail
@@ -543,20 +542,22 @@ def _judged(
 
 def _fit_and_validate(
     kind: str, structure: Structure, record: _Split, options: dict[str, Any]
-) -> tuple[FitResult | None, NDArray[np.float64] | None, BacklashIdError | None]:
-    """The candidate's fit on the head and its simulation error on the tail (simulated from the
-    record's start: rest, or the state the fit estimated), or (None, None, the error) if either fails."""
+) -> tuple[FitResult | None, NDArray[np.float64] | None, float, BacklashIdError | None]:
+    """The candidate's fit on the head, its simulation error on the tail (simulated from the
+    record's start: rest, or the state the fit estimated) and that error's RMSE (the validation
+    RMSE), or (None, None, NaN, the error) if either fails."""
     try:
         result = _fit_one(kind, record.u_est, record.y_est, structure, record.warmup, options)
         if result.model is None:
             raise NotConvergedError("the fit ended with no valid model", result)
         simulated = _simulated(result.model, record.u, record.y, record.init, result)
         tail = record.y[record.n_est :] - simulated[record.n_est :]
-        if not np.all(np.isfinite(tail)):
+        val = float(np.sqrt(np.mean(tail**2)))
+        if not math.isfinite(val):
             raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
     except BacklashIdError as exc:
-        return None, None, exc
-    return result, tail, None
+        return None, None, math.nan, exc
+    return result, tail, val, None
 
 
 def _choose(
