@@ -252,3 +252,10 @@ def test_a_tail_error_that_is_one_slow_wander_does_not_rank_the_candidates():
     assert 1.03 < ratio < 1.08 and slow == [0, 1], ratio
     # without the tails, the relative band alone: the worse one out either way
     assert _selection.validation_band([dict(validation_rmse=1.0), dict(validation_rmse=1.05)], [0, 1], 0.02) == [0]
+    # an excess in one block is insignificant however large: beyond 1.25 times the best RMSE
+    # the candidate is out all the same
+    for size, admitted, (low, high) in ((1.5, [0, 1], (1.05, 1.2)), (3.0, [0], (1.25, 1.45))):
+        burst = noise.copy()
+        burst[:100] += size * rng.standard_normal(100)
+        got, ratio = band(noise, burst)
+        assert low < ratio < high and got == admitted, (size, ratio)

@@ -43,11 +43,15 @@ VALID_SLACK = 1.25  # a valid backlash is preferred unless an invalid one valida
 # better on the tail, which validated no better than the input backlash.
 TAIL_BLOCKS = 5
 TAIL_T = 2.776
+# and only within TAIL_LIMIT times the best validation RMSE: with five blocks, an excess that sits in
+# one of them is insignificant however large (without the limit a sandwich of degree 1 at 23.8
+# times the best joined the band of a position input backlash under ramps)
+TAIL_LIMIT = 1.25
 RULE = (
     "validation band, then BIC: among the candidates that did not raise, keep those whose "
-    "validation simulation RMSE is at most (1 + tolerance) times the best one, or whose squared "
-    "errors on the tail are not significantly above the best one's (batch means over 5 blocks, "
-    "Student's t at 0.975); choose the lowest "
+    "validation simulation RMSE is at most (1 + tolerance) times the best one, or at most 1.25 times "
+    "it with squared errors on the tail not significantly above the best one's (batch means over 5 "
+    "blocks, Student's t at 0.975); choose the lowest "
     "BIC among them (ties: fewer parameters); a candidate whose refit on the whole record raises, does "
     "not converge or simulates the record worse than its fit on the head gives way to the next of the band "
     "by BIC; if none holds, the first one's estimation fit is kept. Valid backlashes first: where the band "
@@ -71,7 +75,7 @@ class StructureSelection:
     structure : Structure
         The chosen orders and degree.
     kind : str
-        The chosen kind, 'cascade' or 'sandwich'.
+        The chosen kind, 'cascade', 'sandwich' or 'hammerstein' (input backlash).
     fit : FitResult
         The chosen structure's fit: refitted on the whole record (``refit=True``), else the
         fit on the estimation part that was judged.
@@ -82,8 +86,8 @@ class StructureSelection:
         validation_rmse (free-run simulation RMSE on the held-out tail, the model simulated
         from the record's start), bic (``n log(estimation_rmse**2) + p log(n)``, n the
         estimation samples after the warm-up), raised (bool), error ('ExceptionName:
-        message' or None), warnings (the fit's FitWarning messages), seconds, in_band (within
-        the tolerance of the best validation RMSE), chosen and refit_error (why its refit on
+        message' or None), warnings (the fit's FitWarning messages), seconds, in_band (in the
+        validation band, :func:`validation_band`), chosen and refit_error (why its refit on
         the whole record was not kept, or None: tried and kept, or not tried) and valid (both
         branches increase and do not cross on the x range the estimation record visits).
         Values that a raising candidate has not are NaN.
@@ -603,7 +607,8 @@ def validation_band(
 ) -> list[int]:
     """The candidates of ``pool`` that validate as well as its best one, within the tail's
     noise: a validation RMSE within ``1 + tolerance`` of the best, or (with the tails' errors)
-    squared errors not significantly above the best one's (:func:`_not_worse_on_tail`).
+    within TAIL_LIMIT of it and squared errors not significantly above the best one's
+    (:func:`_not_worse_on_tail`).
 
     Parameters
     ----------
@@ -629,9 +634,11 @@ def validation_band(
     """
     best = min(pool, key=lambda i: rows[i]["validation_rmse"])
     near = (1.0 + tolerance) * rows[best]["validation_rmse"]
+    limit = max(TAIL_LIMIT, 1.0 + tolerance) * rows[best]["validation_rmse"]
     return [
         i for i in pool
-        if rows[i]["validation_rmse"] <= near or (tails is not None and _not_worse_on_tail(tails[i], tails[best]))
+        if rows[i]["validation_rmse"] <= near
+        or (tails is not None and rows[i]["validation_rmse"] <= limit and _not_worse_on_tail(tails[i], tails[best]))
     ]  # fmt: skip
 
 
