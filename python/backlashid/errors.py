@@ -136,7 +136,8 @@ class FitWarning(UserWarning):
     Issued by :func:`~backlashid.fit_cascade` and :func:`~backlashid.fit_sandwich` when, on the
     range of x the data visit, the fitted branches cross (L(x) <= R(x)) or stop increasing
     (the paper's assumption, Section 2, fails there), or when a parameter's standard error
-    exceeds the magnitude of its estimate (the data hardly determine it). Turn it into an
+    exceeds the magnitude of its estimate (the data hardly determine it); by
+    :func:`~backlashid.evaluate` when its ``init_samples`` leave the start a guess. Turn it into an
     error with ``warnings.simplefilter("error", FitWarning)``, or silence it with ``"ignore"``.
 
     Examples

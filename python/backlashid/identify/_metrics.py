@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -23,9 +24,9 @@ from numpy.typing import ArrayLike, NDArray
 from .._docstrings import AXES, fill
 from .._measures import fit_percent, nrmse, rmse
 from .._validation import as_signal, check_finite, check_int, check_warmup, one_record
-from ..errors import DataError
+from ..errors import DataError, FitWarning
 from ..models import CascadeModel, Model, SandwichModel, check_model
-from ._state import simulate_from_samples
+from ._state import started_from_samples, undetermined_start
 
 __all__ = ["Metrics", "evaluate", "fit_percent", "nrmse", "one_step_prediction", "rmse"]
 
@@ -213,6 +214,15 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
         If ``model`` is not a model, the record cannot be used (not finite, of two lengths),
         ``warmup`` or ``init_samples`` is not inside it, or the errors exceed the float range.
 
+    Warns
+    -----
+    FitWarning
+        If the first ``init_samples`` samples leave the start a guess: the model's input block
+        with its x shifted by half the dead band simulates them as well, and the rest of the
+        record differently by more than their own error (the backlash holds through them, and
+        an input block that integrates keeps where x sits inside the dead band). Give more
+        ``init_samples``, reaching past the backlash's first motion.
+
     Examples
     --------
     >>> import backlashid as bid
@@ -237,7 +247,11 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
     else:
         if init >= y_arr.size:
             raise DataError(f"init_samples = {init}: leave samples to evaluate, give fewer than the record's {y_arr.size}")
-        simulated = model.simulate_from_samples(u_arr, y_arr, init) if augmented else simulate_from_samples(model, u_arr, y_arr, init)
+        if augmented:
+            simulated = model.simulate_from_samples(u_arr, y_arr, init)
+        else:
+            simulated, state = started_from_samples(model, u_arr, y_arr, init)
+            _warn_if_undetermined(model, u_arr, y_arr, init, state)
         warmup = max(check_warmup(warmup, y_arr.size), init)
     # a diagnosed model's predictor: its simulation plus its noise model (the simulation without one)
     predicted = model.predict_from(simulated, y_arr) if augmented else one_step_prediction(model, u_arr, y_arr)
@@ -253,3 +267,21 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
     if overflow:  # finite data whose errors square beyond the float range (|y| near 1e154)
         raise DataError(f"{overflow[0]} exceeds the float range: the record's values are too large; rescale u and y (e.g. to SI units)")
     return metrics
+
+
+def _warn_if_undetermined(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], init: int, state: Any) -> None:
+    """A FitWarning where the first ``init`` samples leave the start open by more than their
+    own error (:func:`~backlashid.identify._state.undetermined_start`)."""
+    open_by = None if state is None else undetermined_start(model, u, y, init, state)
+    if open_by is None or open_by[0] <= open_by[1]:
+        return
+    spread, error = open_by
+    warnings.warn(
+        f"evaluate: the first {init} samples (init_samples) do not determine the start: the input "
+        f"block's x shifted by half the dead band simulates them as well, and the rest of the record "
+        f"{spread:.3g} RMS differently ({spread / error if error > 0 else float('inf'):.3g} times their own error "
+        f"{error:.3g}); the backlash holds through them, so where x sits inside the dead band is a guess. "
+        "Give more init_samples, reaching past the backlash's first motion",
+        FitWarning,
+        stacklevel=3,
+    )

@@ -21,6 +21,7 @@ record starts one sample earlier per feedthrough); the conversion undoes that sh
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -57,6 +58,9 @@ _REFINED = 0.25
 # the default noise level with no residual degrees of freedom: this fraction of the spread
 # of the model's output (a signal-to-noise ratio of 20 dB)
 _NOISE = 0.1
+# undetermined_start: a shifted start fits the first samples as well as the estimate when its
+# RMS error there is at most this many times the estimate's
+SAME_FIT = 1.05
 
 
 def _check_model(model: Any) -> None:
@@ -793,6 +797,14 @@ def simulate_from_samples(
     """
     if not isinstance(model, (CascadeModel, SandwichModel)) and callable(getattr(model, "simulate_from_samples", None)):
         return np.asarray(model.simulate_from_samples(u, y, init_samples), dtype=np.float64)  # a diagnosed model
+    return started_from_samples(model, u, y, init_samples, noise_std=noise_std)[0]
+
+
+def started_from_samples(
+    model: Model, u: ArrayLike, y: ArrayLike, init_samples: int, *, noise_std: float | None = None
+) -> tuple[NDArray[np.float64], CascadeState | SandwichState | None]:
+    """:func:`simulate_from_samples` and the state it started from (None where that state is
+    the core's values, which the model's own pasts cannot hold)."""
     u_arr, y_arr, structure, theta = _estimate_checked(model, u, y, init_samples, "init_samples", noise_std)
     try:
         x0, y_prev, w0 = structure.initial(theta)
@@ -801,8 +813,41 @@ def simulate_from_samples(
     except ModelError:  # a free response the model's own pasts cannot hold: the core's values
         refined = None
     if refined is not None:
-        return np.asarray(model.simulate(u_arr, initial_state=refined), dtype=np.float64)
+        return np.asarray(model.simulate(u_arr, initial_state=refined), dtype=np.float64), refined
     whole = _record(model, structure, u_arr, y_arr)
     # normalisation leaves the output unchanged: the core's output is the model's
-    return np.asarray(whole.simulate(theta))[structure.shift :]
+    return np.asarray(whole.simulate(theta))[structure.shift :], None
+
+
+def undetermined_start(
+    model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samples: int, state: CascadeState | SandwichState
+) -> tuple[float, float] | None:
+    """How far the first ``samples`` samples leave the start open: the RMS difference, over
+    the rest of the record, between the simulation from ``state`` and from the same state with
+    the input block's x shifted by half the dead band, (c_L + c_R) / 2, either way, among the
+    shifts that simulate those samples as well as ``state`` does (their RMS error at most
+    SAME_FIT times its own); with that error RMS. None where no shift fits as well or there
+    is nothing after the samples.
+
+    While the backlash holds, the output says nothing of where x sits inside the dead band;
+    an input block that integrates (a position-controlled drive at rest) keeps that offset, and
+    the play engages later by as much. A stable block forgets it, and the later difference is
+    small."""
+    half = 0.5 * (model.backlash.c_left + model.backlash.c_right)
+    if samples >= len(u) or len(state.x_past) == 0 or not half > 0.0:
+        return None
+    base = model.simulate(u, initial_state=state)
+    error = float(np.sqrt(np.mean((y[:samples] - base[:samples]) ** 2)))
+    same = SAME_FIT * error + 1e-9 * (1.0 + float(np.max(np.abs(y[:samples]))))
+    spread = None
+    for shift in (half, -half):
+        moved = replace(state, x_past=tuple(v + shift for v in state.x_past))
+        try:
+            sim = model.simulate(u, initial_state=moved)
+        except BacklashIdError:
+            continue
+        if float(np.sqrt(np.mean((y[:samples] - sim[:samples]) ** 2))) <= same:
+            later = float(np.sqrt(np.mean((sim[samples:] - base[samples:]) ** 2)))
+            spread = later if spread is None else max(spread, later)
+    return None if spread is None else (spread, error)
 
