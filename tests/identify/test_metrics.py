@@ -78,10 +78,11 @@ def test_bad_arguments_raise_data_errors(call, match):
         call()
 
 
-def _drive_at_rest(pole: float) -> tuple[bid.SandwichModel, np.ndarray, np.ndarray]:
+def _drive_at_rest(pole: float, load: bool = True) -> tuple[bid.CascadeModel | bid.SandwichModel, np.ndarray, np.ndarray]:
     """A drive whose motor integrates velocity pulses (pole 1) or lags them (pole < 1) -> a
-    straight play of half-widths 0.4 / 0.3 -> a load lag, written as its own per-sample loop;
-    the record is cut 100 samples after the first pulse, the play held until sample 300."""
+    straight play of half-widths 0.4 / 0.3 -> a load lag (a sandwich; without it, the play's
+    output measured: a cascade), written as its own per-sample loop; the record is cut 100
+    samples after the first pulse, the play held until sample 300."""
     u = np.zeros(2000)
     for start, stop, v in ((100, 150, 1.0), (500, 560, -1.0), (900, 950, 1.0), (1300, 1380, -1.0), (1600, 1650, 0.7)):
         u[start:stop] = v
@@ -90,16 +91,19 @@ def _drive_at_rest(pole: float) -> tuple[bid.SandwichModel, np.ndarray, np.ndarr
         x[t] = pole * x[t - 1] + 0.05 * u[t - 1]
         p[t] = min(max(p[t - 1], x[t] - 0.3), x[t] + 0.4)  # the play: dragged by either contact
         w[t] = 0.7 * w[t - 1] + 0.3 * p[t - 1]
-    model = bid.SandwichModel(bid.LinearBlock([0.05], [-pole]), bid.GeneralBacklash(0.4, 0.3, [1.0], [1.0]), bid.LinearBlock([0.3], [-0.7]))
-    assert np.max(np.abs(model.simulate(u) - w)) < 1e-12  # the loop is the model
-    noisy = w + 0.005 * np.random.default_rng(0).standard_normal(u.size)
+    motor, play = bid.LinearBlock([0.05], [-pole]), bid.GeneralBacklash(0.4, 0.3, [1.0], [1.0])
+    model = bid.SandwichModel(motor, play, bid.LinearBlock([0.3], [-0.7])) if load else bid.CascadeModel(motor, play)
+    measured = w if load else p
+    assert np.max(np.abs(model.simulate(u) - measured)) < 1e-12  # the loop is the model
+    noisy = measured + 0.005 * np.random.default_rng(0).standard_normal(u.size)
     return model, u[200:], noisy[200:]
 
 
-def test_evaluate_says_when_its_first_samples_leave_the_start_a_guess():
+@pytest.mark.parametrize("load", [True, False], ids=["sandwich", "cascade"])
+def test_evaluate_says_when_its_first_samples_leave_the_start_a_guess(load):
     # issue 31: a position-controlled drive at rest through the first init_samples: where the
     # motor sits inside the play is not in the data, and the rest of the record depends on it
-    model, u, y = _drive_at_rest(1.0)
+    model, u, y = _drive_at_rest(1.0, load)
     with pytest.warns(bid.FitWarning, match="first 100 samples .* do not determine the start"):
         guessed = evaluate(model, u, y, init_samples=100)
     assert guessed.simulation_rmse > 10 * 0.005
@@ -110,9 +114,10 @@ def test_evaluate_says_when_its_first_samples_leave_the_start_a_guess():
     assert known.simulation_rmse < 1.1 * 0.005
 
 
-def test_a_lagging_motor_forgets_its_start_and_is_not_warned_about():
+@pytest.mark.parametrize("load", [True, False], ids=["sandwich", "cascade"])
+def test_a_lagging_motor_forgets_its_start_and_is_not_warned_about(load):
     # the same drive with a stable motor lag: the offset inside the play dies out
-    model, u, y = _drive_at_rest(0.9)
+    model, u, y = _drive_at_rest(0.9, load)
     with warnings.catch_warnings():
         warnings.simplefilter("error", bid.FitWarning)
         assert evaluate(model, u, y, init_samples=100).simulation_rmse < 1.5 * 0.005

@@ -217,11 +217,12 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
     Warns
     -----
     FitWarning
-        If the first ``init_samples`` samples leave the start a guess: the model's input block
-        with its x shifted by half the dead band simulates them as well, and the rest of the
-        record differently by more than their own error (the backlash holds through them, and
-        an input block that integrates keeps where x sits inside the dead band). Give more
-        ``init_samples``, reaching past the backlash's first motion.
+        If the first ``init_samples`` samples leave the start a guess: another start (x
+        elsewhere inside the dead band, or the model at rest at the record's first level)
+        simulates them as well, and the rest of the record differently by more than their own
+        error (the backlash holds through them, and an input block that integrates keeps where
+        x sits inside the dead band). Give more ``init_samples``, reaching past the backlash's
+        first motion.
 
     Examples
     --------
@@ -277,11 +278,11 @@ def _warn_if_undetermined(model: Model, u: NDArray[np.float64], y: NDArray[np.fl
         return
     spread, error = open_by
     warnings.warn(
-        f"evaluate: the first {init} samples (init_samples) do not determine the start: the input "
-        f"block's x shifted by half the dead band simulates them as well, and the rest of the record "
-        f"{spread:.3g} RMS differently ({spread / error if error > 0 else float('inf'):.3g} times their own error "
-        f"{error:.3g}); the backlash holds through them, so where x sits inside the dead band is a guess. "
-        "Give more init_samples, reaching past the backlash's first motion",
+        f"evaluate: the first {init} samples (init_samples) do not determine the start: another start "
+        f"(x elsewhere inside the dead band, or the drive at rest) simulates them as well and the rest of "
+        f"the record {spread:.3g} RMS differently ({spread / error if error > 0 else float('inf'):.3g} times "
+        f"their own error {error:.3g}): while the backlash holds, where x sits inside the dead band is a "
+        "guess. Give more init_samples, reaching past the backlash's first motion",
         FitWarning,
         stacklevel=3,
     )
