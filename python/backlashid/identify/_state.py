@@ -874,7 +874,10 @@ def _rest_states(model: Model, y: NDArray[np.float64], samples: int, state: Casc
             return []
         held = 0.0 if abs(pole_sum) <= 1e-9 * (1.0 + float(np.sum(np.abs(out.b)))) else level * pole_sum / gain
     bl = model.backlash
-    reach = 10.0 * (1.0 + abs(held) / min(bl.m_left[0], bl.m_right[0]) + bl.c_left + bl.c_right)
+    slope = min(float(bl.m_left[0]), float(bl.m_right[0]))
+    if not slope > 0.0:  # no backlash at rest: the branches do not rise at their dead band's ends
+        return []
+    reach = 10.0 * (1.0 + abs(held) / slope + bl.c_left + bl.c_right)
     try:
         z_left, z_right = bl.breakpoints(held, (-reach, reach))
     except BacklashIdError:
