@@ -77,8 +77,9 @@ input backlash's own state starts were developed on the second, third and fourth
 seen: its misses were probed for the smoothed velocity start) and ``--seeds seventh`` (36_909,
 the fresh set for quotes from 2026-11-29's fourth session, run once with this version and the
 one before; then its misses were probed) and ``--seeds eighth`` (37_010, the fresh set for
-quotes from 2026-11-30, its position families run once with the band's limit of 1.25 and the
-version before). A
+quotes from 2026-11-30, run once with the band's limit of 1.25 and the version before) and
+``--seeds ninth`` (37_111, a second fresh set for the same version, run once after the eighth,
+its decision rule frozen before: the targets are judged on the eighth and ninth pooled). A
 record's generator is ``numpy.random.default_rng([seed set,
 the family's index in FAMILIES, index])``; the position families are appended to FAMILIES, so
 their streams are new and the four first families' records are unchanged.
@@ -317,7 +318,7 @@ def summarise(results: list[dict[str, Any]]) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--families", nargs="+", default=list(FAMILIES), choices=list(FAMILIES))
-    ap.add_argument("--seeds", choices=list(SEED_SETS), default="first", help="seed set (default first: 36303; second: 36404; third: 36505; fourth: 36606; fifth: 36707; sixth: 36808; seventh: 36909; eighth: 37010)")
+    ap.add_argument("--seeds", choices=list(SEED_SETS), default="first", help="seed set (default first: 36303; second: 36404; third: 36505; fourth: 36606; fifth: 36707; sixth: 36808; seventh: 36909; eighth: 37010; ninth: 37111)")
     ap.add_argument("--per-family", type=int, default=20, help="records per family (default 20)")
     ap.add_argument("--index", type=int, default=None, help="run only this record index")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
