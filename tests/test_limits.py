@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import backlashid as bid
+from backlashid._validation import CHUNK, _reverses
 from backlashid.identify import Structure, levenberg_marquardt
 
 PYTHON_DIR = str(Path(bid.__file__).resolve().parents[1])
@@ -92,6 +93,41 @@ print("cost", s.problem(u, u).cost(s.pack(bid.example1())))
     assert child.returncode == 0, err[-2000:]
     assert out.startswith("cost "), (out, err[-2000:])
     assert float(out.split()[1]) > 0
+
+
+@pytest.mark.skipif(not LINUX, reason="address-space limits (RLIMIT_AS) are Linux only")
+def test_a_fits_record_checks_need_no_record_sized_buffer() -> None:
+    # issue 31's 1e8-sample fit: the checks that the input reverses and is not the output
+    # itself once made an array of the record's steps (+760 MB at 1e8 samples)
+    child = _child(
+        """
+import resource, numpy as np
+from backlashid._validation import identification_record
+def vm_bytes():
+    for line in open("/proc/self/status"):
+        if line.startswith("VmSize:"):
+            return int(line.split()[1]) * 1024
+n = 120_000_000  # 0.96 GB per signal
+u, y = np.zeros(n), np.zeros(n)
+u[::1000] = 1.0  # rises and falls
+y[1::1000] = 1.0  # and the output is another signal
+limit = vm_bytes() + 600_000_000  # less than one more signal
+resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+identification_record(u, y, y_name="y", warmup=0, parameters=10, constant_input=ValueError)
+print("checked")
+"""
+    )
+    out, err = child.communicate(timeout=120)
+    assert child.returncode == 0 and out.startswith("checked"), err[-2000:]
+
+
+@pytest.mark.parametrize("at", [1, CHUNK - 1, CHUNK, CHUNK + 1, 2 * CHUNK + 2])
+def test_the_chunked_reversal_check_sees_a_fall_at_any_step(at: int) -> None:
+    # the step from sample at - 1 to at falls, every other one rises: the chunks overlap by one
+    u = np.arange(2 * CHUNK + 3, dtype=np.float64)
+    assert not _reverses(u) and not _reverses(u[::-1].copy())
+    u[at:] -= 2.0
+    assert _reverses(u)
 
 
 def test_absurd_orders_are_refused_before_anything_is_built() -> None:

@@ -142,6 +142,7 @@ def check_noise_std(value: Any, name: str = "noise_std") -> float:
 
 
 SIGNAL_RANGE = (1e-100, 1e100)  # a signal's largest size whose squares and sums of squares stay normal floats
+CHUNK = 1 << 20  # samples a whole-record check reads at once: its temporaries stay a few MB
 
 
 def check_scale(values: NDArray[np.float64], name: str) -> NDArray[np.float64]:
@@ -244,8 +245,7 @@ def identification_record(
         )
     if np.ptp(u_arr) == 0.0:
         raise constant_input("the input u is constant: the system is not excited; use a varying input")
-    steps = np.diff(u_arr)
-    if np.all(steps >= 0.0) or np.all(steps <= 0.0):
+    if not _reverses(u_arr):
         raise constant_input(
             "the input u never changes direction (a time or sample-number column chosen as the input?): a backlash "
             "shows only where its input reverses; choose the input signal, or a record in which it moves both ways"
@@ -255,9 +255,22 @@ def identification_record(
             f"the output {y_name} is constant (0 % of its samples move): nothing of the system shows in it; a record at rest, "
             f"or an input too small to move the load off the dead band: check the column chosen as {y_name}, or excite more"
         )
-    if np.array_equal(u_arr, y_arr):
+    if all(np.array_equal(u_arr[s : s + CHUNK], y_arr[s : s + CHUNK]) for s in range(0, len(u_arr), CHUNK)):
         raise DataError(f"u and {y_name} are the same signal: choose the measured output as {y_name} (one column given twice?)")
     return u_arr, y_arr
+
+
+def _reverses(u: NDArray[np.float64]) -> bool:
+    """Whether u rises somewhere and falls somewhere, read CHUNK samples at a time (a record
+    of 1e8 samples would otherwise make an 800 MB array of its steps)."""
+    rises = falls = False
+    for s in range(0, len(u) - 1, CHUNK):
+        steps = np.diff(u[s : s + CHUNK + 1])
+        rises = rises or bool(np.any(steps > 0.0))
+        falls = falls or bool(np.any(steps < 0.0))
+        if rises and falls:
+            return True
+    return False
 
 
 def check_signals(*signals: tuple[str, Any], min_length: int = 0, what: str = "this analysis") -> list[NDArray[np.float64]]:
