@@ -26,7 +26,8 @@ from .._measures import fit_percent, nrmse, rmse
 from .._validation import as_signal, check_finite, check_int, check_warmup, one_record
 from ..errors import DataError, FitWarning
 from ..models import CascadeModel, Model, SandwichModel, check_model
-from ._state import started_from_samples, undetermined_start
+from ._start_check import undetermined_start
+from ._state import started_from_samples
 
 __all__ = ["Metrics", "evaluate", "fit_percent", "nrmse", "one_step_prediction", "rmse"]
 
@@ -272,7 +273,7 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
 
 def _warn_if_undetermined(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], init: int, state: Any) -> None:
     """A FitWarning where the first ``init`` samples leave the start open by more than their
-    own error (:func:`~backlashid.identify._state.undetermined_start`)."""
+    own error (:func:`~backlashid.identify._start_check.undetermined_start`)."""
     open_by = None if state is None else undetermined_start(model, u, y, init, state)
     if open_by is None or open_by[0] <= open_by[1]:
         return
