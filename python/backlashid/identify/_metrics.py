@@ -25,7 +25,7 @@ from .._docstrings import AXES, fill
 from .._measures import fit_percent, nrmse, rmse
 from .._validation import as_signal, check_finite, check_int, check_warmup, one_record
 from ..errors import DataError, FitWarning
-from ..models import CascadeModel, Model, SandwichModel, check_model
+from ..models import CascadeModel, CascadeState, Model, SandwichModel, SandwichState, check_model
 from ._start_check import undetermined_start
 from ._state import started_from_samples
 
@@ -253,7 +253,7 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
             simulated = model.simulate_from_samples(u_arr, y_arr, init)
         else:
             simulated, state = started_from_samples(model, u_arr, y_arr, init)
-            _warn_if_undetermined(model, u_arr, y_arr, init, state)
+            _warn_if_undetermined(model, u_arr, y_arr, init, state, simulated)
         warmup = max(check_warmup(warmup, y_arr.size), init)
     # a diagnosed model's predictor: its simulation plus its noise model (the simulation without one)
     predicted = model.predict_from(simulated, y_arr) if augmented else one_step_prediction(model, u_arr, y_arr)
@@ -271,10 +271,13 @@ def evaluate(model: Model, u: ArrayLike, y: ArrayLike, *, warmup: int = 0, init_
     return metrics
 
 
-def _warn_if_undetermined(model: Model, u: NDArray[np.float64], y: NDArray[np.float64], init: int, state: Any) -> None:
-    """A FitWarning where the first ``init`` samples leave the start open by more than their
-    own error (:func:`~backlashid.identify._start_check.undetermined_start`)."""
-    open_by = None if state is None else undetermined_start(model, u, y, init, state)
+def _warn_if_undetermined(
+    model: Model, u: NDArray[np.float64], y: NDArray[np.float64], init: int, state: CascadeState | SandwichState | None, simulated: NDArray[np.float64]
+) -> None:
+    """A FitWarning where the first ``init`` samples leave the start ``state`` (the one
+    ``simulated`` ran from) open by more than their own error
+    (:func:`~backlashid.identify._start_check.undetermined_start`)."""
+    open_by = None if state is None else undetermined_start(model, u, y, init, state, simulated)
     if open_by is None or open_by[0] <= open_by[1]:
         return
     spread, error = open_by

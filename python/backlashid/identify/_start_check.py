@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
+from .._measures import rmse
 from ..errors import BacklashIdError
 from ..models import CascadeState, Model, SandwichModel, SandwichState
 
@@ -30,10 +31,16 @@ REST_POINTS = 5
 
 
 def undetermined_start(
-    model: Model, u: NDArray[np.float64], y: NDArray[np.float64], samples: int, state: CascadeState | SandwichState
+    model: Model,
+    u: NDArray[np.float64],
+    y: NDArray[np.float64],
+    samples: int,
+    state: CascadeState | SandwichState,
+    simulated: NDArray[np.float64],
 ) -> tuple[float, float] | None:
     """How far the first ``samples`` samples leave the start open: the largest RMS difference,
-    over the rest of the record, between the simulation from ``state`` and from another start
+    over the rest of the record, between ``simulated`` (the simulation from ``state``) and the
+    simulation from another start
     that simulates those samples as well (its RMS error there at most SAME_FIT times the
     state's own), with that error RMS; None where no other start fits as well or nothing
     follows the samples. The other starts: ``state`` with the input block's x shifted by half
@@ -47,8 +54,7 @@ def undetermined_start(
     half = 0.5 * (model.backlash.c_left + model.backlash.c_right)
     if samples >= len(u) or len(state.x_past) == 0 or not half > 0.0:
         return None
-    base = model.simulate(u, initial_state=state)
-    error = float(np.sqrt(np.mean((y[:samples] - base[:samples]) ** 2)))
+    error = rmse(y[:samples], simulated[:samples])
     same = SAME_FIT * error + 1e-9 * (1.0 + float(np.max(np.abs(y[:samples]))))
     others = [replace(state, x_past=tuple(v + shift for v in state.x_past)) for shift in (half, -half)]
     spread = None
@@ -57,8 +63,8 @@ def undetermined_start(
             sim = model.simulate(u, initial_state=other)
         except BacklashIdError:
             continue
-        if float(np.sqrt(np.mean((y[:samples] - sim[:samples]) ** 2))) <= same:
-            later = float(np.sqrt(np.mean((sim[samples:] - base[samples:]) ** 2)))
+        if rmse(y[:samples], sim[:samples]) <= same:
+            later = rmse(simulated, sim, warmup=samples)
             spread = later if spread is None else max(spread, later)
     return None if spread is None else (spread, error)
 
