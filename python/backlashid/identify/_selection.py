@@ -26,6 +26,7 @@ from ..errors import BacklashIdError, DataError, FitWarning, NotConvergedError
 from ._checks import branch_problems
 from ._fit import FitResult, fit_cascade, fit_sandwich, refit_with_estimate
 from ._hammerstein import fit_hammerstein_backlash
+from ._nested import lag1_correlation, with_stand_ins
 from ._state import model_state, simulate_from_samples
 from ._structure import Structure
 
@@ -57,7 +58,11 @@ RULE = (
     "by BIC; if none holds, the first one's estimation fit is kept. Valid backlashes first: where the band "
     "holds one whose branches increase and do not cross on the visited range, the invalid ones leave it; "
     "where it holds none, the valid candidates within 1.25 times the best validation RMSE (their own band) "
-    "replace it, and an invalid model is chosen only when no valid one comes that close"
+    "replace it, and an invalid model is chosen only when no valid one comes that close. Nested: a sandwich "
+    "of the band gives way to the input backlash it contains (same nr, ns, degree; valid if the sandwich is; "
+    "validation RMSE within 1.25 times the best) unless its head fit is significantly better: "
+    "n_eff log(s_IB^2 / s_S^2) above chi^2's 0.99 quantile with its extra parameters and start values, "
+    "n_eff = n (1 - rho) / (1 + rho) for the sandwich's lag-1 error correlation rho; BIC then chooses"
 )
 # The table's columns, in the order summary() prints them.
 COLUMNS = (
@@ -111,7 +116,8 @@ class StructureSelection:
         record worse than its candidate's fit on the head was not kept: the next candidate of
         the validation band was refitted instead (its row's ``refit_error`` says why).
     note : str
-        What preferring valid backlashes did (:func:`preferred_candidates`), or "".
+        What preferring valid backlashes did (:func:`preferred_candidates`) and which input
+        backlash stood in for the sandwich containing it (``_nested.with_stand_ins``), or "".
 
     Examples
     --------
@@ -171,7 +177,7 @@ class StructureSelection:
             refit = "refitted on the whole record" if self.refitted else "the estimation fit (refit=False)"
         lines.append(f"chosen (*): {r['kind']} {self.structure}, {r['parameters']} parameters; {refit}; + = within the validation band")
         if self.note:
-            lines.append(f"validity: {self.note}")
+            lines.append(f"note: {self.note}")
         for i in passed_over if self.refit_error is None else []:
             row = self.rows[i]
             lines.append(f"passed over: {row['kind']} na={row['na']} nb={row['nb']} degree={row['degree']}: {row['refit_error']}")
@@ -309,8 +315,12 @@ def select_structure(
     are not significantly above the best one's (a batch-means t test over 5 blocks of the tail,
     level 0.025: a tail of a few steps, or the one slow drift of a position that integrates,
     ranks candidates by chance), i.e. those within the noise of the best (an omitted term that
-    matters raises the validation error by more); of these choose the lowest BIC (ties: fewer
-    parameters). The chosen structure is then refitted on the whole
+    matters raises the validation error by more). A sandwich among them gives way to the input
+    backlash it contains (same nr, ns and degree, validation RMSE within 1.25 times the best)
+    unless the head needs its input dynamics: a likelihood-ratio test of the two head fits at
+    level 0.01, its samples discounted for the error's lag-1 correlation (a tail of a few steps
+    or one slow drift ranks these two by chance; the head does not). Of these choose the lowest
+    BIC (ties: fewer parameters). The chosen structure is then refitted on the whole
     record (``refit=True``). A candidate whose fit raises, or whose model cannot be simulated
     on the tail, is a row of the table with its error; only when every candidate raises does
     the selection raise.
@@ -402,21 +412,21 @@ def select_structure(
     rows: list[dict[str, Any]] = []
     fits: list[FitResult | None] = []
     errors: list[BacklashIdError | None] = []
-    tails: list[NDArray[np.float64] | None] = []
+    residuals: list[NDArray[np.float64] | None] = []
     candidates = _candidates(kinds, grid_a, grid_b, grid_n, grid_r, grid_s)
     for candidate in candidates:
-        row, result, error, tail = _judged(candidate, record, feedthrough, options)
+        row, result, error, residual = _judged(candidate, record, feedthrough, options)
         rows.append(row)
         fits.append(result)
         errors.append(error)
-        tails.append(tail)
+        residuals.append(residual)
         if progress is not None:
             progress(len(rows), len(candidates), dict(row))
 
     ok = [i for i, r in enumerate(rows) if not r["raised"]]
     if not ok:
         raise _all_raised(rows, [e for e in errors if e is not None])
-    chosen, fit, refit_error, note = _choose(rows, fits, tails, ok, record, tolerance, refit, options)
+    chosen, fit, refit_error, note = _choose(rows, fits, residuals, ok, record, tolerance, refit, options)
     return StructureSelection(
         structure=fit.structure, kind=rows[chosen]["kind"], fit=fit, rows=rows, chosen=chosen, rule=RULE,
         tolerance=float(tolerance), estimation_samples=record.n_est, validation_samples=record.n_val,
@@ -514,8 +524,8 @@ def _judged(
     candidate: tuple[str, int, int, int, int, int], record: _Split, feedthrough: bool, options: dict[str, Any]
 ) -> tuple[dict[str, Any], FitResult | None, BacklashIdError | None, NDArray[np.float64] | None]:
     """One candidate fitted on the head and judged on the tail: its row of the table, its fit
-    (None if it raised), its error (None if it did not) and its simulation error on the tail
-    (None if it raised)."""
+    (None if it raised), its error (None if it did not) and its simulation error over the
+    whole record (None if it raised)."""
     k, a, b, r, s, n = candidate
     structure = _structure(k, a, b, r, s, n, feedthrough, options)
     p = structure.size
@@ -527,7 +537,7 @@ def _judged(
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result, tail, val, error = _fit_and_validate(k, structure, record, options)
+        result, residual, val, error = _fit_and_validate(k, structure, record, options)
     row["warnings"] = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
     for w in caught:  # anything else is shown as Python would have
         if not issubclass(w.category, FitWarning):
@@ -541,38 +551,46 @@ def _judged(
         row["estimation_rmse"], row["validation_rmse"] = est, val
         row["bic"] = record.n_fit * math.log(max(est, 1e-300) ** 2) + p * math.log(record.n_fit)
         row["valid"] = _is_backlash(result.model, record.u_est, record.warmup)
-    return row, result, error, tail
+    return row, result, error, residual
 
 
 def _fit_and_validate(
     kind: str, structure: Structure, record: _Split, options: dict[str, Any]
 ) -> tuple[FitResult | None, NDArray[np.float64] | None, float, BacklashIdError | None]:
-    """The candidate's fit on the head, its simulation error on the tail (simulated from the
-    record's start: rest, or the state the fit estimated) and that error's RMSE (the validation
-    RMSE), or (None, None, NaN, the error) if either fails."""
+    """The candidate's fit on the head, its simulation error over the whole record (simulated
+    from the record's start: rest, or the state the fit estimated) and that error's RMSE on the
+    tail (the validation RMSE), or (None, None, NaN, the error) if either fails."""
     try:
         result = _fit_one(kind, record.u_est, record.y_est, structure, record.warmup, options)
         if result.model is None:
             raise NotConvergedError("the fit ended with no valid model", result)
         simulated = _simulated(result.model, record.u, record.y, record.init, result)
-        tail = record.y[record.n_est :] - simulated[record.n_est :]
-        val = float(np.sqrt(np.mean(tail**2)))
+        residual = record.y - simulated
+        val = float(np.sqrt(np.mean(residual[record.n_est :] ** 2)))
         if not math.isfinite(val):
             raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
     except BacklashIdError as exc:
         return None, None, math.nan, exc
-    return result, tail, val, None
+    return result, residual, val, None
 
 
 def _choose(
-    rows: list[dict[str, Any]], fits: list[FitResult | None], tails: list[NDArray[np.float64] | None], ok: list[int],
-    record: _Split, tolerance: float, refit: bool, options: dict[str, Any],
+    rows: list[dict[str, Any]], fits: list[FitResult | None], residuals: list[NDArray[np.float64] | None],
+    ok: list[int], record: _Split, tolerance: float, refit: bool, options: dict[str, Any],
 ) -> tuple[int, FitResult, str | None, str]:
-    """The chosen row, its fit, why no refit held (or None) and the validity note; marks the
-    rows in the band and the chosen one."""
+    """The chosen row, its fit, why no refit held (or None) and the note (validity, stand-ins);
+    marks the rows in the band and the chosen one."""
+    tails = [None if e is None else e[record.n_est :] for e in residuals]
     for i in validation_band(rows, ok, float(tolerance), tails):
         rows[i]["in_band"] = True
     preferred, note = preferred_candidates(rows, ok, float(tolerance), tails)
+    # an input backlash for the sandwich containing it, where the head does not need the sandwich
+    correlations = [lag1_correlation(None if e is None else e[record.warmup : record.n_est]) for e in residuals]
+    best = min(rows[i]["validation_rmse"] for i in ok)
+    preferred, stand_in = with_stand_ins(
+        rows, preferred, ok, record.n_fit, correlations, [_start_size(f) for f in fits], max(TAIL_LIMIT, 1.0 + tolerance) * best
+    )
+    note = "; ".join(t for t in (note, stand_in) if t)
     # the preferred candidates by BIC (ties: fewer parameters): the order in which a candidate
     # whose whole-record refit fails gives way to the next equally good one (never to one
     # outside them: there the first candidate's validated estimation fit is returned)
@@ -710,6 +728,11 @@ def preferred_candidates(
             f"{best_valid / best:.2f} times): the chosen model's branches fall or cross on the visited range"
         )
     return band, "no candidate is a valid backlash on the visited range: the chosen model's branches fall or cross there"
+
+
+def _start_size(fit: FitResult | None) -> int:
+    """The number of start values ``fit`` estimated (0 from rest or for no fit)."""
+    return len(fit.initial_state) if fit is not None and isinstance(fit.initial_state, dict) else 0
 
 
 def _is_backlash(model: Any, u: NDArray[np.float64], warmup: int) -> bool:
