@@ -79,7 +79,12 @@ the fresh set for quotes from 2026-11-29's fourth session, run once with this ve
 one before; then its misses were probed) and ``--seeds eighth`` (37_010, the fresh set for
 quotes from 2026-11-30, run once with the band's limit of 1.25 and the version before) and
 ``--seeds ninth`` (37_111, a second fresh set for the same version, run once after the eighth,
-its decision rule frozen before: the targets are judged on the eighth and ninth pooled). A
+its decision rule frozen before: the targets are judged on the eighth and ninth pooled),
+``--seeds tenth`` (37_212) and ``--seeds eleventh`` (37_313), the fresh sets for quotes from
+2026-11-30's second session, after the nested input backlash's stand-in was developed on the
+ninth set's rows; each run once with this version, the rule frozen before either ran: the
+targets are judged on the tenth and eleventh pooled, 40 records per family, >= 36 of 40 right
+in class and >= 36 of 40 accurate for every family. A
 record's generator is ``numpy.random.default_rng([seed set,
 the family's index in FAMILIES, index])``; the position families are appended to FAMILIES, so
 their streams are new and the four first families' records are unchanged.
@@ -105,7 +110,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import independent_chains as ic  # the generator beside this script
 import independent_effects as ie
 
-SEED_SETS = {"first": 36_303, "second": 36_404, "third": 36_505, "fourth": 36_606, "fifth": 36_707, "sixth": 36_808, "seventh": 36_909, "eighth": 37_010, "ninth": 37_111}  # "first" the default; "eighth" and "ninth" the fresh quotes
+SEED_SETS = {"first": 36_303, "second": 36_404, "third": 36_505, "fourth": 36_606, "fifth": 36_707, "sixth": 36_808, "seventh": 36_909, "eighth": 37_010, "ninth": 37_111, "tenth": 37_212, "eleventh": 37_313}  # "first" the default; "tenth" and "eleventh" the fresh quotes
 SEEDS = SEED_SETS["first"]
 # family -> class; new families go at the end (a family's seed stream is its index here)
 FAMILIES = {
