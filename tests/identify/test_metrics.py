@@ -121,3 +121,21 @@ def test_a_lagging_motor_forgets_its_start_and_is_not_warned_about(load):
     with warnings.catch_warnings():
         warnings.simplefilter("error", bid.FitWarning)
         assert evaluate(model, u, y, init_samples=100).simulation_rmse < 1.5 * 0.005
+
+
+def test_each_witness_of_an_undetermined_start_works_on_its_own(monkeypatch):
+    # the starts that may simulate the first samples as well as the estimate: x shifted inside
+    # the dead band, the drive at rest, and the start estimated from 3 times the samples. The
+    # last one alone: with 150 init samples the 450-sample estimate reaches past the first
+    # motion (sample 300) and simulates the rest of the record differently
+    from backlashid.identify import _start_check
+
+    model, u, y = _drive_at_rest(1.0, True)
+    monkeypatch.setattr(_start_check, "_shifted", lambda state, half: [])
+    monkeypatch.setattr(_start_check, "_rest_states", lambda *args: [])
+    with pytest.warns(bid.FitWarning, match="first 150 samples .* do not determine the start"):
+        evaluate(model, u, y, init_samples=150)
+    monkeypatch.setattr(_start_check, "_longer", lambda *args: [])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", bid.FitWarning)
+        evaluate(model, u, y, init_samples=150)

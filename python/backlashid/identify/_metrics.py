@@ -283,7 +283,7 @@ def _warn_if_undetermined(
     spread, error = open_by
     warnings.warn(
         f"evaluate: the first {init} samples (init_samples) do not determine the start: another start "
-        f"(x elsewhere inside the dead band, or the drive at rest) simulates them as well and the rest of "
+        f"(x elsewhere inside the dead band, the drive at rest, or the start more samples imply) simulates them as well and the rest of "
         f"the record {spread:.3g} RMS differently ({spread / error if error > 0 else float('inf'):.3g} times "
         f"their own error {error:.3g}): while the backlash holds, where x sits inside the dead band is a "
         "guess. Give more init_samples, reaching past the backlash's first motion",
