@@ -412,21 +412,23 @@ def select_structure(
     rows: list[dict[str, Any]] = []
     fits: list[FitResult | None] = []
     errors: list[BacklashIdError | None] = []
-    residuals: list[NDArray[np.float64] | None] = []
+    tails: list[NDArray[np.float64] | None] = []
+    correlations: list[float] = []
     candidates = _candidates(kinds, grid_a, grid_b, grid_n, grid_r, grid_s)
     for candidate in candidates:
-        row, result, error, residual = _judged(candidate, record, feedthrough, options)
+        row, result, error, tail, correlation = _judged(candidate, record, feedthrough, options)
         rows.append(row)
         fits.append(result)
         errors.append(error)
-        residuals.append(residual)
+        tails.append(tail)
+        correlations.append(correlation)
         if progress is not None:
             progress(len(rows), len(candidates), dict(row))
 
     ok = [i for i, r in enumerate(rows) if not r["raised"]]
     if not ok:
         raise _all_raised(rows, [e for e in errors if e is not None])
-    chosen, fit, refit_error, note = _choose(rows, fits, residuals, ok, record, tolerance, refit, options)
+    chosen, fit, refit_error, note = _choose(rows, fits, tails, correlations, ok, record, tolerance, refit, options)
     return StructureSelection(
         structure=fit.structure, kind=rows[chosen]["kind"], fit=fit, rows=rows, chosen=chosen, rule=RULE,
         tolerance=float(tolerance), estimation_samples=record.n_est, validation_samples=record.n_val,
@@ -522,10 +524,11 @@ def _structure(kind: str, a: int, b: int, r: int, s: int, n: int, feedthrough: b
 
 def _judged(
     candidate: tuple[str, int, int, int, int, int], record: _Split, feedthrough: bool, options: dict[str, Any]
-) -> tuple[dict[str, Any], FitResult | None, BacklashIdError | None, NDArray[np.float64] | None]:
+) -> tuple[dict[str, Any], FitResult | None, BacklashIdError | None, NDArray[np.float64] | None, float]:
     """One candidate fitted on the head and judged on the tail: its row of the table, its fit
-    (None if it raised), its error (None if it did not) and its simulation error over the
-    whole record (None if it raised)."""
+    (None if it raised), its error (None if it did not), its simulation error on the tail
+    (None if it raised) and the lag-1 correlation of that error on the head after the warm-up
+    (0 if it raised)."""
     k, a, b, r, s, n = candidate
     structure = _structure(k, a, b, r, s, n, feedthrough, options)
     p = structure.size
@@ -537,7 +540,7 @@ def _judged(
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result, residual, val, error = _fit_and_validate(k, structure, record, options)
+        result, tail, correlation, error = _fit_and_validate(k, structure, record, options)
     row["warnings"] = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
     for w in caught:  # anything else is shown as Python would have
         if not issubclass(w.category, FitWarning):
@@ -548,44 +551,43 @@ def _judged(
     else:
         assert result is not None
         est = float(result.simulation_rmse)
-        row["estimation_rmse"], row["validation_rmse"] = est, val
+        assert tail is not None
+        row["estimation_rmse"], row["validation_rmse"] = est, float(np.sqrt(np.mean(tail**2)))
         row["bic"] = record.n_fit * math.log(max(est, 1e-300) ** 2) + p * math.log(record.n_fit)
         row["valid"] = _is_backlash(result.model, record.u_est, record.warmup)
-    return row, result, error, residual
+    return row, result, error, tail, correlation
 
 
 def _fit_and_validate(
     kind: str, structure: Structure, record: _Split, options: dict[str, Any]
 ) -> tuple[FitResult | None, NDArray[np.float64] | None, float, BacklashIdError | None]:
-    """The candidate's fit on the head, its simulation error over the whole record (simulated
-    from the record's start: rest, or the state the fit estimated) and that error's RMSE on the
-    tail (the validation RMSE), or (None, None, NaN, the error) if either fails."""
+    """The candidate's fit on the head, its simulation error on the tail (simulated from the
+    record's start: rest, or the state the fit estimated) and the lag-1 correlation of that
+    error on the head after the warm-up, or (None, None, 0, the error) if either fails."""
     try:
         result = _fit_one(kind, record.u_est, record.y_est, structure, record.warmup, options)
         if result.model is None:
             raise NotConvergedError("the fit ended with no valid model", result)
         simulated = _simulated(result.model, record.u, record.y, record.init, result)
-        residual = record.y - simulated
-        val = float(np.sqrt(np.mean(residual[record.n_est :] ** 2)))
-        if not math.isfinite(val):
+        tail = record.y[record.n_est :] - simulated[record.n_est :]
+        if not math.isfinite(float(np.sqrt(np.mean(tail**2)))):
             raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
+        head = record.y[record.warmup : record.n_est] - simulated[record.warmup : record.n_est]
     except BacklashIdError as exc:
-        return None, None, math.nan, exc
-    return result, residual, val, None
+        return None, None, 0.0, exc
+    return result, tail, lag1_correlation(head), None
 
 
 def _choose(
-    rows: list[dict[str, Any]], fits: list[FitResult | None], residuals: list[NDArray[np.float64] | None],
-    ok: list[int], record: _Split, tolerance: float, refit: bool, options: dict[str, Any],
+    rows: list[dict[str, Any]], fits: list[FitResult | None], tails: list[NDArray[np.float64] | None],
+    correlations: list[float], ok: list[int], record: _Split, tolerance: float, refit: bool, options: dict[str, Any],
 ) -> tuple[int, FitResult, str | None, str]:
     """The chosen row, its fit, why no refit held (or None) and the note (validity, stand-ins);
     marks the rows in the band and the chosen one."""
-    tails = [None if e is None else e[record.n_est :] for e in residuals]
     for i in validation_band(rows, ok, float(tolerance), tails):
         rows[i]["in_band"] = True
     preferred, note = preferred_candidates(rows, ok, float(tolerance), tails)
     # an input backlash for the sandwich containing it, where the head does not need the sandwich
-    correlations = [lag1_correlation(None if e is None else e[record.warmup : record.n_est]) for e in residuals]
     best = min(rows[i]["validation_rmse"] for i in ok)
     preferred, stand_in = with_stand_ins(
         rows, preferred, ok, record.n_fit, correlations, [_start_size(f) for f in fits], max(TAIL_LIMIT, 1.0 + tolerance) * best
