@@ -540,7 +540,7 @@ def _judged(
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result, tail, correlation, error = _fit_and_validate(k, structure, record, options)
+        result, tail, val, correlation, error = _fit_and_validate(k, structure, record, options)
     row["warnings"] = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
     for w in caught:  # anything else is shown as Python would have
         if not issubclass(w.category, FitWarning):
@@ -551,8 +551,7 @@ def _judged(
     else:
         assert result is not None
         est = float(result.simulation_rmse)
-        assert tail is not None
-        row["estimation_rmse"], row["validation_rmse"] = est, float(np.sqrt(np.mean(tail**2)))
+        row["estimation_rmse"], row["validation_rmse"] = est, val
         row["bic"] = record.n_fit * math.log(max(est, 1e-300) ** 2) + p * math.log(record.n_fit)
         row["valid"] = _is_backlash(result.model, record.u_est, record.warmup)
     return row, result, error, tail, correlation
@@ -560,22 +559,24 @@ def _judged(
 
 def _fit_and_validate(
     kind: str, structure: Structure, record: _Split, options: dict[str, Any]
-) -> tuple[FitResult | None, NDArray[np.float64] | None, float, BacklashIdError | None]:
+) -> tuple[FitResult | None, NDArray[np.float64] | None, float, float, BacklashIdError | None]:
     """The candidate's fit on the head, its simulation error on the tail (simulated from the
-    record's start: rest, or the state the fit estimated) and the lag-1 correlation of that
-    error on the head after the warm-up, or (None, None, 0, the error) if either fails."""
+    record's start: rest, or the state the fit estimated), that error's RMSE (the validation
+    RMSE) and the lag-1 correlation of the simulation error on the head after the warm-up, or
+    (None, None, NaN, 0, the error) if either fails."""
     try:
         result = _fit_one(kind, record.u_est, record.y_est, structure, record.warmup, options)
         if result.model is None:
             raise NotConvergedError("the fit ended with no valid model", result)
         simulated = _simulated(result.model, record.u, record.y, record.init, result)
         tail = record.y[record.n_est :] - simulated[record.n_est :]
-        if not math.isfinite(float(np.sqrt(np.mean(tail**2)))):
+        val = float(np.sqrt(np.mean(tail**2)))
+        if not math.isfinite(val):
             raise NotConvergedError("the model's simulation of the validation tail is not finite", result)
         head = record.y[record.warmup : record.n_est] - simulated[record.warmup : record.n_est]
     except BacklashIdError as exc:
-        return None, None, 0.0, exc
-    return result, tail, lag1_correlation(head), None
+        return None, None, math.nan, 0.0, exc
+    return result, tail, val, lag1_correlation(head), None
 
 
 def _choose(
