@@ -458,6 +458,34 @@ def test_a_wrong_structure_is_reported_and_raises_no_wear_alarm() -> None:
     assert tracker.mismatch is True and Tracker(E1, monitor=False).mismatch is None
 
 
+def test_a_start_off_the_plant_is_unsettled_not_a_wrong_structure() -> None:
+    """The right structure (the input backlash) started 10 % off in the load's gain or in the
+    play's width, with the fit's covariance and no forgetting, so the estimate moves slowly:
+    the innovations follow the tracker's own parameter directions, and the monitor says
+    "unsettled" from the second window on, never "mismatch" (the monitor before 2026-11-30,
+    without psi, said "mismatch" over most of this record: Q up to 59 times its threshold).
+    The CLI's words and the figure's grey shading follow the verdict."""
+    u, w = _input_backlash_record(30_000, 8)
+    fit = bid.fit_hammerstein_backlash(u[:5000], w[:5000], 2, 2, 2)
+    for gain, width in ((1.1, 1.0), (1.0, 1.1)):
+        play = GeneralBacklash(0.3 * width, 0.25 * width, [1.0, 0.15], [1.05, -0.1])
+        start = bid.identify.hammerstein_backlash(play, LinearBlock([0.08 * gain, 0.04 * gain], [-1.3, 0.42]))
+        r = track(u, w, start, covariance=fit.covariance, noise_std=fit.noise_std, forgetting=1.0, every=100)
+        test = r.monitor
+        assert test is not None and r.unsettled and not r.mismatch
+        assert test.unsettled[1:8].all() and np.all(test.statistics < test.thresholds)
+        assert test.parameter_statistics[1] > 5 * test.parameter_thresholds[1]
+        assert 2000 <= test.periods("unsettled")[0][0] <= 2005  # the second window (after the 5 lags)
+    with pytest.raises(DataError, match="verdict"):
+        test.periods("wear")
+    settled = track(u, w, fit, every=100)
+    assert not settled.unsettled and settled.monitor is not None and not settled.monitor.any_unsettled
+    tracker = Tracker(start, covariance=fit.covariance, noise_std=fit.noise_std, forgetting=1.0)
+    assert tracker.unsettled is False
+    tracker.update(u[:8000], w[:8000])
+    assert tracker.unsettled is True and tracker.mismatch is False and Tracker(E1, monitor=False).unsettled is None
+
+
 def test_the_monitor_continues_across_blocks_and_pickles() -> None:
     u, w = _input_backlash_record(12_000, 9)
     start = bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3)
@@ -478,5 +506,12 @@ def test_plot_shades_the_mismatch_periods() -> None:  # type: ignore[no-untyped-
     u, w = _input_backlash_record(10_000, 10)
     r = track(u, w, bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3), every=50)
     fig = r.plot()
-    assert "does not fit the data where shaded" in fig._suptitle.get_text()
+    assert "does not fit the data where shaded orange" in fig._suptitle.get_text()
     assert len(fig.axes[0].patches) >= 1  # the shaded stretch (axvspan) in each panel
+    # a start 10 % off in the load's gain, no forgetting: unsettled, shaded grey, no orange
+    fit = bid.fit_hammerstein_backlash(u[:5000], w[:5000], 2, 2, 2)
+    play = GeneralBacklash(0.3, 0.25, [1.0, 0.15], [1.05, -0.1])
+    start = bid.identify.hammerstein_backlash(play, LinearBlock([0.088, 0.044], [-1.3, 0.42]))
+    off = track(u, w, start, covariance=fit.covariance, noise_std=fit.noise_std, forgetting=1.0, every=50)
+    title = off.plot()._suptitle.get_text()
+    assert "off the data where shaded grey" in title and "orange" not in title

@@ -288,6 +288,15 @@ def _report_tracking(result: Any, tracker: Any) -> None:
             "its threshold); the standard errors there are not trustworthy and the wear detector paused. "
             "A wandering estimate is then the model, not wear: try another --structure (sandwich, hammerstein) or orders"
         )
+    if result.unsettled and result.monitor is not None:
+        stretches = ", ".join(f"{a}-{b}" for a, b in result.monitor.periods("unsettled"))
+        click.echo(
+            f"unsettled: the tracked estimate is off the record over samples {stretches} (its innovations follow "
+            "its own parameter directions, which a change of the parameters would explain, not a change of "
+            "structure); the standard errors there are not trustworthy. A start fitted on a head the record "
+            "does not confirm, or an estimate carried away by a slow input: try a longer head (--fit-samples) "
+            "or a --forgetting closer to 1"
+        )
     if result.refused:
         click.echo(
             f"refused the update on {result.refused} of {tracker.samples} samples: the innovation exceeded "

@@ -51,9 +51,12 @@ class Alarm:
 
 @dataclass(frozen=True)
 class MismatchTest:
-    """The tracker's model-mismatch monitor over a block or record: one portmanteau test of
-    its own innovations per window of samples (whiteness, correlation with the past input and
-    with the model's past internal x; rust/core/src/tracking/monitor.rs).
+    """The tracker's model-mismatch monitor over a block or record: per window of samples, two
+    score tests of its own innovations (rust/core/src/tracking/monitor.rs). The structure
+    test: whiteness and correlation with the past input and the model's past internal x,
+    beyond what a change of the tracked parameters explains (the innovation's part along the
+    tracker's sensitivities psi is set aside: an estimate that is off leaves psi^T d there).
+    The parameter test: correlation with psi itself, that is, an estimate off the data.
 
     Attributes
     ----------
@@ -61,12 +64,12 @@ class MismatchTest:
         The last sample of each window closed (int64), counted from the tracker's first sample.
     statistics : numpy.ndarray
         Each window's statistic Q, about chi-square with that window's ``degrees`` when the
-        tracked structure is right: the whiteness part plus n R^2 of the innovation regressed
-        on the lagged input and x.
+        tracked structure is right, whatever the parameter error: n R^2 of the innovation's
+        part that psi leaves, regressed on the lagged innovation (prediction-error rule), input
+        and x, psi's part taken out of them too.
     degrees : numpy.ndarray
-        Each window's degrees of freedom (int64): the whiteness lags plus the rank of the
-        lagged input and x in that window (a slow input's lags count as few, a window at rest
-        as none).
+        Each window's degrees of freedom (int64): the rank of those lags beyond psi in that
+        window (a slow input's lags count as few, a window at rest as none).
     thresholds : numpy.ndarray
         The chi-square quantile each window's Q was compared with (inf for a window with
         nothing to test).
@@ -75,6 +78,17 @@ class MismatchTest:
         threshold, cleared by consecutive windows below it.
     window : int
         Samples per window.
+    parameter_statistics : numpy.ndarray
+        Each window's Q_psi: n R^2 of the innovation regressed on psi, about chi-square with
+        ``parameter_degrees`` when the estimate is right too (empty arrays when not given).
+    parameter_degrees : numpy.ndarray
+        The rank of psi in each window (int64).
+    parameter_thresholds : numpy.ndarray
+        The chi-square quantile each Q_psi was compared with.
+    unsettled : numpy.ndarray
+        Whether the "unsettled" verdict held after each window (bool): the estimate is off the
+        data (a start the record does not confirm, an estimate behind a changing plant or
+        carried away by a poorly exciting input), set and cleared like ``mismatch``.
 
     Examples
     --------
@@ -94,6 +108,10 @@ class MismatchTest:
     thresholds: NDArray[np.float64] = field(repr=False)
     mismatch: NDArray[np.bool_] = field(repr=False)
     window: int
+    parameter_statistics: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0), repr=False)
+    parameter_degrees: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
+    parameter_thresholds: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0), repr=False)
+    unsettled: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool), repr=False)
 
     @property
     def worst(self) -> float:
@@ -105,17 +123,34 @@ class MismatchTest:
         """Whether any window said "mismatch"."""
         return bool(self.mismatch.any())
 
-    def periods(self) -> list[tuple[int, int]]:
-        """The stretches of samples (first, last) whose windows ended under the mismatch
-        verdict.
+    @property
+    def any_unsettled(self) -> bool:
+        """Whether any window said "unsettled"."""
+        return bool(self.unsettled.any())
+
+    def periods(self, verdict: str = "mismatch") -> list[tuple[int, int]]:
+        """The stretches of samples (first, last) whose windows ended under a verdict.
+
+        Parameters
+        ----------
+        verdict : {"mismatch", "unsettled"}, default "mismatch"
+            The structure's verdict or the estimate's.
 
         Returns
         -------
         list of tuple of int
             Each stretch's first and last sample.
+
+        Raises
+        ------
+        DataError
+            If ``verdict`` is neither.
         """
+        if verdict not in ("mismatch", "unsettled"):
+            raise DataError(f"verdict = {verdict!r}: give 'mismatch' or 'unsettled'")
+        flags = self.mismatch if verdict == "mismatch" else self.unsettled
         out: list[tuple[int, int]] = []
-        for end, flagged in zip(self.samples.tolist(), self.mismatch.tolist()):
+        for end, flagged in zip(self.samples.tolist(), flags.tolist()):
             first = end - self.window + 1
             if not flagged:
                 continue
@@ -185,6 +220,22 @@ class TrackResult:
         False
         """
         return self.monitor is not None and self.monitor.any
+
+    @property
+    def unsettled(self) -> bool:
+        """Whether the monitor said the estimate is off the data while the structure may be
+        right (in any window of this block or record): a start the record does not confirm,
+        or an estimate behind a changing plant or carried away; the standard errors there are
+        not trustworthy.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> d = bid.example_data(bid.example1(), 6000, snr=25, seed=1)
+        >>> bid.track(d.u, d.noisy, bid.example1(), noise_std=d.noise_std).unsettled
+        False
+        """
+        return self.monitor is not None and self.monitor.any_unsettled
 
     def __len__(self) -> int:
         return int(self.samples.size)
@@ -297,6 +348,7 @@ class TrackResult:
         fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.4 * rows), sharex=True, squeeze=False)
         t = self.samples
         periods = self.monitor.periods() if self.monitor is not None else []
+        unsettled = self.monitor.periods("unsettled") if self.monitor is not None else []
         for k in range(p):
             ax = axes[k // cols][k % cols]
             title, v, s, line, level = self._panel(k, true, batch, scaling if in_record else None)
@@ -309,10 +361,7 @@ class TrackResult:
             if level is not None:
                 ax.axhline(level, color="C2", linestyle=":", linewidth=1.2, label="batch fit")
                 shown.append(np.array([level]))
-            for alarm in self.alarms:
-                ax.axvline(alarm.sample, color="C3", linewidth=0.8, alpha=0.7)
-            for first, last in periods:
-                ax.axvspan(first, last, color="C1", alpha=0.15, linewidth=0)
+            _mark(ax, [a.sample for a in self.alarms], periods, unsettled)
             ax.set_ylim(*_settled_limits(v, s, np.concatenate(shown) if shown else None))
             ax.set_title(title, fontsize=10)
             ax.tick_params(labelsize=8)
@@ -329,7 +378,11 @@ class TrackResult:
         fig.axes[0].legend(fontsize=7, loc="best")
         suffix = f", {len(self.alarms)} alarm(s) (red)" if self.alarms else ""
         if periods:
-            suffix += "; the structure does not fit the data where shaded (standard errors not trustworthy)"
+            suffix += "; the structure does not fit the data where shaded orange"
+        if unsettled:
+            suffix += "; the estimate is off the data where shaded grey"
+        if periods or unsettled:
+            suffix += " (standard errors not trustworthy there)"
         units = " (widths in the record's units, the rest in model units)" if in_record else ""
         fig.suptitle(f"tracked parameters{units} with +-2 standard errors{suffix}", fontsize=11)
         fig.tight_layout()
@@ -355,6 +408,16 @@ class TrackResult:
         if batch is not None:
             level = float(batch[k] * _width_units(self.names, batch[None, :], scaling, name)[0][0])
         return title, v * factor, s * np.abs(factor), line, level
+
+
+def _mark(ax: Any, alarms: list[int], mismatch: list[tuple[int, int]], unsettled: list[tuple[int, int]]) -> None:
+    """A panel's marks: the alarms (red lines), the stretches under the mismatch verdict
+    (orange) and under the unsettled one (grey)."""
+    for sample in alarms:
+        ax.axvline(sample, color="C3", linewidth=0.8, alpha=0.7)
+    for spans, color in ((mismatch, "C1"), (unsettled, "0.5")):
+        for first, last in spans:
+            ax.axvspan(first, last, color=color, alpha=0.15, linewidth=0)
 
 
 def _width_units(names: list[str], theta: NDArray[np.float64], scaling: Scaling, name: str) -> tuple[NDArray[np.float64], str]:

@@ -77,10 +77,11 @@ def _most_degrees(lags: int, whiteness: bool) -> int:
     return int(lags) * (3 if whiteness else 2)
 
 
-def _thresholds(lags: int, whiteness: bool, level: float) -> list[float]:
-    """The monitor's thresholds for a window's 1, 2, .. degrees of freedom: the chi-square
-    quantiles of tail probability ``level``."""
-    return [float(chdtri(d, level)) for d in range(1, _most_degrees(lags, whiteness) + 1)]
+def _thresholds(lags: int, whiteness: bool, level: float, p: int) -> list[float]:
+    """The monitor's thresholds for a window's 1, 2, .. degrees of freedom (up to the lags'
+    most or the p parameters' test, whichever has more): the chi-square quantiles of tail
+    probability ``level``."""
+    return [float(chdtri(d, level)) for d in range(1, max(_most_degrees(lags, whiteness), p) + 1)]
 
 
 def _drift(drift: Any, names: list[str]) -> list[float]:
@@ -292,7 +293,7 @@ class Tracker:
             window = check_int(monitor_window, "monitor_window", 10 * _MONITOR_LAGS, _MOST)
             level = check_real(monitor_level, "monitor_level", low=0.0, high=0.5, low_open=True)
             whiteness = method == "prediction_error"  # the sandwich's equation error is coloured
-            thresholds = _thresholds(_MONITOR_LAGS, whiteness, level)
+            thresholds = _thresholds(_MONITOR_LAGS, whiteness, level, p)
             mon = (window, _MONITOR_LAGS, thresholds, _MONITOR_CONFIRM, _MONITOR_CLEAR, whiteness)
         self._names = names
         self._structure = structure
@@ -476,20 +477,26 @@ class Tracker:
             refused=self.refused - refused,
         )
 
-    def _mismatch_test(self, windows: list[tuple[int, float, int, bool]]) -> MismatchTest | None:
+    def _mismatch_test(self, windows: list[tuple[int, float, int, bool, float, int, bool]]) -> MismatchTest | None:
         mon = self._args[14] if len(self._args) > 14 else None
         if mon is None:
             return None
         window, _, thresholds, _, _, _ = mon
-        degrees = np.array([w[2] for w in windows], dtype=np.int64)
+        columns = list(zip(*windows)) if windows else [()] * 7
+        degrees = np.array(columns[2], dtype=np.int64)
+        parameter_degrees = np.array(columns[5], dtype=np.int64)
         table = np.r_[np.inf, thresholds]  # 0 degrees (nothing to test): never fails
         return MismatchTest(
-            samples=np.array([w[0] for w in windows], dtype=np.int64),
-            statistics=np.array([w[1] for w in windows], dtype=np.float64),
+            samples=np.array(columns[0], dtype=np.int64),
+            statistics=np.array(columns[1], dtype=np.float64),
             degrees=degrees,
             thresholds=table[degrees],
-            mismatch=np.array([w[3] for w in windows], dtype=bool),
+            mismatch=np.array(columns[3], dtype=bool),
             window=int(window),
+            parameter_statistics=np.array(columns[4], dtype=np.float64),
+            parameter_degrees=parameter_degrees,
+            parameter_thresholds=table[parameter_degrees],
+            unsettled=np.array(columns[6], dtype=bool),
         )
 
     @property
@@ -510,6 +517,29 @@ class Tracker:
         False
         """
         verdict = self._native.mismatch()
+        return None if verdict is None else bool(verdict)
+
+    @property
+    def unsettled(self) -> bool | None:
+        """Whether the monitor's "unsettled" verdict holds now: the latest windows' innovations
+        follow the tracker's own parameter directions, so the estimate is off the data (a start
+        the record does not confirm, or an estimate behind a moving plant or carried away)
+        while the structure may be right (None without a monitor). The standard errors are not
+        trustworthy while it holds; the wear detector keeps reading (a fast change of the
+        width is also unsettled until the tracker follows it).
+
+        Returns
+        -------
+        bool or None
+            The verdict.
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> bid.Tracker(bid.example1()).unsettled
+        False
+        """
+        verdict = self._native.unsettled()
         return None if verdict is None else bool(verdict)
 
     def __reduce__(self) -> tuple[Any, ...]:
@@ -538,7 +568,7 @@ def _monitor_of_2026_11_28(args: tuple[Any, ...], state: list[float]) -> tuple[t
         return args, state
     window, lags, threshold, confirm, clear, whiteness = mon
     level = float(chdtrc(_most_degrees(lags, whiteness), threshold))
-    monitor = (window, lags, _thresholds(lags, whiteness, level), confirm, clear, whiteness)
+    monitor = (window, lags, _thresholds(lags, whiteness, level, len(args[3])), confirm, clear, whiteness)
     old = state[len(state) - (6 * lags + 12) :]
     d = 2 * lags
     sums = [0.0] * (lags + 2 * d + d * (d + 1) // 2)  # per lag e e_k; z, e z, z z^T (monitor.rs)
@@ -546,9 +576,46 @@ def _monitor_of_2026_11_28(args: tuple[Any, ...], state: list[float]) -> tuple[t
     return (*args[:14], monitor, *args[15:]), state[: len(state) - len(old)] + old[: 3 * lags] + sums + counts
 
 
+def _monitor_of_2026_11_29(args: tuple[Any, ...], state: list[float]) -> tuple[tuple[Any, ...], list[float]]:
+    """The arguments and state of a tracker pickled before the monitor set the tracker's
+    parameter directions psi aside (2026-11-30): its monitor kept 8K + 2K (2K + 1) + 8
+    numbers (lags of e, u, x; per lag sum e e_k; the sums of the lagged u and x; the counts and
+    the verdict), and its thresholds may stop short of the p degrees of psi's test. Rebuilt
+    with thresholds of the same level up to p; the lags, the counts and the mismatch verdict
+    carried over, the window in progress started afresh (its sums are of the old statistic),
+    nothing unsettled. A state of the current layout, or of none known, passes through (the
+    core refuses a wrong length by name)."""
+    mon = args[14] if len(args) > 14 else None
+    if mon is None:
+        return args, state
+    window, lags, thresholds, confirm, clear, whiteness = mon
+    p = len(args[3])
+    if len(thresholds) < max(_most_degrees(lags, whiteness), p):
+        level = float(chdtrc(1, thresholds[0]))
+        mon = (window, lags, _thresholds(lags, whiteness, level, p), confirm, clear, whiteness)
+        args = (*args[:14], mon, *args[15:])
+    now = len(Tracker._build(args).save())
+    d_old, d_new = 2 * lags, p + _most_degrees(lags, whiteness)
+    m_old = 4 * lags + 2 * d_old + d_old * (d_old + 1) // 2 + 8
+    m_new = 3 * lags + 2 * d_new + d_new * (d_new + 1) // 2 + 10
+    guard = 3 + p + p * p  # the innovation bound's numbers after the monitor's (since 2026-11-29)
+    if len(state) == now - m_new + m_old:
+        begin = len(state) - guard - m_old
+    elif len(state) == now - m_new + m_old - guard:
+        begin = len(state) - m_old
+    else:
+        return args, state
+    old = state[begin : begin + m_old]
+    filled, failed, passed, verdict = old[-8], old[-4], old[-3], old[-2]
+    sums = [0.0] * (2 * d_new + d_new * (d_new + 1) // 2)  # psi and the lags: v, e v, v v^T (monitor.rs)
+    counts = [filled, 0.0, 0.0, 0.0, failed, passed, verdict, 0.0, 0.0, 0.0]
+    return args, state[:begin] + old[: 3 * lags] + sums + counts + state[begin + m_old :]
+
+
 def _restore(args: tuple[Any, ...], structure: Structure, state: list[float]) -> Tracker:
     """A pickled :class:`Tracker`: rebuilt from its arguments, then its state restored."""
     args, state = _monitor_of_2026_11_28(args, list(state))
+    args, state = _monitor_of_2026_11_29(args, state)
     tracker = Tracker.__new__(Tracker)
     tracker._args = args
     tracker._structure = structure

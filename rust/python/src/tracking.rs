@@ -18,8 +18,9 @@ type AlarmOut = (u64, i8, f64, f64, f64);
 type DetectorIn = (u64, u32, f64, f64, u32);
 /// (window, lags, thresholds for 1, 2, .. degrees of freedom, confirm, clear, whiteness).
 type MonitorIn = (u64, usize, Vec<f64>, u32, u32, bool);
-/// A monitor window: (last sample, Q, its degrees of freedom, mismatch verdict after it).
-type WindowOut = (u64, f64, usize, bool);
+/// A monitor window: (last sample, Q, its degrees of freedom, mismatch verdict after it, Q_psi,
+/// its degrees of freedom, "unsettled" verdict after it).
+type WindowOut = (u64, f64, usize, bool, f64, usize, bool);
 
 #[pyclass(module = "backlashid._core", name = "Tracker")]
 pub(crate) struct PyTracker(Tracker);
@@ -162,6 +163,11 @@ impl PyTracker {
         self.0.monitor().map(|m| m.mismatch())
     }
 
+    /// Whether the monitor's "unsettled" verdict holds; None without a monitor.
+    fn unsettled(&self) -> Option<bool> {
+        self.0.monitor().map(|m| m.unsettled())
+    }
+
     /// The current physical estimate and its covariance.
     fn estimate<'py>(&self, py: Python<'py>) -> PyResult<(SignalOut<'py>, MatrixOut<'py>)> {
         let p = self.0.size();
@@ -211,7 +217,18 @@ impl PyTracker {
             .collect();
         let windows = windows
             .into_iter()
-            .map(|w| (w.sample, w.statistic, w.degrees, w.mismatch))
+            .map(|w| {
+                let settled = (w.parameter_statistic, w.parameter_degrees, w.unsettled);
+                (
+                    w.sample,
+                    w.statistic,
+                    w.degrees,
+                    w.mismatch,
+                    settled.0,
+                    settled.1,
+                    settled.2,
+                )
+            })
             .collect();
         Ok((
             vec_f64(py, theta).reshape([rows, p])?,

@@ -93,6 +93,8 @@ pub(crate) struct Engine<const W: usize> {
     wx: [f64; W],
     /// d y_hat / d theta carried over holds (prediction error).
     psi: [f64; W],
+    /// The last update's row (psi or the regression's): the monitor's parameter directions.
+    row: [f64; W],
     /// y_hat(t-1): the simulated backlash memory of the current estimate.
     y_hat: f64,
     /// The sandwich's output block (eq 29, r_1 = 1): y_hat(t-1), y_hat(t-2), .. the
@@ -323,6 +325,7 @@ impl<const W: usize> Engine<W> {
             wu: [0.0; W],
             wx: [0.0; W],
             psi: [0.0; W],
+            row: [0.0; W],
             y_hat: 0.0,
             y_out: [0.0; OUT_LAGS],
             w_out: [0.0; OUT_LAGS],
@@ -546,7 +549,7 @@ impl<const W: usize> Engine<W> {
                 k += 1;
             }
             if let (Some(m), Some((e, xt))) = (self.monitor.as_mut(), innovation) {
-                if let Some(w) = m.observe(self.t - 1, e, ut, xt) {
+                if let Some(w) = m.observe(self.t - 1, e, ut, xt, &self.row[..p]) {
                     sink.windows.push(w);
                 }
             }
@@ -916,6 +919,7 @@ impl<const W: usize> Engine<W> {
     #[inline(always)]
     fn update(&mut self, phi: &[f64; W], e: f64, xt: f64) -> Result<Option<(f64, f64)>> {
         let p = self.dims.p();
+        self.row = *phi;
         if self.q_wait >= DRIFT_BATCH {
             self.add_drift();
         }
@@ -1094,7 +1098,7 @@ impl<const W: usize> Engine<W> {
             + self
                 .monitor
                 .as_ref()
-                .map_or(0, |m| monitor_saved(m.options.lags))
+                .map_or(0, |m| monitor_saved(m.options.lags, m.options.whiteness, p))
     }
 
     pub(crate) fn load(&mut self, s: &[f64]) -> Result<()> {
@@ -1153,7 +1157,7 @@ impl<const W: usize> Engine<W> {
             d.load(&ds);
         }
         if let Some(m) = &mut self.monitor {
-            let mut ms = vec![0.0; monitor_saved(m.options.lags)];
+            let mut ms = vec![0.0; monitor_saved(m.options.lags, m.options.whiteness, p)];
             take(&mut ms);
             m.load(&ms);
         }

@@ -240,7 +240,7 @@ impl Tracker {
             )));
         }
         let det = detector.map(Detector::new).transpose()?;
-        let mon = monitor.map(Monitor::new).transpose()?;
+        let mon = monitor.map(|m| Monitor::new(m, p)).transpose()?;
         macro_rules! build {
             ($v:ident) => {
                 Sized_::$v(Box::new(Engine::new(
