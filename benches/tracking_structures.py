@@ -42,6 +42,14 @@ The rules, frozen before the quoted seeds were run (developed on seeds >= 100):
   0.05 of the Nyquist rate; multisine, 40 random-phase sines on a log grid from 1e-4 to 0.05
   cycles/sample; ramps, triangles between random levels in [-1, 1] over random 200-2000 sample
   legs; steps, random levels in [-1, 1] held for random 50-1000 samples.
+- The memory from the input (``--forgetting auto``: ``forgetting_for(u)``, 4 crossings of the
+  input's median, at least 1000 samples; rule frozen 2026-11-30 before the run on seeds
+  300-319, developed on 100-119): the mismatch part on seeds 300-319 under all five input
+  classes, once with ``--forgetting 0.999`` and once with ``auto``, side by side. ``auto``
+  becomes ``track``'s default if, pooled over ramps and steps and both plants, (a) the right
+  structures' mismatch verdicts fall by at least 30 % and (b) the wrong structures reported
+  within 20,000 samples fall by at most 15 %; white, low-pass and multisine inputs give 0.999
+  either way (no cell of theirs may change).
 - False alarms: 1e8 samples of the constant sandwich and input backlash (chunks of 1e6, the
   state carried), tracked with their own structure at the defaults. Pass: at most 1 wear alarm
   each.
@@ -274,7 +282,7 @@ def excitation(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
     return 0.5 * (v - v.mean()) / v.std()
 
 
-def mismatch_case(key: str, seed: int, png: Path | None, kind: str = "white") -> dict[str, tuple[int | None, int]]:
+def mismatch_case(key: str, seed: int, png: Path | None, kind: str = "white", forgetting: float | str = LAMBDA) -> dict[str, tuple[int | None, int]]:
     """A constant plant tracked with the right structure and with the wrong one (a cascade on
     the input backlash, an input backlash on the cascade), driven by an input of class ``kind``:
     per start, (the first sample of the mismatch verdict or None, wear alarms) over MISMATCH_N
@@ -295,7 +303,7 @@ def mismatch_case(key: str, seed: int, png: Path | None, kind: str = "white") ->
             out["raised"].append(f"{which}: {type(exc).__name__}: {exc}"[:160])
             out.setdefault("unmonitored", (None, 0))
             continue
-        r = bid.track(u, w, start, forgetting=LAMBDA, every=100)
+        r = bid.track(u, w, start, forgetting=forgetting, every=100)
         m = r.monitor
         out[which] = (int(m.samples[m.mismatch][0]) if m.any else None, len(r.alarms))
         out["level"][which] = float(r.noise_std / sd)  # the tracker's innovation std at the end, in noise stds
@@ -303,7 +311,7 @@ def mismatch_case(key: str, seed: int, png: Path | None, kind: str = "white") ->
             png.mkdir(parents=True, exist_ok=True)
             r.plot(path=str(png / f"tracking_mismatch_{key}{'' if kind == 'white' else '_' + kind}.png"))
         if which == "wrong":
-            bare = bid.track(u, w, start, forgetting=LAMBDA, every=100, monitor=False)
+            bare = bid.track(u, w, start, forgetting=forgetting, every=100, monitor=False)
             out["unmonitored"] = (None, len(bare.alarms))
     return out
 
@@ -337,6 +345,8 @@ def main() -> None:
     parser.add_argument("--parts", default="drift,mismatch,false_alarms", help="comma-separated: drift, mismatch, false_alarms")
     parser.add_argument("--inputs", default="white", help=f"comma-separated input classes of the mismatch part: {', '.join(INPUTS)}")
     parser.add_argument("--false-alarm-samples", type=float, default=1e8)
+    parser.add_argument("--forgetting", type=lambda v: v if v == "auto" else float(v), default=LAMBDA,
+                        help=f"the mismatch part's forgetting: a number or auto (forgetting_for(u)) [default {LAMBDA}]")
     parser.add_argument("--png", type=Path, default=None, help="folder for the figures of the first seed")
     args = parser.parse_args()
     chosen = seeds(args.seeds)
@@ -382,7 +392,7 @@ def drift(chosen: list[int], args: argparse.Namespace) -> None:
 def mismatch(chosen: list[int], args: argparse.Namespace, kind: str = "white") -> None:
     for key, wrong in (("input_backlash", "a cascade"), ("cascade", "an input backlash")):
         t0 = time.perf_counter()
-        rows = [mismatch_case(key, s, args.png if k == 0 else None, kind) for k, s in enumerate(chosen)]
+        rows = [mismatch_case(key, s, args.png if k == 0 else None, kind, args.forgetting) for k, s in enumerate(chosen)]
         for s, row in zip(chosen, rows):
             print(f"  {key} {kind} seed {s}: right structure (first mismatch, alarms) {row['right']}, {wrong} {row['wrong']}"
                   + "".join(f"; start raised ({e})" for e in row["raised"]))
@@ -390,7 +400,8 @@ def mismatch(chosen: list[int], args: argparse.Namespace, kind: str = "white") -
         missed = [r["level"]["wrong"] for r in rows if "wrong" in r["level"] and not (r["wrong"][0] is not None and r["wrong"][0] < 20_000)]
         flagged = [r["level"]["right"] for r in rows if "right" in r["level"] and r["right"][0] is not None]
         print(
-            f"MISMATCH {key} tracked with {wrong}, {kind} input ({MISMATCH_N:.0e} samples, constant plant): reported within 20,000 samples "
+            f"MISMATCH {key} tracked with {wrong}, {kind} input ({MISMATCH_N:.0e} samples, constant plant, forgetting {args.forgetting}): "
+            f"reported within 20,000 samples "
             f"on {len(found)}/{len(rows)} seeds (first sample max {max(found, default=0)}); wear alarms "
             f"{sum(r['wrong'][1] for r in rows)} (without the monitor {sum(r['unmonitored'][1] for r in rows)}); "
             f"with the right structure: mismatch on "

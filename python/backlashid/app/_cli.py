@@ -44,6 +44,23 @@ ORDER = click.IntRange(0, 20)
 DEGREE = click.IntRange(1, 30)
 
 
+class _Forgetting(click.ParamType):
+    """``--forgetting``: a number in (0, 1] or ``auto``."""
+
+    name = "lambda|auto"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float | str:
+        if isinstance(value, float) or value == "auto":
+            return value
+        try:
+            return float(value)  # its range is the Tracker's to check (one error line, exit 1)
+        except ValueError:
+            self.fail(f"{value!r}: give a number in (0, 1] or auto", param, ctx)
+
+
+FORGETTING = _Forgetting()
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="backlashid")
 def main() -> None:
@@ -313,9 +330,10 @@ def _report_tracking(result: Any, tracker: Any) -> None:
     if tracker.detector_armed:
         click.echo(f"no alarm: the detector saw no change of the dead band ({width})")
     else:
+        lam = tracker.forgetting
+        arm = f"{8 * int(np.ceil(3.0 / (1.0 - lam))):,} samples at forgetting {lam:.6g}" if lam < 1.0 else "240,000 samples without forgetting"
         click.echo("no alarm, but the detector never armed: it reads the width every 3 / (1 - forgetting) samples and "
-                   "needs 8 readings for its reference (24,000 samples at the default forgetting 0.999); "
-                   "give a longer record or a lower --forgetting")
+                   f"needs 8 readings for its reference ({arm}); give a longer record or a lower --forgetting")
 
 
 @main.command()
@@ -335,7 +353,8 @@ def _report_tracking(result: Any, tracker: Any) -> None:
 @click.option("--degree", default=3, show_default=True, type=DEGREE, help="Without --model: branch degree.")
 @click.option("--nr", default=2, show_default=True, type=ORDER, help="Without --model, sandwich / hammerstein: r coefficients of the output block (r1 = 1).")
 @click.option("--ns", default=2, show_default=True, type=ORDER, help="Without --model, sandwich / hammerstein: s coefficients of the output block.")
-@click.option("--forgetting", type=float, help="Forgetting factor lambda in (0, 1] [default 0.999: a window of about 1000 samples].")
+@click.option("--forgetting", type=FORGETTING, help="Forgetting factor lambda in (0, 1], or auto [default auto without --drift: a memory of 4 swings "
+              "of the input (crossings of its median), at least 1000 samples (lambda 0.999)].")
 @click.option("--drift", type=float, help="Random-walk rate of every parameter (standard deviation of its change per sample).")
 @click.option("--method", type=click.Choice(["prediction_error", "regression"]), default="prediction_error", show_default=True,
               help="The update rule: output-error prediction error (unbiased) or the paper's quasi-linear regression.")
@@ -345,7 +364,7 @@ def _report_tracking(result: Any, tracker: Any) -> None:
 @click.option("--plots", "plots", type=click.Path(file_okay=False, path_type=Path), help="Write parameters.png (every parameter with its +-2 s.e. band and the alarms) here.")
 @_clean_errors
 def track(data: Path, input_: str, output: str, range_: str | None, model_file: Path | None, fit_samples: int, structure: str,
-          na: int, nb: int, degree: int, nr: int, ns: int, forgetting: float | None, drift: float | None, method: str, every: int,
+          na: int, nb: int, degree: int, nr: int, ns: int, forgetting: float | str | None, drift: float | None, method: str, every: int,
           out: Path, plots: Path | None) -> None:
     """Track a model's parameters sample by sample (a backlash that wears), with a detector of dead-band changes.
 
@@ -356,7 +375,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     start's scaling applied to the signals); the figure draws the start's batch fit dotted.
     """
     from ..identify import Scaling
-    from ..tracking import Tracker
+    from ..tracking import Tracker, forgetting_for
     from ._io import Record, _finite_record, _read_signals, decimate_piece, parse_range
 
     signals = _read_signals(data, [input_, output])
@@ -381,6 +400,9 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
         started = f"{shape} of degree {degree} fitted on the first {fit_samples} samples"
     u, y = scaling.input_to_model(record.u), scaling.output_to_model(record.y)
     options: dict[str, Any] = {"method": method}
+    if forgetting == "auto" or (forgetting is None and drift is None):
+        forgetting = forgetting_for(u)
+        click.echo(f"forgetting {forgetting:.6g}: a memory of {1 / (1 - forgetting):.0f} samples from the input's swings")
     if forgetting is not None:
         options["forgetting"] = forgetting
     if drift is not None:

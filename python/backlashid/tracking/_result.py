@@ -188,6 +188,9 @@ class TrackResult:
         Updates in this block or record the innovation bound refused (an innovation beyond
         ``innovation_bound`` start noise stds), each sending the estimate back to its
         checkpoint: a runaway of a structure that does not fit, or outliers.
+    forgetting : float or None
+        The tracker's forgetting factor lambda (a memory of about 1 / (1 - lambda) samples;
+        :func:`track` chooses it from the input by default).
 
     Examples
     --------
@@ -206,6 +209,7 @@ class TrackResult:
     noise_std: float
     monitor: MismatchTest | None = None
     refused: int = 0
+    forgetting: float | None = None
 
     @property
     def mismatch(self) -> bool:

@@ -17,6 +17,7 @@ from .._validation import as_signal, check_choice, check_flag, check_int, check_
 from ..errors import DataError, ModelError
 from ..identify import FitResult, Structure
 from ..models import CascadeModel, SandwichModel
+from ._memory import forgetting_for
 from ._result import Alarm, MismatchTest, TrackResult
 
 __all__ = ["Tracker", "track"]
@@ -158,6 +159,8 @@ class Tracker:
         the prediction-error method needs a good start, so prefer a fit).
     forgetting : float, optional
         lambda in [1e-4, 1]; default 0.999 (a window of about 1000 samples) without ``drift``, 1 (no forgetting) with it.
+        A slow input (ramps, steps) needs a longer memory than 1000 samples: see
+        :func:`~backlashid.tracking.forgetting_for` and :func:`track`'s ``forgetting="auto"``.
     drift : float or dict or array_like, optional
         Random-walk rates, the standard deviation of each parameter's change per sample: one
         number for all, a mapping name -> rate (others 0), or p values.
@@ -228,7 +231,7 @@ class Tracker:
         self,
         model_or_structure: FitResult | CascadeModel | SandwichModel | Structure,
         *,
-        forgetting: float | None = None,
+        forgetting: float | str | None = None,
         drift: float | Mapping[str, float] | ArrayLike | None = None,
         method: str = "prediction_error",
         covariance: ArrayLike | None = None,
@@ -252,6 +255,12 @@ class Tracker:
         rates = _drift(drift, names)
         if forgetting is None:
             lam = 1.0 if rates else _DEFAULT_FORGETTING
+        elif isinstance(forgetting, str) and forgetting == "auto":
+            raise DataError(
+                'forgetting="auto" takes the memory from the input, which a Tracker sees only block by block: '
+                "use track(u, y, start, forgetting='auto'), or Tracker(start, forgetting=forgetting_for(u)) "
+                "with u the record's input or a representative stretch of it"
+            )
         else:
             lam = check_real(forgetting, "forgetting", low=1e-4, high=1.0)
         if covariance is not None:
@@ -475,6 +484,7 @@ class Tracker:
             noise_std=self.noise_std,
             monitor=self._mismatch_test(windows),
             refused=self.refused - refused,
+            forgetting=self.forgetting,
         )
 
     def _mismatch_test(self, windows: list[tuple[int, float, int, bool, float, int, bool]]) -> MismatchTest | None:
@@ -648,7 +658,12 @@ def track(
     **options
         The options of :class:`Tracker` (forgetting, drift, method, covariance, noise_std,
         noise_memory, detector, spacing, threshold, slack, reference, holdoff, monitor,
-        monitor_window, monitor_level, innovation_bound).
+        monitor_window, monitor_level, innovation_bound). Here ``forgetting`` may be
+        ``"auto"``, the default without ``drift``: :func:`~backlashid.tracking.forgetting_for`
+        of ``u``, a memory of 4 swings of the input (crossings of its median), at least 1000
+        samples. A white or fast input keeps the Tracker's 0.999; triangles of 200-2000-sample
+        legs get about 10,000 samples, which kept the right structure's estimate at the noise
+        where 1000 lost it (docs/tracking.md).
 
     Returns
     -------
@@ -667,11 +682,14 @@ def track(
     --------
     >>> import backlashid as bid
     >>> d = bid.example_data(bid.example1(), 3000, snr=25, seed=4)
-    >>> r = bid.track(d.u, d.noisy, bid.example1(), noise_std=d.noise_std, forgetting=0.999)
-    >>> len(r), r.alarms
-    (3000, [])
+    >>> r = bid.track(d.u, d.noisy, bid.example1(), noise_std=d.noise_std)
+    >>> len(r), r.alarms, r.forgetting
+    (3000, [], 0.999)
     """
     unknown = set(options) - _OPTIONS
     if unknown:
         raise DataError(f"track() got unknown options {sorted(unknown)}: see Tracker for the options")
+    lam = options.get("forgetting")
+    if (lam is None and options.get("drift") is None) or (isinstance(lam, str) and lam == "auto"):
+        options["forgetting"] = forgetting_for(u)
     return Tracker(model_or_structure, **options).update(u, y, every=every)
