@@ -77,6 +77,16 @@ this version; table and causes in docs/tracking.md): the right input backlash ca
 alarms on the constant plant 24 -> 0 and 17 -> 0 (lowpass, multisine); the cascade tracked with
 an input backlash reported within 20,000 samples on 14/20, 5/20, 16/20, 9/20 (lowpass,
 multisine, ramps, steps), its misses tracked within 1.06-1.35 noise stds.
+
+2026-11-30, the monitor setting the tracker's parameter directions psi aside (seeds 0-19, the
+cells right structure's verdicts, alarms / wrong reported within 20,000, alarms (without the
+monitor) / starts raised; table in docs/tracking.md): white 0/20, 0 / 20/20 both ways, as
+before; the cascade plant's wrong tracker reported under low-pass 14 -> 20/20; the right
+input backlash flagged under ramps 9 -> 7, steps 13 -> 12. The memory from the input, fresh
+seeds 300-319 (rule above), 0.999 -> auto: right structures' verdicts under ramps + steps
+40 -> 18 (input backlash 11 -> 3 ramps, 11 -> 1 steps; cascade 14 -> 10, 4 -> 4), wrong ones
+reported 42 -> 38 (7 -> 5, 20 -> 20; 11 -> 9, 4 -> 4): the rule holds and ``track`` takes it by
+default. White, low-pass and multisine: the same cells either way.
 """
 
 from __future__ import annotations

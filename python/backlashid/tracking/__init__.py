@@ -6,8 +6,10 @@ parameters drift, one block of samples at a time, with a state of fixed size wha
 record length (picklable: resume later or ship it to a worker), and raises an :class:`Alarm`
 when the dead-band width changes (a sandwich's referred to the input). A monitor tests the
 tracker's own innovations and says when the tracked structure does not explain the data
-(:class:`MismatchTest`): a wrong model's wandering estimate is then not taken for wear.
-:func:`track` runs it over a whole record. The per-sample work (the recursive prediction-error or least-squares update, the
+(:class:`MismatchTest`): a wrong model's wandering estimate is then not taken for wear; and
+when the estimate is off the data while the structure may be right ("unsettled").
+:func:`track` runs it over a whole record, with a memory taken from the input
+(:func:`forgetting_for`: slow ramps need more than the 1000 samples a white input does). The per-sample work (the recursive prediction-error or least-squares update, the
 detector, the monitor) runs in the Rust core (rust/core/src/tracking).
 """
 

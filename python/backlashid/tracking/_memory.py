@@ -43,7 +43,7 @@ def swing_samples(u: ArrayLike) -> float:
     Raises
     ------
     DataError
-        If ``u`` is empty or not finite.
+        If ``u`` is empty, not 1-D or not finite.
 
     Examples
     --------
@@ -54,8 +54,10 @@ def swing_samples(u: ArrayLike) -> float:
     1000.0
     """
     x = as_signal(u, "u")
-    if x.size == 0:
-        raise DataError("u is empty: give the input the tracker will see")
+    if x.ndim != 1 or x.size == 0:
+        raise DataError(f"u has shape {x.shape}: give the input the tracker will see, one value per sample")
+    if not np.isfinite(x).all():
+        raise DataError(f"u has {int((~np.isfinite(x)).sum())} values that are not finite: give a finite input")
     band = HYSTERESIS * float(x.std())
     middle = float(np.median(x))
     side = np.where(x > middle + band, 1, np.where(x < middle - band, -1, 0))
@@ -87,8 +89,8 @@ def forgetting_for(u: ArrayLike, *, swings: float = SWINGS, floor: float = FLOOR
     Raises
     ------
     DataError
-        If ``u`` is empty or not finite, or ``swings`` or ``floor`` is not a number > 0
-        (``floor`` >= 1).
+        If ``u`` is empty, not 1-D or not finite, or ``swings`` or ``floor`` is not a number
+        > 0 (``floor`` >= 1).
 
     Examples
     --------

@@ -144,9 +144,12 @@ class Tracker:
     width and its standard error, and a two-sided CUSUM of the standardised deviations from
     a reference (the mean of the first ``reference`` readings) raises an :class:`Alarm`
     when it exceeds ``threshold``; it then waits ``holdoff`` readings and re-arms. A
-    model-mismatch monitor (``monitor``) tells a wrong structure from wear: when the tracker's
-    innovations are coloured or correlated with the past input or the model's x, the result
-    says so (:attr:`TrackResult.mismatch`, :attr:`mismatch`) and the detector pauses.
+    model-mismatch monitor (``monitor``) tells a wrong structure from wear and from a wrong
+    estimate: when the tracker's innovations are coloured or correlated with the past input or
+    the model's x beyond what a change of the tracked parameters explains, the result says so
+    (:attr:`TrackResult.mismatch`, :attr:`mismatch`) and the detector pauses; when a change of
+    the parameters does explain them (the estimate is off the data: a start the record does
+    not confirm, an estimate carried away), it says "unsettled" (:attr:`unsettled`).
 
     Parameters
     ----------
@@ -189,11 +192,14 @@ class Tracker:
         Readings skipped after an alarm.
     monitor : bool, default True
         Test the tracker's own innovations for a wrong structure (the model-mismatch monitor):
-        every ``monitor_window`` samples a portmanteau statistic of the innovation's
-        correlations at lags 1-5 with its own past (prediction-error rule only), the past
-        input and the model's past internal x, about chi-square when the structure is right.
-        Two consecutive windows above the ``monitor_level`` quantile set the mismatch verdict
-        (3 passing windows clear it); while it holds the detector takes no readings.
+        every ``monitor_window`` samples a score statistic of the innovation's correlations
+        at lags 1-5 with its own past (prediction-error rule only), the past input and the
+        model's past internal x, beyond its correlation with the tracker's parameter
+        directions psi (about chi-square when the structure is right, whatever the parameter
+        error), and one of its correlation with psi (about chi-square when the estimate is
+        right too). Two consecutive windows above the ``monitor_level`` quantile set the
+        mismatch verdict, or the unsettled one (3 passing windows clear it); while mismatch
+        holds the detector takes no readings.
     monitor_window : int, default 2000
         Samples per window of the monitor.
     monitor_level : float, default 1e-8
