@@ -116,3 +116,26 @@ def test_track_says_how_many_updates_the_innovation_bound_refused(log: Path, tmp
     assert "refused the update on 3 of 12000 samples" in res.output and "outliers in the record" in res.output
     clean = run("track", log, "-i", "u", "-o", "y", "--fit-samples", "3000", "--every", "1000", "--out", tmp_path / "q.csv")
     assert "refused" not in clean.output
+
+
+def test_track_judges_its_own_start_and_says_where_the_verdicts_may_come_from(log: Path, tmp_path: Path) -> None:
+    """The start fitted on the head is checked on the samples after it: on a white record it
+    simulates them at the noise and nothing more is said; a head of two slow sine periods does
+    not determine Example 1's cascade (its start misses the white rest by orders of magnitude),
+    and the CLI says so before the monitor's verdicts, whose advice then points at the start
+    rather than at another structure."""
+    res = run("track", log, "-i", "u", "-o", "y", "--fit-samples", "3000", "--every", "100", "--out", tmp_path / "a.csv")
+    assert res.exit_code == 0, res.output
+    line = next(t for t in res.output.splitlines() if t.startswith("the start simulates the 9000 samples"))
+    assert float(line.split(" at ")[1].split(" times")[0]) < 1.3 and "did not determine" not in line
+    assert "forgetting 0.999: a memory of 1000 samples" in res.output
+    rng = np.random.default_rng(8)
+    u = np.concatenate([0.8 * np.sin(2 * np.pi * np.arange(3000) / 1500), rng.uniform(-1, 1, 9000)])
+    y = np.asarray(bx.example1().simulate(u))
+    path = tmp_path / "sine_head.csv"
+    np.savetxt(path, np.column_stack([u, y + y.std() / 25 * rng.standard_normal(u.size)]), delimiter=",", header="u,y", comments="")
+    res = run("track", path, "-i", "u", "-o", "y", "--fit-samples", "3000", "--every", "100", "--out", tmp_path / "b.csv")
+    assert res.exit_code == 0, res.output
+    assert "the head did not determine the model for the rest of the record" in res.output
+    assert "mismatch:" in res.output and "the start missed the record after its head" in res.output
+    assert "try another --structure" not in res.output

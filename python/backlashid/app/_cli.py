@@ -295,15 +295,45 @@ def _tracking_start(head: tuple[Any, Any], structure: str, na: int, nb: int, nr:
     return start, shape.get(structure, f"a cascade {na}/{nb}")
 
 
-def _report_tracking(result: Any, tracker: Any) -> None:
-    """``track``'s lines on the monitor's verdict and the detector's alarms."""
+# the start's free-run simulation of the samples after its head, in its noise stds, above which
+# the head did not determine the model for the rest of the record
+_START_OFF = 2.0
+
+
+def _judge_start(start: Any, u: Any, y: Any, head: int) -> bool:
+    """``track``'s line on its own start (fitted on the first ``head`` samples): how well it
+    simulates the samples after them, against its noise level. A start the head does not
+    determine (a slow ramp or a few steps) misses the rest by several noise stds, and the
+    tracker's verdicts then begin from it. Returns whether it missed them."""
+    rest = np.asarray(start.model.simulate(u))[head:] - y[head:]
+    ratio = float(np.sqrt(np.mean(rest**2)) / start.noise_std) if start.noise_std > 0 else float("inf")
+    line = f"the start simulates the {len(rest)} samples after its head at {ratio:.3g} times its noise std (free run)"
+    off = not ratio <= _START_OFF
+    if off:
+        line += (
+            ": the head did not determine the model for the rest of the record, and the tracker begins from it "
+            "(an unsettled or mismatch verdict may be the start's); try a longer --fit-samples or a --model "
+            "fitted on a richer record"
+        )
+    click.echo(line)
+    return off
+
+
+def _report_tracking(result: Any, tracker: Any, start_off: bool = False) -> None:
+    """``track``'s lines on the monitor's verdict and the detector's alarms (``start_off``: the
+    start missed the record after its head)."""
     if result.mismatch and result.monitor is not None:
         stretches = ", ".join(f"{a}-{b}" for a, b in result.monitor.periods())
+        advice = (
+            "the start missed the record after its head (above), which may be the cause: fit a longer --fit-samples first"
+            if start_off
+            else "try another --structure (sandwich, hammerstein) or orders"
+        )
         click.echo(
             f"mismatch: the tracked {tracker.model.__class__.__name__} does not explain the record over samples {stretches} "
-            f"(its innovations are coloured or follow the input: window statistic up to {result.monitor.worst:.3g} times "
-            "its threshold); the standard errors there are not trustworthy and the wear detector paused. "
-            "A wandering estimate is then the model, not wear: try another --structure (sandwich, hammerstein) or orders"
+            f"(its innovations are coloured or follow the input beyond what a change of its parameters explains: window "
+            f"statistic up to {result.monitor.worst:.3g} times its threshold); the standard errors there are not trustworthy "
+            f"and the wear detector paused. A wandering estimate is then the model, not wear: {advice}"
         )
     if result.unsettled and result.monitor is not None:
         stretches = ", ".join(f"{a}-{b}" for a, b in result.monitor.periods("unsettled"))
@@ -418,9 +448,10 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     with atomic_write(out, "w", encoding="utf-8") as fh:  # an interrupted write leaves the old file or none
         np.savetxt(fh, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
     click.echo(f"tracked {len(record)} samples of {record.source} from {started}")
+    start_off = model_file is None and _judge_start(start, u, y, fit_samples)
     last = {name: (result.theta[-1, k], result.standard_errors[-1, k]) for k, name in enumerate(result.names)}
     click.echo("at the end (model units): " + ", ".join(f"{name} = {v:.6g} +- {se:.2g}" for name, (v, se) in last.items()))
-    _report_tracking(result, tracker)
+    _report_tracking(result, tracker, start_off)
     click.echo(f"wrote {out}")
     if plots is not None:
         from .._optional import pyplot
