@@ -506,7 +506,7 @@ def test_plot_shades_the_mismatch_periods() -> None:  # type: ignore[no-untyped-
     u, w = _input_backlash_record(10_000, 10)
     r = track(u, w, bid.fit_cascade(u[:5000], w[:5000], 2, 2, 3), every=50)
     fig = r.plot()
-    assert "does not fit the data where shaded orange" in fig._suptitle.get_text()
+    assert "orange: the structure does not fit the data" in fig._suptitle.get_text()
     assert len(fig.axes[0].patches) >= 1  # the shaded stretch (axvspan) in each panel
     # a start 10 % off in the load's gain, no forgetting: unsettled, shaded grey, no orange
     fit = bid.fit_hammerstein_backlash(u[:5000], w[:5000], 2, 2, 2)
@@ -514,4 +514,4 @@ def test_plot_shades_the_mismatch_periods() -> None:  # type: ignore[no-untyped-
     start = bid.identify.hammerstein_backlash(play, LinearBlock([0.088, 0.044], [-1.3, 0.42]))
     off = track(u, w, start, covariance=fit.covariance, noise_std=fit.noise_std, forgetting=1.0, every=50)
     title = off.plot()._suptitle.get_text()
-    assert "off the data where shaded grey" in title and "orange" not in title
+    assert "grey: the estimate is off the data" in title and "orange" not in title

@@ -148,7 +148,11 @@ class MismatchTest:
         """
         if verdict not in ("mismatch", "unsettled"):
             raise DataError(f"verdict = {verdict!r}: give 'mismatch' or 'unsettled'")
-        flags = self.mismatch if verdict == "mismatch" else self.unsettled
+        return self._spans(self.mismatch if verdict == "mismatch" else self.unsettled)
+
+    def _spans(self, flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
+        """The stretches (first, last sample) of the windows whose flag is set, joined where
+        they meet."""
         out: list[tuple[int, int]] = []
         for end, flagged in zip(self.samples.tolist(), flags.tolist()):
             first = end - self.window + 1
@@ -352,7 +356,8 @@ class TrackResult:
         fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.4 * rows), sharex=True, squeeze=False)
         t = self.samples
         periods = self.monitor.periods() if self.monitor is not None else []
-        unsettled = self.monitor.periods("unsettled") if self.monitor is not None else []
+        # grey where only the estimate is off: under a mismatch the orange says more
+        unsettled = self.monitor._spans(self.monitor.unsettled & ~self.monitor.mismatch) if self.monitor is not None else []
         for k in range(p):
             ax = axes[k // cols][k % cols]
             title, v, s, line, level = self._panel(k, true, batch, scaling if in_record else None)
@@ -381,12 +386,10 @@ class TrackResult:
                 ax.set_xlabel("sample", fontsize=9)
         fig.axes[0].legend(fontsize=7, loc="best")
         suffix = f", {len(self.alarms)} alarm(s) (red)" if self.alarms else ""
-        if periods:
-            suffix += "; the structure does not fit the data where shaded orange"
-        if unsettled:
-            suffix += "; the estimate is off the data where shaded grey"
-        if periods or unsettled:
-            suffix += " (standard errors not trustworthy there)"
+        shaded = [text for spans, text in ((periods, "orange: the structure does not fit the data"),
+                                           (unsettled, "grey: the estimate is off the data")) if spans]
+        if shaded:  # a second line: the first one stays within the panels
+            suffix += "\nshaded " + "; ".join(shaded) + " (standard errors not trustworthy there)"
         units = " (widths in the record's units, the rest in model units)" if in_record else ""
         fig.suptitle(f"tracked parameters{units} with +-2 standard errors{suffix}", fontsize=11)
         fig.tight_layout()
