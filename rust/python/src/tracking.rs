@@ -218,15 +218,14 @@ impl PyTracker {
         let windows = windows
             .into_iter()
             .map(|w| {
-                let settled = (w.parameter_statistic, w.parameter_degrees, w.unsettled);
                 (
                     w.sample,
                     w.statistic,
                     w.degrees,
                     w.mismatch,
-                    settled.0,
-                    settled.1,
-                    settled.2,
+                    w.parameter_statistic,
+                    w.parameter_degrees,
+                    w.unsettled,
                 )
             })
             .collect();
