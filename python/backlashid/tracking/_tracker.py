@@ -70,6 +70,29 @@ def _start(model_or_structure: Any) -> tuple[Structure, NDArray[np.float64], NDA
     )
 
 
+def _prior_std(theta0: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The wide prior's standard deviations: 30 % of each start value, at least 0.09 (the
+    start of a bare structure, and the most a fit's covariance may claim, `_within_prior`)."""
+    return 0.3 * np.maximum(np.abs(theta0), 0.3)
+
+
+def _within_prior(cov: NDArray[np.float64], prior: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A start fit's covariance no wider than the wide prior in any direction: on the prior's
+    scale (P / (d d')), eigenvalues above 1 are set to 1.
+
+    A fit on a head that hardly determines the model reports standard errors of several times
+    its values (an input backlash under one slow ramp: a_1 = 0.78 +- 5.3); the tracker, trusting
+    them, moved a_1 to -0.1 at the play's first contact and never came back (the innovation
+    bound then refused most later updates). With the covariance held to the prior, 39 of 40
+    such trackers on triangles between random levels ended at the noise (development records,
+    docs/tracking.md). A fit's covariance within the prior passes unchanged."""
+    scaled = cov / np.outer(prior, prior)
+    values, vectors = np.linalg.eigh((scaled + scaled.T) / 2)
+    if values.max() <= 1.0:
+        return cov
+    return (vectors * np.minimum(values, 1.0)) @ vectors.T * np.outer(prior, prior)
+
+
 def _most_degrees(lags: int, whiteness: bool) -> int:
     """The most degrees of freedom of a monitor window's statistic: ``lags`` per correlation
     tested, three with the whiteness, two without (MonitorOptions::degrees in
@@ -269,13 +292,15 @@ class Tracker:
             )
         else:
             lam = check_real(forgetting, "forgetting", low=1e-4, high=1.0)
-        if covariance is not None:
+        prior = _prior_std(theta0)
+        if covariance is not None:  # the caller's, as given
             cov = as_signal(covariance, "covariance")
             if cov.shape != (p, p):
                 raise DataError(f"covariance has shape {cov.shape}: give the {p} x {p} matrix of {names}")
+        elif cov is not None:  # the start's fit's
+            cov = _within_prior(cov, prior)
         if cov is None:
-            scale = np.maximum(np.abs(theta0), 0.3)
-            cov = np.diag((0.3 * scale) ** 2)
+            cov = np.diag(prior**2)
         cov = (np.asarray(cov, dtype=np.float64) + np.asarray(cov, dtype=np.float64).T) / 2
         if noise_std is not None:
             sigma = check_noise_std(noise_std)
