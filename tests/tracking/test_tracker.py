@@ -515,3 +515,18 @@ def test_plot_shades_the_mismatch_periods() -> None:  # type: ignore[no-untyped-
     off = track(u, w, start, covariance=fit.covariance, noise_std=fit.noise_std, forgetting=1.0, every=50)
     title = off.plot()._suptitle.get_text()
     assert "grey: the estimate is off the data" in title and "orange" not in title
+
+
+def test_a_result_built_by_hand_without_the_unsettled_verdicts_still_plots() -> None:
+    """A MismatchTest made with the six fields of 2026-11-29 (no parameter test) reads as never
+    unsettled, and its TrackResult draws the mismatch stretch alone."""
+    pytest.importorskip("matplotlib")
+    from backlashid.tracking import MismatchTest
+
+    test = MismatchTest(np.array([1999, 3999]), np.array([12.0, 900.0]), np.array([15, 15]),
+                        np.array([68.0, 68.0]), np.array([False, True]), 2000)
+    assert not test.any_unsettled and test.periods("unsettled") == []
+    names = Structure(2, 2, 3).names
+    r = TrackResult(names, np.arange(4000), np.tile(TRUE, (4000, 1)), np.full((4000, len(names)), 0.01), [], 0.1, test)
+    title = r.plot()._suptitle.get_text()
+    assert "orange" in title and "grey" not in title and not r.unsettled

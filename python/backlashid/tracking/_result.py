@@ -356,8 +356,7 @@ class TrackResult:
         fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.4 * rows), sharex=True, squeeze=False)
         t = self.samples
         periods = self.monitor.periods() if self.monitor is not None else []
-        # grey where only the estimate is off: under a mismatch the orange says more
-        unsettled = self.monitor._spans(self.monitor.unsettled & ~self.monitor.mismatch) if self.monitor is not None else []
+        unsettled = self._settling_only()
         for k in range(p):
             ax = axes[k // cols][k % cols]
             title, v, s, line, level = self._panel(k, true, batch, scaling if in_record else None)
@@ -397,6 +396,14 @@ class TrackResult:
             fig.savefig(path, dpi=120)
         return fig
 
+
+    def _settling_only(self) -> list[tuple[int, int]]:
+        """The stretches the figure shades grey: unsettled where the structure passes (under a
+        mismatch the orange says more); none for a test built without the unsettled verdicts."""
+        test = self.monitor
+        if test is None or test.unsettled.shape != test.mismatch.shape:
+            return []
+        return test._spans(test.unsettled & ~test.mismatch)
 
     def _panel(
         self, k: int, true: NDArray[np.float64] | None, batch: NDArray[np.float64] | None, scaling: Scaling | None
