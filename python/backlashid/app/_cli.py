@@ -360,10 +360,9 @@ def _report_tracking(result: Any, tracker: Any, start_off: bool = False) -> None
     if tracker.detector_armed:
         click.echo(f"no alarm: the detector saw no change of the dead band ({width})")
     else:
-        lam = tracker.forgetting
-        arm = f"{8 * int(np.ceil(3.0 / (1.0 - lam))):,} samples at forgetting {lam:.6g}" if lam < 1.0 else "240,000 samples without forgetting"
         click.echo("no alarm, but the detector never armed: it reads the width every 3 / (1 - forgetting) samples and "
-                   f"needs 8 readings for its reference ({arm}); give a longer record or a lower --forgetting")
+                   f"needs 8 readings for its reference ({tracker.arming_samples:,} samples at forgetting {tracker.forgetting:.6g}); "
+                   "give a longer record or a lower --forgetting")
 
 
 @main.command()
@@ -405,7 +404,8 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     start's scaling applied to the signals); the figure draws the start's batch fit dotted.
     """
     from ..identify import Scaling
-    from ..tracking import Tracker, forgetting_for
+    from ..tracking import Tracker
+    from ..tracking._memory import chosen_forgetting
     from ._io import Record, _finite_record, _read_signals, decimate_piece, parse_range
 
     signals = _read_signals(data, [input_, output])
@@ -430,9 +430,10 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
         started = f"{shape} of degree {degree} fitted on the first {fit_samples} samples"
     u, y = scaling.input_to_model(record.u), scaling.output_to_model(record.y)
     options: dict[str, Any] = {"method": method}
-    if forgetting == "auto" or (forgetting is None and drift is None):
-        forgetting = forgetting_for(u)
-        click.echo(f"forgetting {forgetting:.6g}: a memory of {1 / (1 - forgetting):.0f} samples from the input's swings")
+    chosen = chosen_forgetting(forgetting, drift, u)
+    if chosen != forgetting:
+        click.echo(f"forgetting {chosen:.6g}: a memory of {1 / (1 - chosen):.0f} samples from the input's swings")
+    forgetting = chosen
     if forgetting is not None:
         options["forgetting"] = forgetting
     if drift is not None:

@@ -106,3 +106,12 @@ def forgetting_for(u: ArrayLike, *, swings: float = SWINGS, floor: float = FLOOR
     least = check_real(floor, "floor", low=1.0)
     memory = max(least, per * swing_samples(u))
     return 1.0 - 1.0 / memory
+
+
+def chosen_forgetting(forgetting: float | str | None, drift: object, u: ArrayLike) -> float | str | None:
+    """``track``'s forgetting (and ``backlashid track``'s): :func:`forgetting_for` of ``u`` for
+    ``"auto"``, or when neither forgetting nor drift is given; anything else as given (the
+    Tracker checks it)."""
+    if (isinstance(forgetting, str) and forgetting == "auto") or (forgetting is None and drift is None):
+        return forgetting_for(u)
+    return forgetting

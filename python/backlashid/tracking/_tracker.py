@@ -17,7 +17,7 @@ from .._validation import as_signal, check_choice, check_flag, check_int, check_
 from ..errors import DataError, ModelError
 from ..identify import FitResult, Structure
 from ..models import CascadeModel, SandwichModel
-from ._memory import forgetting_for
+from ._memory import chosen_forgetting
 from ._result import Alarm, MismatchTest, TrackResult
 
 __all__ = ["Tracker", "track"]
@@ -462,6 +462,20 @@ class Tracker:
         return None if state is None else bool(state[2])
 
     @property
+    def arming_samples(self) -> int | None:
+        """Samples the detector needs before it can raise an alarm: ``reference`` readings,
+        ``spacing`` samples apart (None without a detector).
+
+        Examples
+        --------
+        >>> import backlashid as bid
+        >>> bid.Tracker(bid.example1()).arming_samples
+        24000
+        """
+        det = self._args[11]
+        return None if det is None else int(det[0]) * int(det[1])
+
+    @property
     def model(self) -> CascadeModel | SandwichModel:
         """The current estimate as a model."""
         return self._structure.model(self.theta)  # type: ignore[return-value]
@@ -726,7 +740,7 @@ def track(
     unknown = set(options) - _OPTIONS
     if unknown:
         raise DataError(f"track() got unknown options {sorted(unknown)}: see Tracker for the options")
-    lam = options.get("forgetting")
-    if (lam is None and options.get("drift") is None) or (isinstance(lam, str) and lam == "auto"):
-        options["forgetting"] = forgetting_for(u)
+    lam = chosen_forgetting(options.get("forgetting"), options.get("drift"), u)
+    if lam is not None:
+        options["forgetting"] = lam
     return Tracker(model_or_structure, **options).update(u, y, every=every)
