@@ -637,25 +637,32 @@ def _monitor_of_2026_11_28(args: tuple[Any, ...], state: list[float]) -> tuple[t
     return (*args[:14], monitor, *args[15:]), state[: len(state) - len(old)] + old[: 3 * lags] + sums + counts
 
 
-def _monitor_of_2026_11_29(args: tuple[Any, ...], state: list[float]) -> tuple[tuple[Any, ...], list[float]]:
-    """The arguments and state of a tracker pickled before the monitor set the tracker's
-    parameter directions psi aside (2026-11-30): its monitor kept 8K + 2K (2K + 1) + 8
-    numbers (lags of e, u, x; per lag sum e e_k; the sums of the lagged u and x; the counts and
-    the verdict), and its thresholds may stop short of the p degrees of psi's test. Rebuilt
-    with thresholds of the same level up to p; the lags, the counts and the mismatch verdict
-    carried over, the window in progress started afresh (its sums are of the old statistic),
-    nothing unsettled. A state of the current layout, or of none known, passes through (the
-    core refuses a wrong length by name)."""
+def _thresholds_of_2026_11_29(args: tuple[Any, ...]) -> tuple[Any, ...]:
+    """The arguments of a tracker pickled before the monitor set the tracker's parameter
+    directions psi aside (2026-11-30): its thresholds may stop short of the p degrees of psi's
+    test; rebuilt with thresholds of the same level up to p. Anything else passes through."""
     mon = args[14] if len(args) > 14 else None
     if mon is None:
-        return args, state
+        return args
     window, lags, thresholds, confirm, clear, whiteness = mon
     p = len(args[3])
-    if len(thresholds) < max(_most_degrees(lags, whiteness), p):
-        level = float(chdtrc(1, thresholds[0]))
-        mon = (window, lags, _thresholds(lags, whiteness, level, p), confirm, clear, whiteness)
-        args = (*args[:14], mon, *args[15:])
-    now = len(Tracker._build(args).save())
+    if len(thresholds) >= max(_most_degrees(lags, whiteness), p):
+        return args
+    level = float(chdtrc(1, thresholds[0]))
+    return (*args[:14], (window, lags, _thresholds(lags, whiteness, level, p), confirm, clear, whiteness), *args[15:])
+
+
+def _monitor_state_of_2026_11_29(args: tuple[Any, ...], state: list[float], now: int) -> list[float]:
+    """The state of a tracker pickled before the monitor set psi aside (2026-11-30), for a core
+    tracker whose own state has ``now`` numbers: its monitor kept 8K + 2K (2K + 1) + 8 numbers
+    (lags of e, u, x; per lag sum e e_k; the sums of the lagged u and x; the counts and the
+    verdict). The lags, the counts and the mismatch verdict carried over, the window in progress
+    started afresh (its sums are of the old statistic), nothing unsettled. A state of the
+    current layout, or of none known, passes through (the core refuses a wrong length by name)."""
+    mon = args[14] if len(args) > 14 else None
+    if mon is None:
+        return state
+    lags, whiteness, p = mon[1], mon[5], len(args[3])
     d_old, d_new = 2 * lags, p + _most_degrees(lags, whiteness)
     m_old = 4 * lags + 2 * d_old + d_old * (d_old + 1) // 2 + 8
     m_new = 3 * lags + 2 * d_new + d_new * (d_new + 1) // 2 + 10
@@ -665,24 +672,26 @@ def _monitor_of_2026_11_29(args: tuple[Any, ...], state: list[float]) -> tuple[t
     elif len(state) == now - m_new + m_old - guard:
         begin = len(state) - m_old
     else:
-        return args, state
+        return state
     old = state[begin : begin + m_old]
     filled, failed, passed, verdict = old[-8], old[-4], old[-3], old[-2]
     sums = [0.0] * (2 * d_new + d_new * (d_new + 1) // 2)  # psi and the lags: v, e v, v v^T (monitor.rs)
     counts = [filled, 0.0, 0.0, 0.0, failed, passed, verdict, 0.0, 0.0, 0.0]
-    return args, state[:begin] + old[: 3 * lags] + sums + counts + state[begin + m_old :]
+    return state[:begin] + old[: 3 * lags] + sums + counts + state[begin + m_old :]
 
 
 def _restore(args: tuple[Any, ...], structure: Structure, state: list[float]) -> Tracker:
     """A pickled :class:`Tracker`: rebuilt from its arguments, then its state restored."""
     args, state = _monitor_of_2026_11_28(args, list(state))
-    args, state = _monitor_of_2026_11_29(args, state)
+    args = _thresholds_of_2026_11_29(args)
+    native = Tracker._build(args)
+    state = _monitor_state_of_2026_11_29(args, state, len(native.save()))
     tracker = Tracker.__new__(Tracker)
     tracker._args = args
     tracker._structure = structure
     tracker._names = structure.names
-    tracker._native = Serialised(Tracker._build(args))
-    tracker._native.load(list(state))
+    tracker._native = Serialised(native)
+    tracker._native.load(state)
     return tracker
 
 
