@@ -17,11 +17,16 @@ def run(*args: object):
     return CliRunner().invoke(main, [str(a) for a in args])
 
 
+def _csv(path: Path, u: np.ndarray, y: np.ndarray) -> None:
+    """A log of columns u, y with a header line, as the commands read it."""
+    np.savetxt(path, np.column_stack([u, y]), delimiter=",", header="u,y", comments="")
+
+
 @pytest.fixture(scope="module")
 def log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     d = bx.example_data(bx.example1(), 12_000, snr=25, seed=8)
     path = tmp_path_factory.mktemp("track") / "log.csv"
-    np.savetxt(path, np.column_stack([d.u, d.noisy]), delimiter=",", header="u,y", comments="")
+    _csv(path, d.u, d.noisy)
     return path
 
 
@@ -69,7 +74,7 @@ def test_track_fits_and_tracks_each_structure(tmp_path: Path) -> None:
 
     d = bx.example_data(bx.example2(), 8000, snr=25, seed=9)
     path = tmp_path / "log.csv"
-    np.savetxt(path, np.column_stack([d.u, d.noisy]), delimiter=",", header="u,y", comments="")
+    _csv(path, d.u, d.noisy)
     scaling = Scaling.auto(d.u[:3000], d.noisy[:3000])
     u, y = scaling.input_to_model(d.u), scaling.output_to_model(d.noisy)
     for structure, names, fit in (
@@ -93,7 +98,7 @@ def test_track_says_when_the_structure_does_not_fit(tmp_path: Path) -> None:
     play = bx.GeneralBacklash(0.3, 0.25, [1.0, 0.15], [1.05, -0.1])
     w = bx.identify.hammerstein_backlash(play, bx.LinearBlock([0.08, 0.04], [-1.3, 0.42])).simulate(u)
     path = tmp_path / "drive.csv"
-    np.savetxt(path, np.column_stack([u, w + w.std() / 25 * rng.standard_normal(u.size)]), delimiter=",", header="u,y", comments="")
+    _csv(path, u, w + w.std() / 25 * rng.standard_normal(u.size))
     res = run("track", path, "-i", "u", "-o", "y", "--fit-samples", "5000", "--every", "1000", "--out", tmp_path / "p.csv")
     assert res.exit_code == 0, res.output
     assert "mismatch: the tracked CascadeModel does not explain the record" in res.output
@@ -110,7 +115,7 @@ def test_track_says_how_many_updates_the_innovation_bound_refused(log: Path, tmp
     y = data["y"].copy()
     y[[5000, 7000, 9000]] += 100 * y[:3000].std() / 25
     path = tmp_path / "spiked.csv"
-    np.savetxt(path, np.column_stack([data["u"], y]), delimiter=",", header="u,y", comments="")
+    _csv(path, data["u"], y)
     res = run("track", path, "-i", "u", "-o", "y", "--fit-samples", "3000", "--every", "1000", "--out", tmp_path / "p.csv")
     assert res.exit_code == 0, res.output
     assert "refused the update on 3 of 12000 samples" in res.output and "outliers in the record" in res.output
@@ -133,7 +138,7 @@ def test_track_judges_its_own_start_and_says_where_the_verdicts_may_come_from(lo
     u = np.concatenate([0.8 * np.sin(2 * np.pi * np.arange(3000) / 1500), rng.uniform(-1, 1, 9000)])
     y = np.asarray(bx.example1().simulate(u))
     path = tmp_path / "sine_head.csv"
-    np.savetxt(path, np.column_stack([u, y + y.std() / 25 * rng.standard_normal(u.size)]), delimiter=",", header="u,y", comments="")
+    _csv(path, u, y + y.std() / 25 * rng.standard_normal(u.size))
     res = run("track", path, "-i", "u", "-o", "y", "--fit-samples", "3000", "--every", "100", "--out", tmp_path / "b.csv")
     assert res.exit_code == 0, res.output
     assert "the head did not determine the model for the rest of the record" in res.output
