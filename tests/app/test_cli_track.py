@@ -144,3 +144,20 @@ def test_track_judges_its_own_start_and_says_where_the_verdicts_may_come_from(lo
     assert "the head did not determine the model for the rest of the record" in res.output
     assert "mismatch:" in res.output and "the start missed the record after its head" in res.output
     assert "try another --structure" not in res.output
+
+
+def test_track_reports_a_run_off_estimate_on_a_position_record_instead_of_failing(tmp_path: Path) -> None:
+    """A motor -> play -> integrating load (the output a position): the prediction-error tracker
+    runs off (docs/tracking.md, Limits) to an estimate whose left branch decreases, which is no
+    valid model. The command still reports (the tracked structure named from its start) and
+    exits 0; before, it ended on 'Error: branch L does not increase'."""
+    rng = np.random.default_rng(5)
+    u = rng.uniform(-1, 1, 60_000)
+    play = bx.GeneralBacklash(0.3, 0.25, [1.0, 0.15], [1.05, -0.1])
+    w = np.asarray(bx.identify.hammerstein_backlash(play, bx.LinearBlock([0.08, 0.04], [-1.7, 0.7])).simulate(u))
+    path = tmp_path / "position.csv"
+    _csv(path, u, w + w[:5000].std() / 25 * rng.standard_normal(u.size))
+    res = run("track", path, "-i", "u", "-o", "y", "--structure", "hammerstein", "--degree", "2", "--every", "1000",
+              "--out", tmp_path / "p.csv")
+    assert res.exit_code == 0, res.output
+    assert "mismatch: the tracked SandwichModel does not explain the record" in res.output and "Error" not in res.output

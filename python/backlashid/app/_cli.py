@@ -319,9 +319,10 @@ def _judge_start(start: Any, u: Any, y: Any, head: int) -> bool:
     return off
 
 
-def _report_tracking(result: Any, tracker: Any, start_off: bool = False) -> None:
-    """``track``'s lines on the monitor's verdict and the detector's alarms (``start_off``: the
-    start missed the record after its head)."""
+def _report_tracking(result: Any, tracker: Any, kind: type, start_off: bool = False) -> None:
+    """``track``'s lines on the monitor's verdict and the detector's alarms. ``kind``: the start
+    model's class (the tracked estimate at the end need not be a valid model: a run-off
+    branch may decrease); ``start_off``: the start missed the record after its head."""
     if result.mismatch and result.monitor is not None:
         stretches = ", ".join(f"{a}-{b}" for a, b in result.monitor.periods())
         advice = (
@@ -330,7 +331,7 @@ def _report_tracking(result: Any, tracker: Any, start_off: bool = False) -> None
             else "try another --structure (sandwich, hammerstein) or orders"
         )
         click.echo(
-            f"mismatch: the tracked {tracker.model.__class__.__name__} does not explain the record over samples {stretches} "
+            f"mismatch: the tracked {kind.__name__} does not explain the record over samples {stretches} "
             f"(its innovations are coloured or follow the input beyond what a change of its parameters explains: window "
             f"statistic up to {result.monitor.worst:.3g} times its threshold); the standard errors there are not trustworthy "
             f"and the wear detector paused. A wandering estimate is then the model, not wear: {advice}"
@@ -351,7 +352,7 @@ def _report_tracking(result: Any, tracker: Any, start_off: bool = False) -> None
             "the start (each sent the estimate back to its last checkpoint): "
             + ("the tracked structure runs away from this record" if result.mismatch else "outliers in the record, or a start far off")
         )
-    width = "its width referred to the input" if isinstance(tracker.model, SandwichModel) else "c_L + c_R"
+    width = "its width referred to the input" if issubclass(kind, SandwichModel) else "c_L + c_R"
     for alarm in result.alarms:
         change = "wider" if alarm.direction > 0 else "narrower"
         click.echo(f"alarm at sample {alarm.sample}: dead band {change}, {width} = {alarm.width:.6g} (reference {alarm.reference:.6g})")
@@ -452,7 +453,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     start_off = model_file is None and _judge_start(start, u, y, fit_samples)
     last = {name: (result.theta[-1, k], result.standard_errors[-1, k]) for k, name in enumerate(result.names)}
     click.echo("at the end (model units): " + ", ".join(f"{name} = {v:.6g} +- {se:.2g}" for name, (v, se) in last.items()))
-    _report_tracking(result, tracker, start_off)
+    _report_tracking(result, tracker, type(getattr(start, "model", start)), start_off)
     click.echo(f"wrote {out}")
     if plots is not None:
         from .._optional import pyplot
