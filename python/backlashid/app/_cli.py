@@ -405,8 +405,7 @@ def track(data: Path, input_: str, output: str, range_: str | None, model_file: 
     start's scaling applied to the signals); the figure draws the start's batch fit dotted.
     """
     from ..identify import Scaling
-    from ..tracking import Tracker
-    from ..tracking._memory import chosen_forgetting
+    from ..tracking import Tracker, chosen_forgetting
     from ._io import Record, _finite_record, _read_signals, decimate_piece, parse_range
 
     signals = _read_signals(data, [input_, output])

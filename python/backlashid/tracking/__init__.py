@@ -15,8 +15,8 @@ detector, the monitor) runs in the Rust core (rust/core/src/tracking).
 
 from __future__ import annotations
 
-from ._memory import forgetting_for, swing_samples
+from ._memory import chosen_forgetting, forgetting_for, swing_samples
 from ._result import Alarm, MismatchTest, TrackResult
 from ._tracker import Tracker, track
 
-__all__ = ["Alarm", "MismatchTest", "TrackResult", "Tracker", "forgetting_for", "swing_samples", "track"]
+__all__ = ["Alarm", "MismatchTest", "TrackResult", "Tracker", "chosen_forgetting", "forgetting_for", "swing_samples", "track"]

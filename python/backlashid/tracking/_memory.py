@@ -109,9 +109,40 @@ def forgetting_for(u: ArrayLike, *, swings: float = SWINGS, floor: float = FLOOR
 
 
 def chosen_forgetting(forgetting: float | str | None, drift: object, u: ArrayLike) -> float | str | None:
-    """``track``'s forgetting (and ``backlashid track``'s): :func:`forgetting_for` of ``u`` for
-    ``"auto"``, or when neither forgetting nor drift is given; anything else as given (the
-    Tracker checks it)."""
+    """The forgetting factor :func:`~backlashid.tracking.track` (and ``backlashid track``) uses
+    for these options on the input ``u``: :func:`forgetting_for` of ``u`` for ``"auto"``, or
+    when neither ``forgetting`` nor ``drift`` is given; otherwise ``forgetting`` as given (the
+    :class:`~backlashid.tracking.Tracker` checks it). For a Tracker fed block by block that
+    should behave as ``track`` does.
+
+    Parameters
+    ----------
+    forgetting : float or str or None
+        The ``forgetting`` option: lambda, ``"auto"`` or None.
+    drift : object
+        The ``drift`` option (None: no random walk).
+    u : array_like
+        The input the tracker will see (a whole record, or a representative stretch).
+
+    Returns
+    -------
+    float or str or None
+        lambda from the input, or ``forgetting`` itself (None with drift: the Tracker then
+        does not forget).
+
+    Raises
+    ------
+    DataError
+        If the input is needed and is empty, not 1-D or not finite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashid.tracking import chosen_forgetting
+    >>> u = np.random.default_rng(0).uniform(-1, 1, 5000)
+    >>> chosen_forgetting(None, None, u), chosen_forgetting(0.99, None, u), chosen_forgetting(None, 1e-6, u)
+    (0.999, 0.99, None)
+    """
     if (isinstance(forgetting, str) and forgetting == "auto") or (forgetting is None and drift is None):
         return forgetting_for(u)
     return forgetting
